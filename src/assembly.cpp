@@ -1,0 +1,148 @@
+#include "assembly.hpp"
+
+#include <algorithm>
+
+namespace softbody {
+
+LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) {
+  LocalElements elements;
+  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
+  for (const Body &body : scene.bodies) {
+    if (body.fixed) continue;
+    const Lame lame = LameFromYoungPoisson(body.material.young, body.material.poisson);
+    for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
+      std::array<PetscInt, 4> vertices;
+      TetPositions X;
+      for (int a = 0; a < 4; ++a) {
+        const int32_t local = body.mesh.tets(t, a);
+        vertices[a] = layout.petsc_of_free[layout.free_of_natural[body.first_vertex + local]];
+        X.row(a) = body.mesh.vertices.row(local);
+      }
+      const PetscInt owner_vertex = *std::min_element(vertices.begin(), vertices.end());
+      if (owner_vertex < begin || owner_vertex >= end) continue;
+      elements.vertices.push_back(vertices);
+      elements.gradients.push_back(ComputeShapeGradients(X));
+      elements.volumes.push_back(std::abs(SignedVolume(X)));
+      elements.lame.push_back(lame);
+      elements.densities.push_back(body.material.density);
+    }
+  }
+  return elements;
+}
+
+PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
+                                   const LocalElements &elements, PetscBool with_diagonal,
+                                   Mat *matrix) {
+  PetscFunctionBeginUser;
+  const PetscInt local_dofs = 3 * layout.local_count(), dof_begin = 3 * layout.local_begin();
+  const PetscCount entries = 144 * static_cast<PetscCount>(elements.size()) +
+                             (with_diagonal ? local_dofs : 0);
+  std::vector<PetscInt> rows, cols;
+  rows.reserve(entries);
+  cols.reserve(entries);
+  for (const auto &v : elements.vertices)
+    for (int a = 0; a < 4; ++a)
+      for (int ca = 0; ca < 3; ++ca)
+        for (int b = 0; b < 4; ++b)
+          for (int cb = 0; cb < 3; ++cb) {
+            rows.push_back(3 * v[a] + ca);
+            cols.push_back(3 * v[b] + cb);
+          }
+  if (with_diagonal)
+    for (PetscInt i = 0; i < local_dofs; ++i) {
+      rows.push_back(dof_begin + i);
+      cols.push_back(dof_begin + i);
+    }
+  PetscCall(MatCreate(comm, matrix));
+  PetscCall(MatSetSizes(*matrix, local_dofs, local_dofs, PETSC_DETERMINE, PETSC_DETERMINE));
+  PetscCall(MatSetBlockSize(*matrix, 3));
+  PetscCall(MatSetType(*matrix, MATAIJ));
+  PetscCall(MatSetPreallocationCOO(*matrix, entries, rows.data(), cols.data()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode FillElasticMatrix(const LocalElements &elements, double shear_scale,
+                                 double stiffness_scale, Vec lumped_mass, double mass_scale,
+                                 Mat matrix) {
+  PetscFunctionBeginUser;
+  PetscInt local_dofs = 0;
+  if (lumped_mass) PetscCall(VecGetLocalSize(lumped_mass, &local_dofs));
+  std::vector<PetscScalar> values(144 * elements.size() + local_dofs);
+  PetscScalar *out = values.data();
+  for (size_t e = 0; e < elements.size(); ++e) {
+    const Mat12 K = ElementStiffness(elements.gradients[e], elements.volumes[e], elements.lame[e],
+                                     shear_scale);
+    // Row-major order, as the pattern: entry (3a+ca, 3b+cb).
+    for (int i = 0; i < 12; ++i)
+      for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
+  }
+  if (lumped_mass) {
+    const PetscScalar *mass;
+    PetscCall(VecGetArrayRead(lumped_mass, &mass));
+    for (PetscInt i = 0; i < local_dofs; ++i) *out++ = mass_scale * mass[i];
+    PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
+  }
+  PetscCall(MatSetValuesCOO(matrix, values.data(), INSERT_VALUES));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode AssembleLumpedMass(MPI_Comm comm, const DofLayout &layout,
+                                  const LocalElements &elements, Vec *lumped_mass) {
+  PetscFunctionBeginUser;
+  PetscCall(VecCreate(comm, lumped_mass));
+  PetscCall(VecSetSizes(*lumped_mass, 3 * layout.local_count(), PETSC_DETERMINE));
+  PetscCall(VecSetBlockSize(*lumped_mass, 3));
+  PetscCall(VecSetType(*lumped_mass, VECMPI));
+  for (size_t e = 0; e < elements.size(); ++e) {
+    const double m = LumpedVertexMass(elements.densities[e], elements.volumes[e]);
+    for (int a = 0; a < 4; ++a) {
+      const PetscInt block = elements.vertices[e][a];
+      const PetscScalar values[3] = {m, m, m};
+      PetscCall(VecSetValuesBlocked(*lumped_mass, 1, &block, values, ADD_VALUES));
+    }
+  }
+  PetscCall(VecAssemblyBegin(*lumped_mass));
+  PetscCall(VecAssemblyEnd(*lumped_mass));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
+
+namespace softbody {
+
+State::~State() {
+  VecDestroy(&rest_positions);
+  VecDestroy(&positions);
+  VecDestroy(&velocities);
+  VecDestroy(&lumped_mass);
+}
+
+PetscErrorCode CreateState(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                           const LocalElements &elements, State *state) {
+  PetscFunctionBeginUser;
+  PetscCall(AssembleLumpedMass(comm, layout, elements, &state->lumped_mass));
+  PetscCall(VecDuplicate(state->lumped_mass, &state->rest_positions));
+  PetscCall(VecDuplicate(state->lumped_mass, &state->velocities));
+  PetscScalar *X, *v;
+  PetscCall(VecGetArray(state->rest_positions, &X));
+  PetscCall(VecGetArray(state->velocities, &v));
+  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
+  for (const Body &body : scene.bodies)
+    for (int32_t i = 0; i < body.mesh.num_vertices(); ++i) {
+      const PetscInt f = layout.free_of_natural[body.first_vertex + i];
+      if (f < 0) continue;
+      const PetscInt p = layout.petsc_of_free[f];
+      if (p < begin || p >= end) continue;
+      for (int c = 0; c < 3; ++c) {
+        X[3 * (p - begin) + c] = body.mesh.vertices(i, c);
+        v[3 * (p - begin) + c] = scene.initial_velocities(body.first_vertex + i, c);
+      }
+    }
+  PetscCall(VecRestoreArray(state->rest_positions, &X));
+  PetscCall(VecRestoreArray(state->velocities, &v));
+  PetscCall(VecDuplicate(state->rest_positions, &state->positions));
+  PetscCall(VecCopy(state->rest_positions, state->positions));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody

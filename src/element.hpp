@@ -1,0 +1,62 @@
+// Linear tetrahedral element kernels. Pure functions on fixed-size Eigen types;
+// not collective, no PETSc.
+//
+// Conventions
+// - A tet is four vertex positions X0..X3 (rows of a 4x3 matrix), in metres.
+// - Element vectors are ordered by vertex then coordinate: (x0 y0 z0 x1 ... z3).
+// - Strain is the engineering strain (exx, eyy, ezz, gxy, gyz, gzx) with
+//   g = du/dy + dv/dx etc.; stress = C strain with the isotropic
+//       C = [[l+2m, l, l], [l, l+2m, l], [l, l, l+2m]] (+) s m I3,
+//   l, m the Lame parameters and s the shear scale (s = 1: standard linear
+//   elasticity; the coursework grader uses s = 0.25).
+// - The elastic force on the element's vertices is f = -K_e (x - X).
+#pragma once
+
+#include <Eigen/Dense>
+
+namespace softbody {
+
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+using TetPositions = Eigen::Matrix<double, 4, 3>;  // rows: vertex positions (m)
+using ShapeGradients = Eigen::Matrix<double, 4, 3>; // rows: grad N_i (1/m)
+using Mat12 = Eigen::Matrix<double, 12, 12>;
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+
+struct Lame {
+  double lambda;  // first Lame parameter l = E nu / ((1 + nu)(1 - 2 nu)), Pa
+  double mu;      // shear modulus m = E / (2 (1 + nu)), Pa
+};
+
+// Young's modulus E (Pa, > 0) and Poisson ratio nu (-1 < nu < 0.5).
+Lame LameFromYoungPoisson(double young, double poisson);
+
+// det[X1 - X0, X2 - X0, X3 - X0] / 6 (m^3): positive when X3 lies on the side of
+// the face (X0, X1, X2) that its normal (X1 - X0) x (X2 - X0) points to.
+double SignedVolume(const TetPositions &X);
+
+// Longest edge length (m), the scale for deciding that a volume is "zero".
+double LongestEdge(const TetPositions &X);
+
+// Gradients of the four linear shape functions, constant over the tet:
+// rows of the inverse of [[1, X0], [1, X1], [1, X2], [1, X3]] without its first
+// row; equivalently grad N_{1..3} = rows of Dm^{-1}, Dm = [X1-X0, X2-X0, X3-X0],
+// grad N_0 = -(grad N_1 + grad N_2 + grad N_3). Requires a non-degenerate tet.
+ShapeGradients ComputeShapeGradients(const TetPositions &X);
+
+// K_e = V B^T C B (N/m), 12 x 12, symmetric positive semi-definite with the six
+// rigid-body modes in its null space. V = |volume| (m^3). Evaluated block-wise:
+//   K_ab = V [ l g_a g_b^T + 2m diag(g_a o g_b)
+//              + s m (g_b g_a^T + (g_a . g_b) I - 2 diag(g_a o g_b)) ].
+Mat12 ElementStiffness(const ShapeGradients &grad, double volume, const Lame &lame,
+                       double shear_scale);
+
+// The same matrix formed literally as V B^T C B with the 6 x 12 engineering-strain
+// B: slower, kept as the independent reference for the tests.
+Mat12 ElementStiffnessReference(const ShapeGradients &grad, double volume, const Lame &lame,
+                                double shear_scale);
+
+// Lumped mass per vertex (kg): density (kg/m^3) x |volume| / 4.
+inline double LumpedVertexMass(double density, double volume) { return density * volume / 4.0; }
+
+}  // namespace softbody

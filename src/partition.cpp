@@ -1,0 +1,91 @@
+#include "partition.hpp"
+
+#include <metis.h>
+
+#include <algorithm>
+#include <numeric>
+
+namespace softbody {
+
+namespace {
+
+// Rank 0 only: METIS k-way partition of the free-vertex adjacency graph.
+PetscErrorCode PartitionFreeVertices(const Scene &scene, const DofLayout &layout, idx_t nparts,
+                                     std::vector<idx_t> *part) {
+  PetscFunctionBeginUser;
+  const PetscInt n = layout.num_free();
+  // Neighbour lists from the tets, then CSR without self loops or repeats.
+  std::vector<std::vector<idx_t>> neighbours(n);
+  for (const Body &body : scene.bodies) {
+    if (body.fixed) continue;
+    for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b)
+          if (a != b)
+            neighbours[layout.free_of_natural[body.first_vertex + body.mesh.tets(t, a)]].push_back(
+                static_cast<idx_t>(layout.free_of_natural[body.first_vertex + body.mesh.tets(t, b)]));
+  }
+  std::vector<idx_t> xadj(n + 1, 0), adjncy;
+  for (PetscInt v = 0; v < n; ++v) {
+    auto &list = neighbours[v];
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+    adjncy.insert(adjncy.end(), list.begin(), list.end());
+    xadj[v + 1] = static_cast<idx_t>(adjncy.size());
+    std::vector<idx_t>().swap(list);
+  }
+  idx_t nvtxs = static_cast<idx_t>(n), ncon = 1, objval = 0;
+  idx_t options[METIS_NOPTIONS];
+  METIS_SetDefaultOptions(options);
+  options[METIS_OPTION_SEED] = 1;  // reproducible partitions
+  part->assign(n, 0);
+  const int status = METIS_PartGraphKway(&nvtxs, &ncon, xadj.data(), adjncy.data(), nullptr, nullptr,
+                                         nullptr, &nparts, nullptr, nullptr, options, &objval,
+                                         part->data());
+  PetscCheck(status == METIS_OK, PETSC_COMM_SELF, PETSC_ERR_LIB, "METIS_PartGraphKway failed (%d)",
+             status);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
+PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layout) {
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_rank(comm, &layout->rank));
+  PetscCallMPI(MPI_Comm_size(comm, &layout->size));
+
+  // Free vertices in natural order.
+  std::vector<char> in_free_tet(scene.num_vertices(), 0);
+  for (const Body &body : scene.bodies)
+    if (!body.fixed)
+      for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
+        for (int a = 0; a < 4; ++a) in_free_tet[body.first_vertex + body.mesh.tets(t, a)] = 1;
+  layout->free_of_natural.assign(scene.num_vertices(), -1);
+  layout->natural_of_free.clear();
+  for (PetscInt v = 0; v < scene.num_vertices(); ++v)
+    if (in_free_tet[v]) {
+      layout->free_of_natural[v] = layout->num_free();
+      layout->natural_of_free.push_back(v);
+    }
+  const PetscInt n = layout->num_free();
+
+  // Part of every free vertex: METIS on rank 0 when there is more than one rank.
+  std::vector<idx_t> part(n, 0);
+  if (layout->size > 1 && n > 0) {
+    if (layout->rank == 0) PetscCall(PartitionFreeVertices(scene, *layout, layout->size, &part));
+    static_assert(sizeof(idx_t) == sizeof(int32_t), "METIS built with 32-bit indices expected");
+    PetscCallMPI(MPI_Bcast(part.data(), static_cast<int>(n), MPI_INT32_T, 0, comm));
+  }
+
+  // Renumber part by part, natural order within a part.
+  layout->vertex_start.assign(layout->size + 1, 0);
+  for (PetscInt f = 0; f < n; ++f) ++layout->vertex_start[part[f] + 1];
+  std::partial_sum(layout->vertex_start.begin(), layout->vertex_start.end(),
+                   layout->vertex_start.begin());
+  std::vector<PetscInt> next(layout->vertex_start.begin(), layout->vertex_start.end() - 1);
+  layout->petsc_of_free.resize(n);
+  for (PetscInt f = 0; f < n; ++f) layout->petsc_of_free[f] = next[part[f]]++;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody

@@ -1,0 +1,81 @@
+#include "report.hpp"
+
+#include <algorithm>
+
+namespace softbody {
+
+PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                               const IntegratorOptions &o, const OutputOptions &output,
+                               const SolverStatistics &solver, KSP ksp, const RunReport &r) {
+  PetscFunctionBeginUser;
+  int fixed_bodies = 0;
+  PetscInt fixed_vertices = 0;
+  for (const Body &body : scene.bodies)
+    if (body.fixed) {
+      ++fixed_bodies;
+      fixed_vertices += body.mesh.num_vertices();
+    }
+  const PetscInt stray = scene.num_vertices() - fixed_vertices - layout.num_free();
+  PetscInt min_dofs = PETSC_MAX_INT, max_dofs = 0;
+  for (PetscMPIInt q = 0; q < layout.size; ++q) {
+    const PetscInt dofs = 3 * (layout.vertex_start[q + 1] - layout.vertex_start[q]);
+    min_dofs = std::min(min_dofs, dofs);
+    max_dofs = std::max(max_dofs, dofs);
+  }
+
+  PetscCall(PetscPrintf(comm, "softbody run summary\n"));
+  PetscCall(PetscPrintf(comm, "  scene        %s: %zu bodies (%d fixed), %d vertices, %lld tets\n",
+                        scene.path.c_str(), scene.bodies.size(), fixed_bodies, scene.num_vertices(),
+                        (long long)scene.num_tets()));
+  PetscCall(PetscPrintf(comm, "  unknowns     %" PetscInt_FMT " DOFs on %d ranks (%" PetscInt_FMT
+                        " to %" PetscInt_FMT " per rank, METIS partition)\n",
+                        3 * layout.num_free(), layout.size, min_dofs, max_dofs));
+  PetscCall(PetscPrintf(comm, "  model        linear elasticity, shear scale %g; damping a = %g 1/s, "
+                        "b = %g s; dt = %g s, %" PetscInt_FMT " steps\n",
+                        (double)o.shear_scale, (double)o.alpha, (double)o.beta, (double)o.dt,
+                        r.steps));
+
+  PetscCall(PetscPrintf(comm, "  left out     D never formed (A = (1 + a dt) M + (b dt + dt^2) K)"));
+  if (fixed_bodies)
+    PetscCall(PetscPrintf(comm, "; %d fixed bodies (%" PetscInt_FMT " vertices, no unknowns)",
+                          fixed_bodies, fixed_vertices));
+  if (stray) PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " vertices in no tet", stray));
+  if (scene.ignored_fixed_velocities)
+    PetscCall(PetscPrintf(comm, "; %d initial velocities on fixed bodies", scene.ignored_fixed_velocities));
+  if (o.alpha == 0) PetscCall(PetscPrintf(comm, "; mass damping (a = 0)"));
+  if (o.beta == 0) PetscCall(PetscPrintf(comm, "; stiffness damping (b = 0)"));
+  PetscCall(PetscPrintf(comm, "; external force (none in this scene)"));
+  if (output.path.empty()) PetscCall(PetscPrintf(comm, "; output (no -output)"));
+  PetscCall(PetscPrintf(comm, "\n"));
+
+  if (ksp) {
+    KSPType ksp_type;
+    PCType pc_type;
+    PC pc;
+    PetscCall(KSPGetType(ksp, &ksp_type));
+    PetscCall(KSPGetPC(ksp, &pc));
+    PetscCall(PCGetType(pc, &pc_type));
+    MatSolverType factor_package = nullptr;
+    PetscBool factored;
+    PetscCall(PetscObjectTypeCompareAny((PetscObject)pc, &factored, PCCHOLESKY, PCLU, ""));
+    if (factored) PetscCall(PCFactorGetMatSolverType(pc, &factor_package));
+    PetscCall(PetscPrintf(comm, "  solver       %s + %s%s%s; factorisation/set-up %.3g s; %" PetscInt_FMT
+                          " solves, %" PetscInt_FMT " iterations (max %" PetscInt_FMT " per step)\n",
+                          ksp_type, pc_type, factor_package ? " " : "",
+                          factor_package ? factor_package : "", solver.factor_seconds, solver.solves,
+                          solver.total_iterations, solver.max_iterations));
+  } else {
+    PetscCall(PetscPrintf(comm, "  solver       none: the scene has no unknowns\n"));
+  }
+  const double per_step = r.steps > 0 ? r.times.loop / r.steps : 0;
+  PetscCall(PetscPrintf(comm, "  time         set-up %.3f s, time loop %.3f s (%.3g ms/step), output %.3f s\n",
+                        r.times.setup, r.times.loop, 1e3 * per_step, r.times.output));
+  PetscCall(PetscPrintf(comm, "  energy       at t = %g s: kinetic %.6e J, elastic %.6e J\n",
+                        (double)r.final_time, (double)r.kinetic, (double)r.elastic));
+  if (!output.path.empty())
+    PetscCall(PetscPrintf(comm, "  output       %s (%" PetscInt_FMT " frames) and its .xdmf\n",
+                          output.path.c_str(), r.frames));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody

@@ -1,0 +1,35 @@
+// The run summary printed by rank 0 at the end of a run.
+#pragma once
+
+#include <petscksp.h>
+
+#include <string>
+
+#include "integrator.hpp"
+#include "output.hpp"
+#include "partition.hpp"
+#include "scene.hpp"
+
+namespace softbody {
+
+struct RunTimes {
+  PetscLogDouble setup = 0;   // s: reading, partitioning, assembly, factorisation
+  PetscLogDouble loop = 0;    // s: the time steps, output excluded
+  PetscLogDouble output = 0;  // s: gathering and writing frames
+};
+
+struct RunReport {
+  PetscInt steps = 0;
+  PetscReal final_time = 0;
+  PetscReal kinetic = 0, elastic = 0;  // J, at the end
+  PetscInt frames = 0;
+  RunTimes times;
+};
+
+// Collective (the solver description is queried collectively); prints on rank 0.
+// ksp may be null when the scene has no unknowns.
+PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                               const IntegratorOptions &integration, const OutputOptions &output,
+                               const SolverStatistics &solver, KSP ksp, const RunReport &report);
+
+}  // namespace softbody
