@@ -222,8 +222,9 @@ PetscErrorCode ResultWriter::Close() {
   if (rank_ == 0 && file_ >= 0) {
     ok = H5Fclose(file_) >= 0;
     file_ = -1;
-    // XDMF 3: a temporal collection of grids sharing the tets, each frame a
-    // hyperslab of /positions and /velocities.
+    // XDMF 3, as ParaView's default reader (Xdmf3ReaderS) takes it: a temporal
+    // collection of grids sharing the tets; frame f of a [F][V][3] series is the
+    // HDF subset "file:/set|start:stride:count:dims".
     const std::string h5 = std::filesystem::path(path_).filename().string();
     const std::string xdmf_path = std::filesystem::path(path_).replace_extension(".xdmf").string();
     const size_t F = times_.size();
@@ -232,12 +233,9 @@ PetscErrorCode ResultWriter::Close() {
     xdmf << "<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n<Domain>\n"
          << "<Grid Name=\"softbody\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
     auto slab = [&](const char *dataset, size_t frame) {
-      return "<DataItem ItemType=\"HyperSlab\" Dimensions=\"" + V + " 3\">\n"
-             "<DataItem Dimensions=\"3 3\" Format=\"XML\">" + std::to_string(frame) +
-             " 0 0 1 1 1 1 " + V + " 3</DataItem>\n"
-             "<DataItem Dimensions=\"" + std::to_string(F) + " " + V +
-             " 3\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">" + h5 + ":" + dataset +
-             "</DataItem>\n</DataItem>\n";
+      return "<DataItem Dimensions=\"" + V + " 3\" NumberType=\"Float\" Precision=\"8\" "
+             "Format=\"HDF\">" + h5 + ":" + dataset + "|" + std::to_string(frame) + " 0 0:1 1 1:1 " +
+             V + " 3:" + std::to_string(F) + " " + V + " 3</DataItem>\n";
     };
     for (size_t f = 0; f < F; ++f) {
       char time[32];
