@@ -27,6 +27,18 @@ LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) 
       elements.densities.push_back(body.material.density);
     }
   }
+  elements.touched_vertices.reserve(4 * elements.size());
+  for (const auto &v : elements.vertices)
+    elements.touched_vertices.insert(elements.touched_vertices.end(), v.begin(), v.end());
+  auto &touched = elements.touched_vertices;
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  for (const auto &v : elements.vertices) {
+    std::array<PetscInt, 4> index;
+    for (int a = 0; a < 4; ++a)
+      index[a] = std::lower_bound(touched.begin(), touched.end(), v[a]) - touched.begin();
+    elements.touched_index.push_back(index);
+  }
   return elements;
 }
 
@@ -61,28 +73,68 @@ PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode FillElasticMatrix(const LocalElements &elements, double shear_scale,
-                                 double stiffness_scale, Vec lumped_mass, double mass_scale,
-                                 Mat matrix) {
-  PetscFunctionBeginUser;
-  PetscInt local_dofs = 0;
-  if (lumped_mass) PetscCall(VecGetLocalSize(lumped_mass, &local_dofs));
-  std::vector<PetscScalar> values(144 * elements.size() + local_dofs);
-  PetscScalar *out = values.data();
+void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
+                           double stiffness_scale, CooValues *values) {
+  PetscScalar *out = values->data();
   for (size_t e = 0; e < elements.size(); ++e) {
     const Mat12 K = ElementStiffness(elements.gradients[e], elements.volumes[e], elements.lame[e],
                                      shear_scale);
-    // Row-major order, as the pattern: entry (3a+ca, 3b+cb).
+    // Row-major, as the pattern: entry (3a+ca, 3b+cb).
     for (int i = 0; i < 12; ++i)
       for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
   }
+}
+
+double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
+                                const PetscScalar *x_touched, const PetscScalar *X_touched,
+                                double stiffness_scale, CooValues *values,
+                                PetscScalar *force_touched) {
+  std::fill(force_touched, force_touched + 3 * elements.touched_vertices.size(), 0.0);
+  PetscScalar *out = values->data();
+  double energy = 0;
+  for (size_t e = 0; e < elements.size(); ++e) {
+    TetPositions x, X, force;
+    for (int a = 0; a < 4; ++a)
+      for (int c = 0; c < 3; ++c) {
+        x(a, c) = x_touched[3 * elements.touched_index[e][a] + c];
+        X(a, c) = X_touched[3 * elements.touched_index[e][a] + c];
+      }
+    Mat12 K;
+    double element_energy;
+    CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale, x, X,
+                     &force, &element_energy, &K);
+    energy += element_energy;
+    for (int a = 0; a < 4; ++a)
+      for (int c = 0; c < 3; ++c) force_touched[3 * elements.touched_index[e][a] + c] += force(a, c);
+    for (int i = 0; i < 12; ++i)
+      for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
+  }
+  return energy;
+}
+
+PetscErrorCode SetElasticMatrixValues(Vec lumped_mass, double mass_scale, CooValues *values,
+                                      Mat matrix) {
+  PetscFunctionBeginUser;
   if (lumped_mass) {
+    PetscInt local_dofs;
     const PetscScalar *mass;
+    PetscCall(VecGetLocalSize(lumped_mass, &local_dofs));
     PetscCall(VecGetArrayRead(lumped_mass, &mass));
-    for (PetscInt i = 0; i < local_dofs; ++i) *out++ = mass_scale * mass[i];
+    PetscScalar *diagonal = values->data() + values->size() - local_dofs;
+    for (PetscInt i = 0; i < local_dofs; ++i) diagonal[i] = mass_scale * mass[i];
     PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
   }
-  PetscCall(MatSetValuesCOO(matrix, values.data(), INSERT_VALUES));
+  PetscCall(MatSetValuesCOO(matrix, values->data(), INSERT_VALUES));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode CreateStiffnessMatrix(MPI_Comm comm, const DofLayout &layout,
+                                     const LocalElements &elements, double shear_scale, Mat *K) {
+  PetscFunctionBeginUser;
+  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_FALSE, K));
+  CooValues values(144 * elements.size());
+  LinearStiffnessValues(elements, shear_scale, 1.0, &values);
+  PetscCall(SetElasticMatrixValues(nullptr, 0.0, &values, *K));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -21,6 +21,10 @@ namespace softbody {
 // Elements owned by this rank and their rest-state data.
 struct LocalElements {
   std::vector<std::array<PetscInt, 4>> vertices;  // PETSc vertex indices
+  // The vertices the local elements touch (owned or not), increasing PETSc
+  // index, and each element's vertices as positions in that list.
+  std::vector<PetscInt> touched_vertices;
+  std::vector<std::array<PetscInt, 4>> touched_index;
   std::vector<ShapeGradients> gradients;          // rest shape-function gradients (1/m)
   std::vector<double> volumes;                    // rest volumes |V| (m^3)
   std::vector<Lame> lame;                         // Pa
@@ -38,12 +42,33 @@ LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout);
 PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
                                    const LocalElements &elements, PetscBool with_diagonal, Mat *matrix);
 
-// Collective. matrix = stiffness_scale K + mass_scale diag(lumped_mass), where K
-// is the linear elastic stiffness with the given shear scale; lumped_mass may be
-// nullptr only when the matrix was created without its diagonal part.
-PetscErrorCode FillElasticMatrix(const LocalElements &elements, double shear_scale,
-                                 double stiffness_scale, Vec lumped_mass, double mass_scale,
-                                 Mat matrix);
+// Collective. The rest stiffness K (N/m): CreateElasticMatrix without diagonal
+// part, filled with the linear element stiffness.
+PetscErrorCode CreateStiffnessMatrix(MPI_Comm comm, const DofLayout &layout,
+                                     const LocalElements &elements, double shear_scale, Mat *K);
+
+// COO values of a matrix made by CreateElasticMatrix: 144 per element (its 12 x 12
+// block, row-major), then, with a diagonal part, one per local DOF.
+using CooValues = std::vector<PetscScalar>;
+
+// Not collective. Element part of values = stiffness_scale K_e (linear stiffness).
+void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
+                           double stiffness_scale, CooValues *values);
+
+// Not collective. The corotational pass (Mueller & Gross 2004) over the local
+// elements at positions x_touched (3 per touched vertex, m), rest positions
+// X_touched: element part of values = stiffness_scale R K_e R^T; force_touched
+// (zeroed here, 3 per touched vertex) += R K_e (R^T x_e - X_e); returns the local
+// strain energy sum_e y^T K_e y / 2 (J).
+double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
+                                const PetscScalar *x_touched, const PetscScalar *X_touched,
+                                double stiffness_scale, CooValues *values,
+                                PetscScalar *force_touched);
+
+// Collective. Writes mass_scale x lumped_mass into the diagonal part of values
+// (when lumped_mass is given) and sets the matrix's values from them.
+PetscErrorCode SetElasticMatrixValues(Vec lumped_mass, double mass_scale, CooValues *values,
+                                      Mat matrix);
 
 // Collective. Lumped mass per DOF (kg), density x volume / 4 to each vertex of
 // each tet, repeated for the three coordinates. Created from the layout.

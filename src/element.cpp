@@ -56,6 +56,52 @@ Mat12 ElementStiffness(const ShapeGradients &grad, double volume, const Lame &la
   return K;
 }
 
+void ElasticForceAndEnergy(const ShapeGradients &grad, double volume, const Lame &lame,
+                           double shear_scale, const TetPositions &u, TetPositions *force,
+                           double *energy) {
+  const Mat3 H = u.transpose() * grad;  // displacement gradient du_i/dX_j
+  const double trace = H.trace(), sm = shear_scale * lame.mu;
+  Mat3 stress = sm * (H + H.transpose());
+  stress.diagonal() = (lame.lambda * trace) * Vec3::Ones() + 2.0 * lame.mu * H.diagonal();
+  *force = volume * grad * stress;  // row a: V (sigma g_a)^T, sigma symmetric
+  // strain . stress: normal parts H_ii sigma_ii, shear parts gamma_ij tau_ij.
+  double density = 0;
+  for (int i = 0; i < 3; ++i) density += H(i, i) * stress(i, i);
+  density += (H(0, 1) + H(1, 0)) * stress(0, 1) + (H(1, 2) + H(2, 1)) * stress(1, 2) +
+             (H(2, 0) + H(0, 2)) * stress(2, 0);
+  *energy = 0.5 * volume * density;
+}
+
+Mat3 DeformationGradient(const TetPositions &x, const ShapeGradients &grad) {
+  return x.transpose() * grad;
+}
+
+Mat3 RotationOfDeformation(const Mat3 &F) {
+  const Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 U = svd.matrixU(), V = svd.matrixV();
+  // Eigen orders singular values decreasingly: column 2 is the smallest.
+  if (U.determinant() < 0) U.col(2) *= -1.0;
+  if (V.determinant() < 0) V.col(2) *= -1.0;
+  return U * V.transpose();
+}
+
+Mat3 CorotatedElement(const ShapeGradients &grad, double volume, const Lame &lame,
+                      double shear_scale, const TetPositions &x, const TetPositions &X,
+                      TetPositions *force, double *energy, Mat12 *stiffness) {
+  const Mat3 R = RotationOfDeformation(DeformationGradient(x, grad));
+  const TetPositions y = x * R - X;  // rows: R^T x_a - X_a
+  TetPositions local_force;
+  ElasticForceAndEnergy(grad, volume, lame, shear_scale, y, &local_force, energy);
+  *force = local_force * R.transpose();  // rows: (R f_a)^T
+  if (stiffness) {
+    *stiffness = ElementStiffness(grad, volume, lame, shear_scale);
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        stiffness->block<3, 3>(3 * a, 3 * b) = R * stiffness->block<3, 3>(3 * a, 3 * b) * R.transpose();
+  }
+  return R;
+}
+
 Mat12 ElementStiffnessReference(const ShapeGradients &grad, double volume, const Lame &lame,
                                 double shear_scale) {
   Eigen::Matrix<double, 6, 12> B = Eigen::Matrix<double, 6, 12>::Zero();

@@ -59,4 +59,31 @@ Mat12 ElementStiffnessReference(const ShapeGradients &grad, double volume, const
 // Lumped mass per vertex (kg): density (kg/m^3) x |volume| / 4.
 inline double LumpedVertexMass(double density, double volume) { return density * volume / 4.0; }
 
+// Elastic force term and strain energy of displacements u (rows u_a, m), without
+// forming K_e: H = sum_a u_a g_a^T, engineering strain from H, stress
+// sigma = C strain, force_a = V sigma g_a (= rows of K_e u, N; the physical force
+// on vertex a is -force_a), energy = V strain . C strain / 2 (J).
+void ElasticForceAndEnergy(const ShapeGradients &grad, double volume, const Lame &lame,
+                           double shear_scale, const TetPositions &u, TetPositions *force,
+                           double *energy);
+
+// Deformation gradient F = Ds Dm^{-1} = sum_a x_a g_a^T of current positions x
+// (rows) with rest shape gradients g.
+Mat3 DeformationGradient(const TetPositions &x, const ShapeGradients &grad);
+
+// Rotation R of the polar decomposition F = R S, robust for degenerate and
+// inverted F (Irving et al. 2004): F = U diag(s) V^T by SVD; when det U or det V
+// is negative, the column belonging to the smallest singular value is negated, so
+// R = U V^T is always a proper rotation (det R = +1), also when det F <= 0.
+Mat3 RotationOfDeformation(const Mat3 &F);
+
+// Corotated element (Mueller & Gross 2004) for current positions x and rest
+// positions X (rows), with R = RotationOfDeformation(F):
+//   y_a = R^T x_a - X_a,  force_a = R (K_e y)_a,  energy = y^T K_e y / 2,
+// and, when stiffness is not null, the rotated stiffness R K_e R^T (12 x 12,
+// blocks R K_ab R^T). Returns R.
+Mat3 CorotatedElement(const ShapeGradients &grad, double volume, const Lame &lame,
+                      double shear_scale, const TetPositions &x, const TetPositions &X,
+                      TetPositions *force, double *energy, Mat12 *stiffness);
+
 }  // namespace softbody

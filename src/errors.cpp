@@ -14,7 +14,7 @@ namespace {
 PetscErrorCode OneLineInputErrorHandler(MPI_Comm comm, int line, const char *function,
                                         const char *file, PetscErrorCode code,
                                         PetscErrorType type, const char *message, void *ctx) {
-  if (code != PETSC_ERR_USER_INPUT)
+  if (code != PETSC_ERR_USER_INPUT && code != PETSC_ERR_NOT_CONVERGED)
     return PetscTraceBackErrorHandler(comm, line, function, file, code, type, message, ctx);
   if (type == PETSC_ERROR_INITIAL) {
     PetscMPIInt rank = 0;

@@ -3,7 +3,8 @@
 // Parsers and validators throw InputError with a message that names the file and
 // line (or the option) at fault. At the module boundary (the PetscErrorCode
 // functions) the exception becomes a PETSc error of class PETSC_ERR_USER_INPUT.
-// The handler installed by InstallErrorHandler() prints such an error as one line,
+// The handler installed by InstallErrorHandler() prints such an error, and a
+// linear solve that did not converge (PETSC_ERR_NOT_CONVERGED), as one line,
 // "softbody: error: <message>", on rank 0 only; every other PETSc error keeps
 // PETSc's usual traceback. Input is replicated on every rank, so every rank raises
 // the same input error and all of them exit non-zero without waiting on each other.

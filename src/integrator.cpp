@@ -4,9 +4,16 @@
 
 namespace softbody {
 
+const char *const kElasticityModes[] = {"linear", "corotational", "ElasticityMode", "MODE_", nullptr};
+
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionBeginUser;
   PetscOptionsBegin(comm, nullptr, "Time integration (backward Euler)", nullptr);
+  PetscCall(PetscOptionsEnum("-mode",
+                             "Elasticity: linear (K factorised once) or corotational (per-tet "
+                             "rotations, K rebuilt and solved every step)",
+                             nullptr, kElasticityModes, (PetscEnum)o->mode, (PetscEnum *)&o->mode,
+                             nullptr));
   PetscCall(PetscOptionsReal("-dt", "Time step (s)", nullptr, o->dt, &o->dt, nullptr));
   PetscCall(PetscOptionsInt("-steps", "Number of time steps (0: set up only)", nullptr, o->steps,
                             &o->steps, nullptr));
@@ -31,41 +38,73 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-LinearImplicitEuler::~LinearImplicitEuler() {
+ImplicitEuler::~ImplicitEuler() {
   KSPDestroy(&ksp_);
-  MatDestroy(&K_);
   MatDestroy(&A_);
-  VecDestroy(&displacement_);
-  VecDestroy(&stiffness_product_);
+  MatDestroy(&K_);
+  VecDestroy(&elastic_force_);
   VecDestroy(&rhs_);
+  VecDestroy(&displacement_);
+  VecScatterDestroy(&touched_scatter_);
+  VecDestroy(&x_touched_);
+  VecDestroy(&X_touched_);
+  VecDestroy(&force_touched_);
 }
 
-PetscErrorCode LinearImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
-                                          const LocalElements &elements, Vec rest_positions,
-                                          Vec lumped_mass, const IntegratorOptions &options) {
+PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
+                                    const LocalElements &elements, Vec rest_positions,
+                                    Vec lumped_mass, const IntegratorOptions &options) {
   PetscFunctionBeginUser;
   elements_ = &elements;
   options_ = options;
   rest_ = rest_positions;
   mass_ = lumped_mass;
-  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_FALSE, &K_));
-  PetscCall(FillElasticMatrix(elements, options.shear_scale, 1.0, nullptr, 0.0, K_));
-  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_TRUE, &A_));
-  PetscCall(VecDuplicate(rest_, &displacement_));
-  PetscCall(VecDuplicate(rest_, &stiffness_product_));
+  PetscCall(VecDuplicate(rest_, &elastic_force_));
   PetscCall(VecDuplicate(rest_, &rhs_));
-  PetscCall(ApplyPresetDefaults(kLinearPreset));
+  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_TRUE, &A_));
+  PetscInt local_dofs;
+  PetscCall(VecGetLocalSize(rest_, &local_dofs));
+  values_.resize(144 * elements.size() + local_dofs);
+
+  if (options.mode == MODE_LINEAR) {
+    PetscCall(CreateStiffnessMatrix(comm, layout, elements, options.shear_scale, &K_));
+    PetscCall(VecDuplicate(rest_, &displacement_));
+  } else {
+    // Gather plan: owned and ghost positions of every vertex the local elements touch.
+    const PetscInt touched = static_cast<PetscInt>(elements.touched_vertices.size());
+    IS from;
+    PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, touched, elements.touched_vertices.data(),
+                            PETSC_COPY_VALUES, &from));
+    PetscCall(VecCreateSeq(PETSC_COMM_SELF, 3 * touched, &x_touched_));
+    PetscCall(VecDuplicate(x_touched_, &X_touched_));
+    PetscCall(VecDuplicate(x_touched_, &force_touched_));
+    PetscCall(VecScatterCreate(rest_, from, x_touched_, nullptr, &touched_scatter_));
+    PetscCall(ISDestroy(&from));
+    PetscCall(VecScatterBegin(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
+  }
+
+  PetscCall(ApplyPresetDefaults(options.mode == MODE_LINEAR ? kDirectPreset : kCgGamgPreset));
   PetscCall(CreateSolver(A_, rest_positions, &ksp_));
+  PC pc;
+  PetscCall(KSPGetPC(ksp_, &pc));
+  PetscBool gamg;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCGAMG, &gamg));
+  gamg_ = gamg;
   PetscCall(SetTimeStep(options.dt));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode LinearImplicitEuler::SetTimeStep(PetscReal dt) {
+PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscFunctionBeginUser;
   dt_ = dt;
+  if (options_.mode == MODE_COROTATIONAL) {
+    elastic_state_current_ = false;  // A depends on dt: refilled at the next step
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
   const PetscReal a = options_.alpha, b = options_.beta;
-  PetscCall(FillElasticMatrix(*elements_, options_.shear_scale, b * dt + dt * dt, mass_,
-                              1.0 + a * dt, A_));
+  LinearStiffnessValues(*elements_, options_.shear_scale, b * dt + dt * dt, &values_);
+  PetscCall(SetElasticMatrixValues(mass_, 1.0 + a * dt, &values_, A_));
   PetscLogDouble start, end;
   PetscCall(PetscTime(&start));
   PetscCall(KSPSetOperators(ksp_, A_, A_));
@@ -75,45 +114,82 @@ PetscErrorCode LinearImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode LinearImplicitEuler::UpdateStiffnessProduct(Vec x) {
+PetscErrorCode ImplicitEuler::UpdateNearNullSpace(Vec x) {
   PetscFunctionBeginUser;
-  if (product_current_) PetscFunctionReturn(PETSC_SUCCESS);
-  PetscCall(VecWAXPY(displacement_, -1.0, rest_, x));
-  PetscCall(MatMult(K_, displacement_, stiffness_product_));
-  product_current_ = true;
+  MatNullSpace rigid_body_modes;
+  PetscCall(MatNullSpaceCreateRigidBody(x, &rigid_body_modes));
+  PetscCall(MatSetNearNullSpace(A_, rigid_body_modes));
+  PetscCall(MatNullSpaceDestroy(&rigid_body_modes));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode LinearImplicitEuler::Step(Vec x, Vec v) {
+PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
   PetscFunctionBeginUser;
-  // rhs = M v0 - dt K (x0 - X)
-  PetscCall(UpdateStiffnessProduct(x));
+  if (elastic_state_current_) PetscFunctionReturn(PETSC_SUCCESS);
+  if (options_.mode == MODE_LINEAR) {
+    // f_el = K (x - X), energy = (x - X) . f_el / 2
+    PetscCall(VecWAXPY(displacement_, -1.0, rest_, x));
+    PetscCall(MatMult(K_, displacement_, elastic_force_));
+    PetscCall(VecDot(displacement_, elastic_force_, &elastic_energy_));
+    elastic_energy_ *= 0.5;
+  } else {
+    PetscCall(VecScatterBegin(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
+    const PetscScalar *x_touched, *X_touched;
+    PetscScalar *force_touched;
+    PetscCall(VecGetArrayRead(x_touched_, &x_touched));
+    PetscCall(VecGetArrayRead(X_touched_, &X_touched));
+    PetscCall(VecGetArrayWrite(force_touched_, &force_touched));
+    const PetscReal a = options_.alpha, b = options_.beta;
+    const double local_energy = CorotatedStiffnessValues(
+        *elements_, options_.shear_scale, x_touched, X_touched, b * dt_ + dt_ * dt_, &values_,
+        force_touched);
+    PetscCall(VecRestoreArrayRead(x_touched_, &x_touched));
+    PetscCall(VecRestoreArrayRead(X_touched_, &X_touched));
+    PetscCall(VecRestoreArrayWrite(force_touched_, &force_touched));
+    PetscCall(SetElasticMatrixValues(mass_, 1.0 + a * dt_, &values_, A_));
+    PetscCall(VecZeroEntries(elastic_force_));
+    PetscCall(VecScatterBegin(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
+    PetscCall(VecScatterEnd(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
+    PetscCall(MPIU_Allreduce(&local_energy, &elastic_energy_, 1, MPIU_REAL, MPIU_SUM,
+                             PetscObjectComm((PetscObject)x)));
+    if (gamg_) PetscCall(UpdateNearNullSpace(x));
+  }
+  elastic_state_current_ = true;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Step(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  // rhs = M v0 - dt f_el(x0)
+  PetscCall(UpdateElasticState(x));
   PetscCall(VecPointwiseMult(rhs_, mass_, v));
-  PetscCall(VecAXPY(rhs_, -dt_, stiffness_product_));
-  // A v1 = rhs; v holds v0 as the initial guess of iterative solvers.
+  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
+  // A v1 = rhs; v holds v0, the initial guess of iterative solvers.
   PetscCall(KSPSolve(ksp_, rhs_, v));
   KSPConvergedReason reason;
   PetscInt iterations;
   PetscCall(KSPGetConvergedReason(ksp_, &reason));
   PetscCall(KSPGetIterationNumber(ksp_, &iterations));
   PetscCheck(reason >= 0, PetscObjectComm((PetscObject)ksp_), PETSC_ERR_NOT_CONVERGED,
-             "linear solve %" PetscInt_FMT " did not converge: %s after %" PetscInt_FMT " iterations",
+             "step %" PetscInt_FMT ": the linear solve did not converge (%s after %" PetscInt_FMT
+             " iterations); try a smaller -dt or another -ksp_type/-pc_type",
              stats_.solves + 1, KSPConvergedReasons[reason], iterations);
   ++stats_.solves;
   stats_.last_iterations = iterations;
   stats_.total_iterations += iterations;
+  stats_.min_iterations = PetscMin(stats_.min_iterations, iterations);
   stats_.max_iterations = PetscMax(stats_.max_iterations, iterations);
   // x1 = x0 + dt v1
   PetscCall(VecAXPY(x, dt_, v));
-  product_current_ = false;
+  elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode LinearImplicitEuler::Energies(Vec x, Vec v, PetscReal *kinetic, PetscReal *elastic) {
+PetscErrorCode ImplicitEuler::Energies(Vec x, Vec v, PetscReal *kinetic, PetscReal *elastic) {
   PetscFunctionBeginUser;
-  PetscCall(UpdateStiffnessProduct(x));
-  PetscCall(VecDot(displacement_, stiffness_product_, elastic));
-  *elastic *= 0.5;
+  PetscCall(UpdateElasticState(x));
+  *elastic = elastic_energy_;
   PetscCall(VecPointwiseMult(rhs_, mass_, v));
   PetscCall(VecDot(rhs_, v, kinetic));
   *kinetic *= 0.5;

@@ -1,16 +1,24 @@
-// Time integration of the linear finite-element equations of motion
+// Time integration of the finite-element equations of motion
 //
-//     M x'' + D x' + K (x - X) = f_ext,    D = a M + b K  (Rayleigh damping),
+//     M x'' + D x' + f_el(x) = f_ext,    D = a M + b K  (Rayleigh damping),
 //
 // with backward (implicit) Euler in velocity form, one linear solve per step:
 //
-//     (M + dt D + dt^2 K) v1 = M v0 - dt K (x0 - X) + dt f_ext,    x1 = x0 + dt v1.
+//     (M + dt D + dt^2 K) v1 = M v0 - dt f_el(x0) + dt f_ext,    x1 = x0 + dt v1.
 //
-// M is the lumped mass (kg, kept as a Vec), K the stiffness (N/m), X the rest
-// positions (m), x positions (m), v velocities (m/s), dt in s, a in 1/s, b in s.
-// D is never formed: A = (1 + a dt) M + (b dt + dt^2) K. A is assembled and
-// factorised once per time step size; each step then costs one K x product and
-// one solve. Energies: kinetic v^T M v / 2, elastic (x - X)^T K (x - X) / 2 (J).
+// M is the lumped mass (kg, kept as a Vec), X the rest positions (m), x positions
+// (m), v velocities (m/s), dt in s, a in 1/s, b in s. D is never formed:
+// A = (1 + a dt) M + (b dt + dt^2) K.
+//
+// Linear mode: K is the rest stiffness, f_el = K (x - X); A is assembled and
+//   factorised once per time step size; a step costs one K x product and one solve.
+// Corotational mode (Mueller & Gross 2004, "Interactive Virtual Materials"): each
+//   step extracts every tet's rotation R from F = Ds Dm^-1 (see element.hpp),
+//   K = K(R) = sum_e R K_e R^T and f_el = sum_e R K_e (R^T x_e - X_e); A's values
+//   are refilled into the same pattern (no symbolic work) and solved again,
+//   by default with CG + GAMG warm-started from the previous velocity.
+// Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode,
+// sum_e y_e^T K_e y_e / 2 with y_e = R^T x_e - X_e in corotational mode (J).
 #pragma once
 
 #include <petscksp.h>
@@ -19,7 +27,11 @@
 
 namespace softbody {
 
+typedef enum { MODE_LINEAR, MODE_COROTATIONAL } ElasticityMode;
+extern const char *const kElasticityModes[];
+
 struct IntegratorOptions {
+  ElasticityMode mode = MODE_LINEAR;
   PetscReal dt = 0.02;     // s
   PetscInt steps = 100;
   PetscReal alpha = 0.1;   // mass damping a, 1/s
@@ -27,53 +39,67 @@ struct IntegratorOptions {
   PetscReal shear_scale = 1.0;
 };
 
-// Collective. Reads -dt -steps -alpha -beta -shear_scale; rejects impossible values.
+// Collective. Reads -mode -dt -steps -alpha -beta -shear_scale; rejects
+// impossible values.
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *options);
 
 struct SolverStatistics {
   PetscInt solves = 0;
   PetscInt total_iterations = 0;
   PetscInt last_iterations = 0;
+  PetscInt min_iterations = PETSC_MAX_INT;
   PetscInt max_iterations = 0;
-  PetscLogDouble factor_seconds = 0;  // wall time of the last (re)factorisation
+  PetscLogDouble factor_seconds = 0;  // wall time of the last (re)factorisation/set-up
 };
 
-class LinearImplicitEuler {
+class ImplicitEuler {
  public:
-  LinearImplicitEuler() = default;
-  LinearImplicitEuler(const LinearImplicitEuler &) = delete;
-  LinearImplicitEuler &operator=(const LinearImplicitEuler &) = delete;
-  ~LinearImplicitEuler();
+  ImplicitEuler() = default;
+  ImplicitEuler(const ImplicitEuler &) = delete;
+  ImplicitEuler &operator=(const ImplicitEuler &) = delete;
+  ~ImplicitEuler();
 
-  // Collective. Assembles K and A for options.dt and sets up (factorises) the
-  // solver. rest_positions and lumped_mass are referenced, not copied.
+  // Collective. Creates the matrices and the solver for options.dt (linear mode:
+  // assembles and factorises A). rest_positions and lumped_mass are referenced.
   PetscErrorCode Setup(MPI_Comm comm, const DofLayout &layout, const LocalElements &elements,
                        Vec rest_positions, Vec lumped_mass, const IntegratorOptions &options);
-  // Collective. Refills A and refactorises for a new time step size (s).
+  // Collective. New time step size (s); linear mode refills A and refactorises.
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step (f_ext = 0).
   PetscErrorCode Step(Vec x, Vec v);
+  // Not collective. To be called after positions were changed outside Step.
+  void PositionsChanged() { elastic_state_current_ = false; }
   // Collective. Kinetic and elastic energy (J) of the state (x, v).
   PetscErrorCode Energies(Vec x, Vec v, PetscReal *kinetic, PetscReal *elastic);
 
-  Mat stiffness() const { return K_; }
   KSP solver() const { return ksp_; }
   PetscReal time_step() const { return dt_; }
   const SolverStatistics &statistics() const { return stats_; }
 
  private:
-  // K (x - X) into stiffness_product_, unless already computed for these
-  // positions (x changes only in Step).
-  PetscErrorCode UpdateStiffnessProduct(Vec x);
+  // f_el(x) into elastic_force_ and the elastic energy; corotational mode also
+  // refills A for x. Skipped when already done for these positions (x changes
+  // only in Step).
+  PetscErrorCode UpdateElasticState(Vec x);
+  PetscErrorCode UpdateNearNullSpace(Vec x);
 
   const LocalElements *elements_ = nullptr;
   IntegratorOptions options_;
   PetscReal dt_ = 0;
-  Vec rest_ = nullptr, mass_ = nullptr;      // not owned
-  Mat K_ = nullptr, A_ = nullptr;
+  Vec rest_ = nullptr, mass_ = nullptr;  // not owned
+  Mat A_ = nullptr;
   KSP ksp_ = nullptr;
-  Vec displacement_ = nullptr, stiffness_product_ = nullptr, rhs_ = nullptr;
-  bool product_current_ = false;             // K u is that of the positions of the last Step
+  Vec elastic_force_ = nullptr, rhs_ = nullptr;
+  PetscReal elastic_energy_ = 0;
+  bool elastic_state_current_ = false;
+  bool gamg_ = false;                     // the PC uses the near-null space
+  CooValues values_;                      // A's COO values
+  // Linear mode: the rest stiffness and a work vector for x - X.
+  Mat K_ = nullptr;
+  Vec displacement_ = nullptr;
+  // Corotational mode: positions of the vertices the local elements touch.
+  VecScatter touched_scatter_ = nullptr;
+  Vec x_touched_ = nullptr, X_touched_ = nullptr, force_touched_ = nullptr;
   SolverStatistics stats_;
 };
 

@@ -258,10 +258,13 @@ PetscErrorCode ResultWriter::Close() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout, Mat stiffness,
+PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout,
+                              const LocalElements &elements, PetscReal shear_scale,
                               Vec lumped_mass, PetscReal alpha, PetscReal beta) {
   PetscFunctionBeginUser;
-  MPI_Comm comm = PetscObjectComm((PetscObject)stiffness);
+  MPI_Comm comm = PetscObjectComm((PetscObject)lumped_mass);
+  Mat stiffness;
+  PetscCall(CreateStiffnessMatrix(comm, layout, elements, shear_scale, &stiffness));
   std::error_code error;
   if (layout.rank == 0) std::filesystem::create_directories(dir, error);
   PetscCall(AgreeOnSuccess(comm, !error, "option -export_matrices: cannot create folder '" + dir + "'"));
@@ -296,6 +299,7 @@ PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout, M
     PetscCall(MatView(matrix, viewer));
     PetscCall(PetscViewerDestroy(&viewer));
   }
+  PetscCall(MatDestroy(&stiffness));
   PetscCall(MatDestroy(&K));
   PetscCall(MatDestroy(&M));
   PetscCall(MatDestroy(&D));

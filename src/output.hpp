@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "assembly.hpp"
 #include "partition.hpp"
 #include "scene.hpp"
 
@@ -67,7 +68,9 @@ class ResultWriter {
 };
 
 // Collective. Writes DIR/M.bin, DIR/K.bin, DIR/D.bin (D = alpha M + beta K).
-PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout, Mat stiffness,
+// K is the rest stiffness (in both modes).
+PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout,
+                              const LocalElements &elements, PetscReal shear_scale,
                               Vec lumped_mass, PetscReal alpha, PetscReal beta);
 
 }  // namespace softbody

@@ -30,12 +30,14 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
   PetscCall(PetscPrintf(comm, "  unknowns     %" PetscInt_FMT " DOFs on %d ranks (%" PetscInt_FMT
                         " to %" PetscInt_FMT " per rank, METIS partition)\n",
                         3 * layout.num_free(), layout.size, min_dofs, max_dofs));
-  PetscCall(PetscPrintf(comm, "  model        linear elasticity, shear scale %g; damping a = %g 1/s, "
+  PetscCall(PetscPrintf(comm, "  model        %s elasticity, shear scale %g; damping a = %g 1/s, "
                         "b = %g s; dt = %g s, %" PetscInt_FMT " steps\n",
-                        (double)o.shear_scale, (double)o.alpha, (double)o.beta, (double)o.dt,
+                        kElasticityModes[o.mode], (double)o.shear_scale, (double)o.alpha, (double)o.beta, (double)o.dt,
                         r.steps));
 
   PetscCall(PetscPrintf(comm, "  left out     D never formed (A = (1 + a dt) M + (b dt + dt^2) K)"));
+  if (o.mode == MODE_COROTATIONAL) PetscCall(PetscPrintf(comm, "; K never formed (A refilled directly)"));
+  else PetscCall(PetscPrintf(comm, "; reassembly (K, A fixed)"));
   if (fixed_bodies)
     PetscCall(PetscPrintf(comm, "; %d fixed bodies (%" PetscInt_FMT " vertices, no unknowns)",
                           fixed_bodies, fixed_vertices));
@@ -59,11 +61,18 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscBool factored;
     PetscCall(PetscObjectTypeCompareAny((PetscObject)pc, &factored, PCCHOLESKY, PCLU, ""));
     if (factored) PetscCall(PCFactorGetMatSolverType(pc, &factor_package));
-    PetscCall(PetscPrintf(comm, "  solver       %s + %s%s%s; factorisation/set-up %.3g s; %" PetscInt_FMT
-                          " solves, %" PetscInt_FMT " iterations (max %" PetscInt_FMT " per step)\n",
-                          ksp_type, pc_type, factor_package ? " " : "",
-                          factor_package ? factor_package : "", solver.factor_seconds, solver.solves,
-                          solver.total_iterations, solver.max_iterations));
+    PetscCall(PetscPrintf(comm, "  solver       %s + %s%s%s", ksp_type, pc_type,
+                          factor_package ? " " : "", factor_package ? factor_package : ""));
+    if (o.mode == MODE_LINEAR)
+      PetscCall(PetscPrintf(comm, ", factorised once in %.3g s", solver.factor_seconds));
+    else
+      PetscCall(PetscPrintf(comm, ", A refilled and set up again every step"));
+    PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " solves", solver.solves));
+    if (solver.solves)
+      PetscCall(PetscPrintf(comm, ", iterations per step %.3g mean, %" PetscInt_FMT " min, %" PetscInt_FMT " max",
+                            (double)solver.total_iterations / solver.solves, solver.min_iterations,
+                            solver.max_iterations));
+    PetscCall(PetscPrintf(comm, "\n"));
   } else {
     PetscCall(PetscPrintf(comm, "  solver       none: the scene has no unknowns\n"));
   }

@@ -10,7 +10,9 @@
 
 namespace softbody {
 
-extern const char *const kLinearPreset;  // config/linear-direct.opts
+// Presets compiled in from config/: the defaults of linear and corotational mode.
+extern const char *const kDirectPreset;  // config/direct.opts
+extern const char *const kCgGamgPreset;  // config/cg-gamg.opts
 
 // Collective. Inserts the preset's options where the command line sets none.
 PetscErrorCode ApplyPresetDefaults(const char *preset);
