@@ -12,6 +12,7 @@
 
 #include <petscsys.h>
 
+#include <new>
 #include <stdexcept>
 #include <string>
 
@@ -38,5 +39,7 @@ PetscErrorCode InstallErrorHandler();
       statement;                                                           \
     } catch (const softbody::InputError &input_error_) {                   \
       SETERRQ(comm, PETSC_ERR_USER_INPUT, "%s", input_error_.what());      \
+    } catch (const std::bad_alloc &) {                                     \
+      SETERRQ(comm, PETSC_ERR_MEM, "out of memory while reading input");   \
     }                                                                      \
   } while (0)

@@ -28,9 +28,14 @@ const std::map<std::string, int> kSkippedSections = {
     {"RequiredTriangles", 1}, {"Normals", 3},       {"Tangents", 3},
     {"NormalAtVertices", 2}, {"TangentAtEdges", 3}};
 
+// A section's row count. A row takes at least one byte, so a count beyond the
+// bytes left is rejected before anything is allocated (a short section is
+// reported where the file ends).
 long ExpectCount(TextReader &in, const char *section) {
   const long count = in.ExpectInteger((std::string("number of ") + section).c_str());
   if (count < 0) in.Fail(std::string("negative number of ") + section);
+  if (static_cast<size_t>(count) > in.remaining_bytes())
+    in.Fail(std::to_string(count) + " " + section + " announced, more than the rest of the file holds");
   return count;
 }
 
@@ -56,6 +61,7 @@ TetMesh ReadMedit(const std::string &path) {
     } else if (keyword == "Dimension") {
       if (in.ExpectInteger("dimension") != 3) in.Fail("only 3-dimensional meshes are supported");
     } else if (keyword == "Vertices") {
+      if (have_vertices) in.Fail("second Vertices section");
       const long n = ExpectCount(in, "vertices");
       mesh.vertices.resize(n, 3);
       for (long v = 0; v < n; ++v) {
@@ -65,6 +71,7 @@ TetMesh ReadMedit(const std::string &path) {
       have_vertices = true;
     } else if (keyword == "Tetrahedra") {
       if (!have_vertices) in.Fail("Tetrahedra before Vertices");
+      if (have_tets) in.Fail("second Tetrahedra section");
       const long n = ExpectCount(in, "tetrahedra");
       mesh.tets.resize(n, 4);
       for (long t = 0; t < n; ++t) {

@@ -38,6 +38,7 @@ bool TextReader::NextToken(std::string_view *token) {
   SkipBlanksAndComments(false);
   if (pos_ >= text_.size()) return false;
   const size_t start = pos_;
+  token_line_ = line_;
   while (pos_ < text_.size() && !std::isspace(static_cast<unsigned char>(text_[pos_])) &&
          text_[pos_] != '#')
     ++pos_;
@@ -87,6 +88,8 @@ long TextReader::ParseInteger(std::string_view token, const char *what) const {
   return value;
 }
 
-void TextReader::Fail(const std::string &what) const { throw InputError(Where(path_, line_, what)); }
+void TextReader::Fail(const std::string &what) const {
+  throw InputError(Where(path_, token_line_, what));
+}
 
 }  // namespace softbody

@@ -14,12 +14,15 @@ class TextReader {
   explicit TextReader(std::string path);
 
   const std::string &path() const { return path_; }
-  // Line of the token returned last (1-based), or of the end of the file.
-  long line() const { return line_; }
+  // Line of the token returned last (1-based).
+  long line() const { return token_line_; }
+  // Bytes not read yet: an upper bound for how many tokens can still follow.
+  size_t remaining_bytes() const { return text_.size() - pos_; }
 
   // Next token; false at the end of the file.
   bool NextToken(std::string_view *token);
-  // Next token, or InputError "expected <what>, found end of file".
+  // Next token, or InputError "expected <what>, found end of file" (at the line
+  // of the last token).
   std::string_view ExpectToken(const char *what);
   // Tokens of the next line that holds any; false at the end of the file.
   bool NextLine(std::vector<std::string_view> *tokens);
@@ -41,7 +44,8 @@ class TextReader {
   std::string path_;
   std::string text_;
   size_t pos_ = 0;
-  long line_ = 1;
+  long line_ = 1;             // line of the reading position
+  long token_line_ = 1;       // line of the token returned last
 };
 
 }  // namespace softbody
