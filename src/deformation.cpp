@@ -36,20 +36,24 @@ std::vector<PetscInt> LocalBodies(const Scene &scene, const DofLayout &layout) {
 
 }  // namespace
 
-PetscErrorCode ProcessDeformationOptions(MPI_Comm comm, const Scene &scene,
-                                         std::vector<Deformation> *deformations) {
+PetscErrorCode ProcessDeformationOptions(MPI_Comm comm, std::string *text) {
   PetscFunctionBeginUser;
   char buffer[PETSC_MAX_PATH_LEN] = "";
-  PetscBool set = PETSC_FALSE;
   PetscOptionsBegin(comm, nullptr, "Prescribed deformation", nullptr);
   PetscCall(PetscOptionsString("-deform",
                                "Scale body b about its centroid by (sx,sy,sz) at time t (s): "
                                "b:t:sx,sy,sz, several separated by ';'",
-                               nullptr, buffer, buffer, sizeof(buffer), &set));
+                               nullptr, buffer, buffer, sizeof(buffer), nullptr));
   PetscOptionsEnd();
+  *text = buffer;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ParseDeformations(MPI_Comm comm, const std::string &text, const Scene &scene,
+                                 std::vector<Deformation> *deformations) {
+  PetscFunctionBeginUser;
   deformations->clear();
-  if (!set) PetscFunctionReturn(PETSC_SUCCESS);
-  std::istringstream list(buffer);
+  std::istringstream list(text);
   std::string item;
   while (std::getline(list, item, ';')) {
     Deformation d;

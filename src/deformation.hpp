@@ -21,10 +21,13 @@ struct Deformation {
   bool applied = false;
 };
 
-// Collective. Reads -deform "body:time:sx,sy,sz[;body:time:sx,sy,sz...]" and
-// checks it against the scene (body index, not fixed, time >= 0, factors non-zero).
-PetscErrorCode ProcessDeformationOptions(MPI_Comm comm, const Scene &scene,
-                                         std::vector<Deformation> *deformations);
+// Collective. Reads -deform "body:time:sx,sy,sz[;body:time:sx,sy,sz...]" ("" if unset).
+PetscErrorCode ProcessDeformationOptions(MPI_Comm comm, std::string *text);
+
+// Collective. Parses the -deform text and checks it against the scene (body
+// index, not fixed, time >= 0, factors non-zero).
+PetscErrorCode ParseDeformations(MPI_Comm comm, const std::string &text, const Scene &scene,
+                                 std::vector<Deformation> *deformations);
 
 // Collective. Applies every deformation due at `time` (time >= its time, up to
 // half a step of round-off) not applied before; *changed tells whether any was.

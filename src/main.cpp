@@ -96,6 +96,8 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(ProcessSceneOptions(comm, &scene_path));
   PetscCall(ProcessIntegratorOptions(comm, &integration));
   PetscCall(ProcessOutputOptions(comm, &output));
+  std::string deform_text;
+  PetscCall(ProcessDeformationOptions(comm, &deform_text));
   PetscBool help;
   PetscCall(PetscOptionsHasHelp(nullptr, &help));
   if (help) {
@@ -109,7 +111,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(LoadScene(comm, scene_path, &scene));
 
   std::vector<Deformation> deformations;
-  PetscCall(ProcessDeformationOptions(comm, scene, &deformations));
+  PetscCall(ParseDeformations(comm, deform_text, scene, &deformations));
 
   // 3. Free vertices, METIS partition, contiguous block per rank.
   DofLayout layout;
