@@ -1,5 +1,6 @@
 #include "integrator.hpp"
 
+#include "options.hpp"
 #include "solver.hpp"
 
 namespace softbody {
@@ -8,6 +9,12 @@ const char *const kElasticityModes[] = {"linear", "corotational", "ElasticityMod
 
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionBeginUser;
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kChoice, "-mode", kElasticityModes},
+                                     {OptionSyntax::kReal, "-dt"},
+                                     {OptionSyntax::kInteger, "-steps"},
+                                     {OptionSyntax::kReal, "-alpha"},
+                                     {OptionSyntax::kReal, "-beta"},
+                                     {OptionSyntax::kReal, "-shear_scale"}}));
   PetscOptionsBegin(comm, nullptr, "Time integration (backward Euler)", nullptr);
   PetscCall(PetscOptionsEnum("-mode",
                              "Elasticity: linear (K factorised once) or corotational (per-tet "

@@ -3,11 +3,14 @@
 #include <filesystem>
 #include <fstream>
 
+#include "options.hpp"
+
 namespace softbody {
 
 PetscErrorCode ProcessOutputOptions(MPI_Comm comm, OutputOptions *o) {
   PetscFunctionBeginUser;
   char path[PETSC_MAX_PATH_LEN] = "", dir[PETSC_MAX_PATH_LEN] = "";
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kInteger, "-output_every"}}));
   PetscOptionsBegin(comm, nullptr, "Output", nullptr);
   PetscCall(PetscOptionsString("-output", "HDF5 file of the frames (+ .xdmf beside it); none if unset",
                                nullptr, path, path, sizeof(path), nullptr));
