@@ -58,7 +58,11 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
   for (int c = 0; c < 3; ++c) position[c] = in.ParseReal(fields[5 + c], "position");
   for (int c = 0; c < 4; ++c) quaternion[c] = in.ParseReal(fields[8 + c], "quaternion");
   if (!(quaternion.norm() > 0)) in.Fail("quaternion must be non-zero");
-  body.mesh = ReadTetMesh(body.mesh_path);
+  try {
+    body.mesh = ReadTetMesh(body.mesh_path);
+  } catch (const InputError &error) {  // say which scene line named the mesh
+    in.Fail(std::string("mesh: ") + error.what());
+  }
   PlaceMesh(position, quaternion, &body.mesh);
   return body;
 }

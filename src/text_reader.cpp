@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -10,6 +11,9 @@
 namespace softbody {
 
 TextReader::TextReader(std::string path) : path_(std::move(path)) {
+  std::error_code error;
+  if (std::filesystem::exists(path_, error) && !std::filesystem::is_regular_file(path_, error))
+    throw InputError(Where(path_, 0, "not a regular file"));
   std::ifstream in(path_, std::ios::binary);
   if (!in) throw InputError(Where(path_, 0, "cannot open file"));
   std::ostringstream buffer;
