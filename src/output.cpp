@@ -92,6 +92,18 @@ bool WriteArray(hid_t location, const char *name, hid_t type, const std::vector<
   return ok;
 }
 
+// Root attribute "complete": 0 while the run goes on, 1 once it has finished.
+bool MarkComplete(hid_t file, int complete) {
+  const hid_t space = H5Screate(H5S_SCALAR);
+  const hid_t attribute = H5Aexists(file, "complete") > 0
+                              ? H5Aopen(file, "complete", H5P_DEFAULT)
+                              : H5Acreate2(file, "complete", H5T_NATIVE_INT, space, H5P_DEFAULT, H5P_DEFAULT);
+  const bool ok = attribute >= 0 && H5Awrite(attribute, H5T_NATIVE_INT, &complete) >= 0;
+  if (attribute >= 0) H5Aclose(attribute);
+  H5Sclose(space);
+  return ok;
+}
+
 // Rank 0: the static mesh datasets under /mesh.
 bool WriteMesh(hid_t file, const Scene &scene) {
   const hid_t group = H5Gcreate2(file, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
@@ -180,7 +192,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const std::string &path, const 
         if (set >= 0) H5Dclose(set);
       }
       if (energy >= 0) H5Gclose(energy);
-      ok = ok && energy >= 0 && WriteMesh(file_, scene);
+      ok = ok && energy >= 0 && WriteMesh(file_, scene) && MarkComplete(file_, 0);
     }
   }
   PetscCall(AgreeOnSuccess(comm, ok, "option -output: cannot create HDF5 file '" + path + "'"));
@@ -223,7 +235,7 @@ PetscErrorCode ResultWriter::Close() {
   PetscFunctionBeginUser;
   bool ok = true;
   if (rank_ == 0 && file_ >= 0) {
-    ok = H5Fclose(file_) >= 0;
+    ok = MarkComplete(file_, 1) && H5Fclose(file_) >= 0;
     file_ = -1;
     // XDMF 3, as ParaView's default reader (Xdmf3ReaderS) takes it: a temporal
     // collection of grids sharing the tets; frame f of a [F][V][3] series is the

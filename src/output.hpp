@@ -6,8 +6,9 @@
 //   /energy/kinetic [F], /energy/elastic [F] (J),
 //   /mesh/tets [T][4], /mesh/boundary_triangles [B][3] (0-based natural vertex
 //   indices), /mesh/vertex_body [V], /mesh/rest_positions [V][3].
-// Frame 0 is the initial state. The file is flushed after every frame. An .xdmf
-// beside it (same name) describes the frames as a ParaView time series.
+// Frame 0 is the initial state. The file is flushed after every frame; its root
+// attribute "complete" is 0 until the run has finished (1). An .xdmf beside it
+// (same name), written at the end, describes the frames as a ParaView time series.
 //
 // Matrices: PETSc binary files of M, K and D in the natural order of the free
 // vertices' coordinates (xyzxyz).

@@ -10,6 +10,8 @@
 (d) A body inverted in its initial state (-deform 0:0:1,1,-1) recovers: volume
     positive again, no NaN.
 (e) 1 rank and 2 ranks give the same corotational trajectory (-ksp_rtol 1e-12).
+(f) A solve that does not converge stops the run with the KSP reason, and the
+    partial result file is not marked complete.
 """
 import os
 import subprocess
@@ -137,4 +139,16 @@ two = simulate("ranks2", scene, ranks=2, options=tight)
 for name in ("positions", "velocities"):
     rel = np.abs(one[name] - two[name]).max() / np.abs(one[name]).max()
     checks.check(rel < 1e-8, f"(e) 1 vs 2 ranks, {name}: relative difference {rel:.2e} < 1e-8")
+
+# (f) non-convergence is flagged, not carried on
+partial = os.path.join(args.work, "unconverged.h5")
+result = harness.run(args, 2, ["-scene", scene, "-mode", "corotational", "-ksp_max_it", "2",
+                               "-steps", "5", "-output", partial], check=False)
+checks.check(result.returncode != 0 and "did not converge (DIVERGED_ITS" in result.stderr,
+             f"(f) unconverged solve stops the run: {result.stderr.splitlines()[0] if result.stderr else ''}")
+import h5py  # noqa: E402
+with h5py.File(partial, "r") as f:
+    checks.check(f.attrs["complete"] == 0, "(f) the partial result file is marked incomplete")
+with h5py.File(os.path.join(args.work, "ranks2.h5"), "r") as f:
+    checks.check(f.attrs["complete"] == 1, "(f) a finished run's file is marked complete")
 checks.exit()
