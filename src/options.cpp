@@ -1,30 +1,16 @@
 #include "options.hpp"
 
-#include <charconv>
+#include <strings.h>
+
 #include <cmath>
 #include <cstring>
-#include <strings.h>
 #include <string>
+
+#include "text_reader.hpp"
 
 namespace softbody {
 
 namespace {
-
-bool ParsesAsReal(const char *text) {
-  const char *begin = text + (text[0] == '+');
-  const char *end = text + std::strlen(text);
-  double value;
-  const auto [stop, error] = std::from_chars(begin, end, value);
-  return error == std::errc() && stop == end && std::isfinite(value);
-}
-
-bool ParsesAsInteger(const char *text) {
-  const char *begin = text + (text[0] == '+');
-  const char *end = text + std::strlen(text);
-  long value;
-  const auto [stop, error] = std::from_chars(begin, end, value);
-  return error == std::errc() && stop == end;
-}
 
 bool IsChoice(const char *text, const char *const *choices) {
   // PetscOptionsEnum lists: names, then the enum's type name, prefix, nullptr.
@@ -42,15 +28,17 @@ PetscErrorCode CheckOptionSyntax(MPI_Comm comm, std::initializer_list<OptionSynt
   for (const OptionSyntax &option : options) {
     char value[PETSC_MAX_PATH_LEN];
     PetscBool set;
+    double real;
+    long integer;
     PetscCall(PetscOptionsGetString(nullptr, nullptr, option.name, value, sizeof(value), &set));
     if (!set) continue;
     switch (option.kind) {
       case OptionSyntax::kReal:
-        PetscCheck(ParsesAsReal(value), comm, PETSC_ERR_USER_INPUT,
+        PetscCheck(ParseNumber(value, &real) && std::isfinite(real), comm, PETSC_ERR_USER_INPUT,
                    "option %s: '%s' is not a finite number", option.name, value);
         break;
       case OptionSyntax::kInteger:
-        PetscCheck(ParsesAsInteger(value), comm, PETSC_ERR_USER_INPUT,
+        PetscCheck(ParseNumber(value, &integer), comm, PETSC_ERR_USER_INPUT,
                    "option %s: '%s' is not an integer", option.name, value);
         break;
       case OptionSyntax::kChoice: {

@@ -1,6 +1,5 @@
 #include "text_reader.hpp"
 
-#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -71,23 +70,15 @@ bool TextReader::NextLine(std::vector<std::string_view> *tokens) {
 }
 
 double TextReader::ParseReal(std::string_view token, const char *what) const {
-  std::string_view digits = token;
-  if (!digits.empty() && digits.front() == '+') digits.remove_prefix(1);
   double value = 0;
-  const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
-  if (error != std::errc() || end != digits.data() + digits.size())
-    Fail(std::string(what) + ": '" + std::string(token) + "' is not a number");
-  if (!std::isfinite(value))
-    Fail(std::string(what) + ": '" + std::string(token) + "' is not finite");
+  if (!ParseNumber(token, &value)) Fail(std::string(what) + ": '" + std::string(token) + "' is not a number");
+  if (!std::isfinite(value)) Fail(std::string(what) + ": '" + std::string(token) + "' is not finite");
   return value;
 }
 
 long TextReader::ParseInteger(std::string_view token, const char *what) const {
-  std::string_view digits = token;
-  if (!digits.empty() && digits.front() == '+') digits.remove_prefix(1);
   long value = 0;
-  const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
-  if (error != std::errc() || end != digits.data() + digits.size())
+  if (!ParseNumber(token, &value))
     Fail(std::string(what) + ": '" + std::string(token) + "' is not an integer");
   return value;
 }

@@ -2,11 +2,22 @@
 // Everything after '#' on a line is a comment. Not collective; throws InputError.
 #pragma once
 
+#include <charconv>
 #include <string>
 #include <string_view>
 #include <vector>
 
 namespace softbody {
+
+// Parses all of `text` (an optional leading '+', then what std::from_chars
+// reads: decimal integers; reals in fixed or scientific notation, "nan", "inf").
+// False when something is left over or nothing parses.
+template <typename Number>
+bool ParseNumber(std::string_view text, Number *value) {
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), *value);
+  return error == std::errc() && end == text.data() + text.size();
+}
 
 class TextReader {
  public:

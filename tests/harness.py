@@ -91,6 +91,15 @@ def read_petsc_aij(path):
     return rows, cols.astype(np.int64), values.astype(np.float64), (m, n)
 
 
+def relative_difference(ours, reference):
+    """max |ours - reference| / max |reference| (inf when the shapes differ)."""
+    import numpy as np
+    ours, reference = np.asarray(ours), np.asarray(reference)
+    if ours.shape != reference.shape:
+        return float("inf")
+    return float(np.abs(ours - reference).max() / np.abs(reference).max())
+
+
 class Checks:
     """Collects named pass/fail checks and prints them; exit() ends the script."""
 

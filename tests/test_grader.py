@@ -65,12 +65,6 @@ def relative_matrix_difference(ours, reference):
     return float(np.abs(difference).max() / scale), f"max |ref| {scale:.6g}"
 
 
-def relative_vector_difference(ours, reference):
-    if ours.shape != reference.shape:
-        return float("inf")
-    return float(np.abs(ours - reference).max() / np.abs(reference).max())
-
-
 def main():
     args = harness.arguments()
     checks = harness.Checks()
@@ -132,8 +126,8 @@ def main():
                      f"shear {shear:g}: 6 frames, last at t = {frames['time'][-1]:.6g} s")
         velocities = frames["velocities"][-1].reshape(-1)
         positions = frames["positions"][-1].reshape(-1)
-        ev = relative_vector_difference(velocities, velocities_ref)
-        ex = relative_vector_difference(positions, positions_ref)
+        ev = harness.relative_difference(velocities, velocities_ref)
+        ex = harness.relative_difference(positions, positions_ref)
         absolute = (f"(max abs diff {np.abs(velocities - velocities_ref).max():.3e} of "
                     f"{np.abs(velocities_ref).max():.4g}; "
                     f"positions {np.abs(positions - positions_ref).max():.3e} of "

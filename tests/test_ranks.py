@@ -22,12 +22,6 @@ ITERATIVE_TOLERANCE = 1e-7
 GAMG = ["-ksp_type", "cg", "-pc_type", "gamg", "-ksp_rtol", 1e-12]
 
 
-def relative(ours, reference):
-    if ours.shape != reference.shape:
-        return float("inf")
-    return float(np.abs(ours - reference).max() / np.abs(reference).max())
-
-
 def main():
     args = harness.arguments()
     checks = harness.Checks()
@@ -57,17 +51,17 @@ def main():
                          f"{label}: the run used CG + GAMG ({solver_line!r})")
         same_times = run["time"].shape == reference["time"].shape and np.array_equal(run["time"], reference["time"])
         checks.check(same_times, f"{label}: same {len(run['time'])} frame times as 1 rank")
-        ex = relative(run["positions"], reference["positions"])
-        ev = relative(run["velocities"], reference["velocities"])
+        ex = harness.relative_difference(run["positions"], reference["positions"])
+        ev = harness.relative_difference(run["velocities"], reference["velocities"])
         checks.check(ex <= tolerance,
                      f"{label} vs direct-1: positions relative difference {ex:.3e} <= {tolerance:g}")
         checks.check(ev <= tolerance,
                      f"{label} vs direct-1: velocities relative difference {ev:.3e} <= {tolerance:g}")
         for name in ("energy/kinetic", "energy/elastic"):
             checks.check(run[name].shape == reference[name].shape
-                         and relative(run[name], reference[name]) <= tolerance,
+                         and harness.relative_difference(run[name], reference[name]) <= tolerance,
                          f"{label} vs direct-1: {name} relative difference "
-                         f"{relative(run[name], reference[name]):.3e} <= {tolerance:g}")
+                         f"{harness.relative_difference(run[name], reference[name]):.3e} <= {tolerance:g}")
 
     # GAMG set-up: the operator has block size 3 and the rigid-body near-null
     # space (6 modes: the coarse levels then have block size 6).
