@@ -92,6 +92,14 @@ struct State {
   ~State();
 };
 
+// Energies of a state (J).
+struct EnergySample {
+  PetscReal kinetic = 0;        // v^T M v / 2
+  PetscReal elastic = 0;        // strain energy
+  PetscReal gravitational = 0;  // -sum_i m_i g . x_i
+  PetscReal total() const { return kinetic + elastic + gravitational; }
+};
+
 // Collective. Rest and initial positions, initial velocities, lumped mass.
 PetscErrorCode CreateState(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                            const LocalElements &elements, State *state);

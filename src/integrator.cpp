@@ -1,6 +1,9 @@
 #include "integrator.hpp"
 
+#include <cmath>
+
 #include "options.hpp"
+#include "text_reader.hpp"
 #include "solver.hpp"
 
 namespace softbody {
@@ -11,10 +14,15 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionBeginUser;
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kChoice, "-mode", kElasticityModes},
                                      {OptionSyntax::kReal, "-dt"},
+                                     {OptionSyntax::kRealList, "-gravity"},
                                      {OptionSyntax::kInteger, "-steps"},
                                      {OptionSyntax::kReal, "-alpha"},
                                      {OptionSyntax::kReal, "-beta"},
                                      {OptionSyntax::kReal, "-shear_scale"}}));
+  char schedule[PETSC_MAX_PATH_LEN] = "";
+  PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
+  PetscInt gravity_count = 3;
+  PetscBool gravity_set = PETSC_FALSE;
   PetscOptionsBegin(comm, nullptr, "Time integration (backward Euler)", nullptr);
   PetscCall(PetscOptionsEnum("-mode",
                              "Elasticity: linear (K factorised once) or corotational (per-tet "
@@ -22,6 +30,12 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              nullptr, kElasticityModes, (PetscEnum)o->mode, (PetscEnum *)&o->mode,
                              nullptr));
   PetscCall(PetscOptionsReal("-dt", "Time step (s)", nullptr, o->dt, &o->dt, nullptr));
+  PetscCall(PetscOptionsString("-dt_schedule",
+                               "Change the time step during the run: t1:dt1,t2:dt2 (s) means dt1 from "
+                               "time t1 on, then dt2 from t2 on; A is refactorised once per change",
+                               nullptr, schedule, schedule, sizeof(schedule), nullptr));
+  PetscCall(PetscOptionsRealArray("-gravity", "Gravitational acceleration gx,gy,gz (m/s^2)", nullptr,
+                                  gravity, &gravity_count, &gravity_set));
   PetscCall(PetscOptionsInt("-steps", "Number of time steps (0: set up only)", nullptr, o->steps,
                             &o->steps, nullptr));
   PetscCall(PetscOptionsReal("-alpha", "Rayleigh mass damping a in D = a M + b K (1/s)", nullptr,
@@ -33,6 +47,28 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              "linear elasticity, 0.25: the coursework grader's convention)",
                              nullptr, o->shear_scale, &o->shear_scale, nullptr));
   PetscOptionsEnd();
+  if (gravity_set) {
+    PetscCheck(gravity_count == 3, comm, PETSC_ERR_USER_INPUT, "option -gravity: expected gx,gy,gz");
+    o->gravity = Eigen::Vector3d(gravity[0], gravity[1], gravity[2]);
+  }
+  o->dt_schedule.clear();
+  for (std::string_view rest = schedule; !rest.empty();) {
+    const size_t comma = rest.find(',');
+    const std::string_view item = rest.substr(0, comma);
+    const size_t colon = item.find(':');
+    std::pair<PetscReal, PetscReal> entry;
+    PetscCheck(colon != std::string_view::npos && ParseNumber(item.substr(0, colon), &entry.first) &&
+                   ParseNumber(item.substr(colon + 1), &entry.second) && std::isfinite(entry.first) &&
+                   std::isfinite(entry.second) && entry.first >= 0 && entry.second > 0,
+               comm, PETSC_ERR_USER_INPUT,
+               "option -dt_schedule: '%s' is not time:dt with time >= 0 and dt > 0 (s)",
+               std::string(item).c_str());
+    PetscCheck(o->dt_schedule.empty() || entry.first > o->dt_schedule.back().first, comm,
+               PETSC_ERR_USER_INPUT, "option -dt_schedule: times must increase");
+    o->dt_schedule.push_back(entry);
+    if (comma == std::string_view::npos) break;
+    rest.remove_prefix(comma + 1);
+  }
   PetscCheck(o->dt > 0, comm, PETSC_ERR_USER_INPUT, "option -dt: must be > 0 (got %g)", (double)o->dt);
   PetscCheck(o->steps >= 0, comm, PETSC_ERR_USER_INPUT, "option -steps: must be >= 0 (got %" PetscInt_FMT ")",
              o->steps);
@@ -45,7 +81,17 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time) {
+  PetscReal dt = options.dt;
+  // An entry applies from its time on, up to round-off in the accumulated time.
+  for (const auto &[from, step] : options.dt_schedule)
+    if (time >= from - 1e-9 * step) dt = step;
+  return dt;
+}
+
 ImplicitEuler::~ImplicitEuler() {
+  VecDestroy(&gravity_force_);
+  VecDestroy(&x_start_);
   KSPDestroy(&ksp_);
   MatDestroy(&A_);
   MatDestroy(&K_);
@@ -68,6 +114,16 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
   mass_ = lumped_mass;
   PetscCall(VecDuplicate(rest_, &elastic_force_));
   PetscCall(VecDuplicate(rest_, &rhs_));
+  if (options.gravity.squaredNorm() > 0) {  // f_ext = M g, coordinate by coordinate
+    PetscCall(VecDuplicate(rest_, &gravity_force_));
+    PetscCall(VecCopy(mass_, gravity_force_));
+    PetscScalar *f;
+    PetscInt n;
+    PetscCall(VecGetLocalSize(gravity_force_, &n));
+    PetscCall(VecGetArray(gravity_force_, &f));
+    for (PetscInt i = 0; i < n; ++i) f[i] *= options.gravity[i % 3];
+    PetscCall(VecRestoreArray(gravity_force_, &f));
+  }
   PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_TRUE, &A_));
   PetscInt local_dofs;
   PetscCall(VecGetLocalSize(rest_, &local_dofs));
@@ -104,6 +160,7 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
 
 PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscFunctionBeginUser;
+  if (dt_ > 0) ++stats_.time_step_changes;
   dt_ = dt;
   if (options_.mode == MODE_COROTATIONAL) {
     elastic_state_current_ = false;  // A depends on dt: refilled at the next step
@@ -166,18 +223,20 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::Step(Vec x, Vec v) {
+PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
   PetscFunctionBeginUser;
-  // rhs = M v0 - dt f_el(x0)
-  PetscCall(UpdateElasticState(x));
-  PetscCall(VecPointwiseMult(rhs_, mass_, v));
-  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
-  // A v1 = rhs; v holds v0, the initial guess of iterative solvers.
-  PetscCall(KSPSolve(ksp_, rhs_, v));
-  KSPConvergedReason reason;
-  PetscInt iterations;
-  PetscCall(KSPGetConvergedReason(ksp_, &reason));
-  PetscCall(KSPGetIterationNumber(ksp_, &iterations));
+  KSPConvergedReason reason = KSP_CONVERGED_ITS;
+  PetscInt iterations = 0;
+  if (!contact || contact->global_constraint_count() == 0) {
+    PetscCall(KSPSolve(ksp_, rhs_, v));
+    PetscCall(KSPGetConvergedReason(ksp_, &reason));
+    PetscCall(KSPGetIterationNumber(ksp_, &iterations));
+    reactions_.clear();
+  } else {
+    PetscCall(projected_.Solve(ksp_, rhs_, contact->velocity_constraints(), v, &reactions_, &iterations));
+    ++stats_.contact_solves;
+    stats_.contact_iterations += iterations;
+  }
   PetscCheck(reason >= 0, PetscObjectComm((PetscObject)ksp_), PETSC_ERR_NOT_CONVERGED,
              "step %" PetscInt_FMT ": the linear solve did not converge (%s after %" PetscInt_FMT
              " iterations); try a smaller -dt or another -ksp_type/-pc_type",
@@ -187,19 +246,54 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v) {
   stats_.total_iterations += iterations;
   stats_.min_iterations = PetscMin(stats_.min_iterations, iterations);
   stats_.max_iterations = PetscMax(stats_.max_iterations, iterations);
-  // x1 = x0 + dt v1
-  PetscCall(VecAXPY(x, dt_, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  // rhs = M v0 - dt f_el(x0) + dt f_ext
+  PetscCall(UpdateElasticState(x));
+  PetscCall(VecPointwiseMult(rhs_, mass_, v));
+  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
+  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
+  if (!contact || !contact->active()) {
+    // A v1 = rhs; v holds v0, the initial guess of iterative solvers.
+    PetscCall(Solve(v, nullptr));
+    PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
+    elastic_state_current_ = false;
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  // With contact: the obstacles move with v0 meanwhile; constrain and solve again
+  // until the step takes no further vertex inside an obstacle.
+  if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
+  PetscCall(VecCopy(x, x_start_));
+  PetscCall(contact->BeginStep(x_start_, v, dt_));
+  constexpr int kMaxRounds = 20;
+  bool added = true;
+  for (int round = 0; added && round < kMaxRounds; ++round) {
+    PetscCall(Solve(v, contact));
+    PetscCall(contact->AddPenetrations(x_start_, v, dt_, &added));
+  }
+  if (added) PetscCall(Solve(v, contact));
+  PetscCall(VecWAXPY(x, dt_, v, x_start_));  // x1 = x0 + dt v1
+  bool changed;
+  PetscCall(contact->EndStep(x, v, reactions_, &changed));
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::Energies(Vec x, Vec v, PetscReal *kinetic, PetscReal *elastic) {
+PetscErrorCode ImplicitEuler::Energies(Vec x, Vec v, EnergySample *energy) {
   PetscFunctionBeginUser;
   PetscCall(UpdateElasticState(x));
-  *elastic = elastic_energy_;
+  energy->elastic = elastic_energy_;
+  energy->gravitational = 0;
+  if (gravity_force_) {
+    PetscCall(VecDot(gravity_force_, x, &energy->gravitational));
+    energy->gravitational *= -1;
+  }
   PetscCall(VecPointwiseMult(rhs_, mass_, v));
-  PetscCall(VecDot(rhs_, v, kinetic));
-  *kinetic *= 0.5;
+  PetscCall(VecDot(rhs_, v, &energy->kinetic));
+  energy->kinetic *= 0.5;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

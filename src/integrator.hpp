@@ -19,11 +19,17 @@
 //   by default with CG + GAMG warm-started from the previous velocity.
 // Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode,
 // sum_e y_e^T K_e y_e / 2 with y_e = R^T x_e - X_e in corotational mode (J).
+// External force: gravity, f_ext = M g.
 #pragma once
 
 #include <petscksp.h>
 
+#include <utility>
+#include <vector>
+
 #include "assembly.hpp"
+#include "contact.hpp"
+#include "projected_solve.hpp"
 
 namespace softbody {
 
@@ -33,14 +39,20 @@ extern const char *const kElasticityModes[];
 struct IntegratorOptions {
   ElasticityMode mode = MODE_LINEAR;
   PetscReal dt = 0.02;     // s
+  // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
+  std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2
   PetscInt steps = 100;
   PetscReal alpha = 0.1;   // mass damping a, 1/s
   PetscReal beta = 0.1;    // stiffness damping b, s
   PetscReal shear_scale = 1.0;
 };
 
-// Collective. Reads -mode -dt -steps -alpha -beta -shear_scale; rejects
-// impossible values.
+// The time step at time t (s): -dt until the first -dt_schedule entry applies.
+PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time);
+
+// Collective. Reads -mode -dt -dt_schedule -steps -alpha -beta -shear_scale
+// -gravity; rejects impossible values.
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *options);
 
 struct SolverStatistics {
@@ -50,6 +62,9 @@ struct SolverStatistics {
   PetscInt min_iterations = PETSC_MAX_INT;
   PetscInt max_iterations = 0;
   PetscLogDouble factor_seconds = 0;  // wall time of the last (re)factorisation/set-up
+  PetscInt time_step_changes = 0;     // SetTimeStep calls after the first
+  PetscInt contact_solves = 0;        // solves with contact constraints
+  PetscInt contact_iterations = 0;    // their CG iterations
 };
 
 class ImplicitEuler {
@@ -65,12 +80,17 @@ class ImplicitEuler {
                        Vec rest_positions, Vec lumped_mass, const IntegratorOptions &options);
   // Collective. New time step size (s); linear mode refills A and refactorises.
   PetscErrorCode SetTimeStep(PetscReal dt);
-  // Collective. Advances positions x and velocities v by one step (f_ext = 0).
-  PetscErrorCode Step(Vec x, Vec v);
+  // Collective. Advances positions x and velocities v by one step; the external
+  // force is gravity, f_ext = M g (none when g = 0). With contact (may be null):
+  // solve, constrain the vertices the step would take inside obstacles, solve
+  // again with the constraints until no new one appears (contact.hpp), then the
+  // contact's velocity response and distance constraints.
+  PetscErrorCode Step(Vec x, Vec v, ContactSolver *contact);
   // Not collective. To be called after positions were changed outside Step.
   void PositionsChanged() { elastic_state_current_ = false; }
-  // Collective. Kinetic and elastic energy (J) of the state (x, v).
-  PetscErrorCode Energies(Vec x, Vec v, PetscReal *kinetic, PetscReal *elastic);
+  // Collective. Kinetic, elastic and gravitational energy (J) of the state (x, v);
+  // the gravitational energy is -sum_i m_i g . x_i (zero at the origin).
+  PetscErrorCode Energies(Vec x, Vec v, EnergySample *energy);
 
   KSP solver() const { return ksp_; }
   PetscReal time_step() const { return dt_; }
@@ -82,6 +102,9 @@ class ImplicitEuler {
   // only in Step).
   PetscErrorCode UpdateElasticState(Vec x);
   PetscErrorCode UpdateNearNullSpace(Vec x);
+  // v = A^-1 rhs_ (v: initial guess), with the contact's velocity constraints
+  // when any rank has one.
+  PetscErrorCode Solve(Vec v, const ContactSolver *contact);
 
   const LocalElements *elements_ = nullptr;
   IntegratorOptions options_;
@@ -90,6 +113,10 @@ class ImplicitEuler {
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
   Vec elastic_force_ = nullptr, rhs_ = nullptr;
+  Vec gravity_force_ = nullptr;           // M g, only when g != 0
+  Vec x_start_ = nullptr;                 // x0 during a step with contact
+  ProjectedSolver projected_;
+  std::vector<PetscReal> reactions_;
   PetscReal elastic_energy_ = 0;
   bool elastic_state_current_ = false;
   bool gamg_ = false;                     // the PC uses the near-null space

@@ -5,13 +5,18 @@
 //   mpirun -n 2 softbody -scene S.txt -steps 200 -dt 0.01 -ksp_type cg -pc_type gamg -log_view
 //   mpirun -n 2 softbody -scene S.txt -options_file config/cg-jacobi.opts -ksp_monitor
 //   mpirun -n 2 softbody -scene S.txt -mode corotational -ksp_converged_reason
+//   mpirun -n 2 softbody -scene S.txt -options_file config/practical3.opts -constraints C.txt
 //
-// Equations (linear and corotational): see integrator.hpp. Data flow: scene -> free DOFs (METIS partition)
-// -> element kernels on each rank's elements -> COO assembly -> KSP -> time loop
-// -> HDF5 frames in natural vertex order.
+// Equations (linear and corotational): see integrator.hpp; collisions and
+// constraints: contact.hpp. Data flow: scene -> free DOFs (METIS partition) ->
+// element kernels on each rank's elements -> COO assembly -> KSP -> time loop
+// (solve, then contact) -> HDF5 frames in natural vertex order.
 #include <petscksp.h>
 
+#include <optional>
+
 #include "assembly.hpp"
+#include "contact.hpp"
 #include "deformation.hpp"
 #include "errors.hpp"
 #include "integrator.hpp"
@@ -41,16 +46,6 @@ PetscErrorCode PrintSolverHelp(MPI_Comm comm) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Energies of the current state (the corotational element pass this needs is
-// reused by the next step, so it counts as step work).
-PetscErrorCode ComputeEnergies(ImplicitEuler &integrator, bool has_unknowns, const State &state,
-                               RunReport *report) {
-  PetscFunctionBeginUser;
-  if (has_unknowns)
-    PetscCall(integrator.Energies(state.positions, state.velocities, &report->kinetic, &report->elastic));
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 // Prescribed deformations due at `time` (s), before the step that starts then.
 PetscErrorCode ApplyDeformations(const Scene &scene, const DofLayout &layout, PetscReal time,
                                  PetscReal dt, const State &state, ImplicitEuler *integrator,
@@ -64,19 +59,24 @@ PetscErrorCode ApplyDeformations(const Scene &scene, const DofLayout &layout, Pe
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode WriteFrame(ResultWriter *writer, const State &state, PetscReal time,
-                          PetscLogStage stage, RunReport *report) {
-  PetscFunctionBeginUser;
-  PetscLogDouble start, end;
-  PetscCall(PetscLogStagePush(stage));
-  PetscCall(PetscTime(&start));
-  PetscCall(writer->WriteFrame(time, state.positions, state.velocities, report->kinetic,
-                               report->elastic));
-  PetscCall(PetscTime(&end));
-  PetscCall(PetscLogStagePop());
-  report->times.output += end - start;
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
+// A stopwatch that adds the wall time of a scope to a total and logs the scope
+// as a PETSc stage (-log_view).
+class Timed {
+ public:
+  Timed(PetscLogStage stage, PetscLogDouble *total) : total_(total) {
+    PetscCallVoid(PetscLogStagePush(stage));
+    PetscCallVoid(PetscTime(&start_));
+  }
+  ~Timed() {
+    PetscLogDouble end;
+    PetscCallVoid(PetscTime(&end));
+    *total_ += end - start_;
+    PetscCallVoid(PetscLogStagePop());
+  }
+
+ private:
+  PetscLogDouble *total_, start_ = 0;
+};
 
 PetscErrorCode Run(MPI_Comm comm) {
   PetscFunctionBeginUser;
@@ -84,32 +84,31 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(PetscLogStageRegister("Set-up", &setup_stage));
   PetscCall(PetscLogStageRegister("Time steps", &step_stage));
   PetscCall(PetscLogStageRegister("Output", &output_stage));
-  PetscLogDouble start, end;
-  RunReport report_init;
-  PetscCall(PetscTime(&start));
-  PetscCall(PetscLogStagePush(setup_stage));
+  RunReport report;
+  std::optional<Timed> setup_timer(std::in_place, setup_stage, &report.times.setup);
 
   // 1. Options of every module; -help lists them and stops.
-  std::string scene_path;
-  IntegratorOptions integration;
-  OutputOptions output;
-  PetscCall(ProcessSceneOptions(comm, &scene_path));
-  PetscCall(ProcessIntegratorOptions(comm, &integration));
-  PetscCall(ProcessOutputOptions(comm, &output));
+  SceneOptions scene_options;
   std::string deform_text;
+  IntegratorOptions integration;
+  ContactOptions contact_options;
+  OutputOptions output;
+  PetscCall(ProcessSceneOptions(comm, &scene_options));
+  PetscCall(ProcessIntegratorOptions(comm, &integration));
+  PetscCall(ProcessContactOptions(comm, &contact_options));
   PetscCall(ProcessDeformationOptions(comm, &deform_text));
+  PetscCall(ProcessOutputOptions(comm, &output));
   PetscBool help;
   PetscCall(PetscOptionsHasHelp(nullptr, &help));
   if (help) {
+    setup_timer.reset();
     PetscCall(PrintSolverHelp(comm));
-    PetscCall(PetscLogStagePop());
     PetscFunctionReturn(PETSC_SUCCESS);
   }
 
   // 2. Every rank reads and validates the scene and its meshes.
   Scene scene;
-  PetscCall(LoadScene(comm, scene_path, &scene));
-
+  PetscCall(LoadScene(comm, scene_options, &scene));
   std::vector<Deformation> deformations;
   PetscCall(ParseDeformations(comm, deform_text, scene, &deformations));
 
@@ -123,43 +122,53 @@ PetscErrorCode Run(MPI_Comm comm) {
   State state;
   PetscCall(CreateState(comm, scene, layout, elements, &state));
 
-  // 5. A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once).
+  // 5. A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once);
+  //    collision structures and constraints, only as far as the scene needs them.
   ImplicitEuler integrator;
+  integration.dt = TimeStepAt(integration, 0.0);
   if (has_unknowns)
     PetscCall(integrator.Setup(comm, layout, elements, state.rest_positions, state.lumped_mass,
                                integration));
   if (!output.matrix_dir.empty() && has_unknowns)
     PetscCall(ExportMatrices(output.matrix_dir, layout, elements, integration.shear_scale,
                              state.lumped_mass, integration.alpha, integration.beta));
+  ContactSolver contact;
+  PetscCall(contact.Setup(comm, scene, layout, state.lumped_mass, contact_options));
 
-  // 6. Deformations due at t = 0, the output file with the mesh and frame 0.
+  // 6. Deformations due at t = 0, the output file with the mesh, frame 0.
   PetscCall(ApplyDeformations(scene, layout, 0.0, integration.dt, state, &integrator, &deformations));
   ResultWriter file;
   ResultWriter *writer = output.path.empty() ? nullptr : &file;
   if (writer) PetscCall(writer->Open(comm, output.path, scene, layout, state.positions));
-  PetscCall(ComputeEnergies(integrator, has_unknowns, state, &report_init));
-  PetscCall(PetscLogStagePop());
-  PetscCall(PetscTime(&end));
-  RunReport report = report_init;
-  report.times.setup = end - start;
-  if (writer) PetscCall(WriteFrame(writer, state, 0.0, output_stage, &report));
+  if (has_unknowns) PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
+  setup_timer.reset();
+  if (writer) {
+    Timed timer(output_stage, &report.times.output);
+    PetscCall(writer->WriteFrame(0.0, state.positions, state.velocities, report.energy));
+  }
 
-  // 7. Time loop: one solve per step, a frame every -output_every steps.
+  // 7. Time loop: solve, then collisions and constraints; a frame every
+  //    -output_every steps.
+  PetscReal time = 0;
   for (PetscInt step = 1; step <= integration.steps; ++step) {
     const bool frame = writer && step % output.every == 0;
-    PetscCall(PetscLogStagePush(step_stage));
-    PetscCall(PetscTime(&start));
-    PetscCall(ApplyDeformations(scene, layout, (step - 1) * integration.dt, integration.dt, state,
-                                &integrator, &deformations));
-    if (has_unknowns) PetscCall(integrator.Step(state.positions, state.velocities));
-    if (frame || step == integration.steps)
-      PetscCall(ComputeEnergies(integrator, has_unknowns, state, &report));
-    PetscCall(PetscTime(&end));
-    PetscCall(PetscLogStagePop());
-    report.times.loop += end - start;
+    {
+      Timed timer(step_stage, &report.times.loop);
+      const PetscReal dt = TimeStepAt(integration, time);
+      if (has_unknowns && dt != integrator.time_step()) PetscCall(integrator.SetTimeStep(dt));
+      PetscCall(ApplyDeformations(scene, layout, time, dt, state, &integrator, &deformations));
+      if (has_unknowns) PetscCall(integrator.Step(state.positions, state.velocities, &contact));
+      time += dt;
+      // The corotational element pass behind the energies is reused by the next step.
+      if (has_unknowns && (frame || step == integration.steps))
+        PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
+    }
     report.steps = step;
-    report.final_time = step * integration.dt;
-    if (frame) PetscCall(WriteFrame(writer, state, report.final_time, output_stage, &report));
+    report.final_time = time;
+    if (frame) {
+      Timed timer(output_stage, &report.times.output);
+      PetscCall(writer->WriteFrame(time, state.positions, state.velocities, report.energy));
+    }
   }
   if (writer) {
     PetscCall(writer->Close());
@@ -168,7 +177,7 @@ PetscErrorCode Run(MPI_Comm comm) {
 
   // 8. Summary on rank 0.
   PetscCall(PrintRunSummary(comm, scene, layout, integration, output, integrator.statistics(),
-                            has_unknowns ? integrator.solver() : nullptr, report));
+                            has_unknowns ? integrator.solver() : nullptr, contact, report));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -37,6 +37,18 @@ PetscErrorCode CheckOptionSyntax(MPI_Comm comm, std::initializer_list<OptionSynt
         PetscCheck(ParseNumber(value, &real) && std::isfinite(real), comm, PETSC_ERR_USER_INPUT,
                    "option %s: '%s' is not a finite number", option.name, value);
         break;
+      case OptionSyntax::kRealList: {
+        bool ok = true;
+        for (std::string_view rest = value; ok;) {
+          const size_t comma = rest.find(',');
+          ok = ParseNumber(rest.substr(0, comma), &real) && std::isfinite(real);
+          if (comma == std::string_view::npos) break;
+          rest.remove_prefix(comma + 1);
+        }
+        PetscCheck(ok, comm, PETSC_ERR_USER_INPUT, "option %s: '%s' is not a list of finite numbers",
+                   option.name, value);
+        break;
+      }
       case OptionSyntax::kInteger:
         PetscCheck(ParseNumber(value, &integer), comm, PETSC_ERR_USER_INPUT,
                    "option %s: '%s' is not an integer", option.name, value);

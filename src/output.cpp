@@ -107,10 +107,11 @@ bool MarkComplete(hid_t file, int complete) {
 // Rank 0: the static mesh datasets under /mesh.
 bool WriteMesh(hid_t file, const Scene &scene) {
   const hid_t group = H5Gcreate2(file, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  std::vector<int32_t> tets, triangles, vertex_body;
+  std::vector<int32_t> tets, triangles, vertex_body, body_fixed;
   std::vector<double> rest;
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
+    body_fixed.push_back(body.fixed ? 1 : 0);
     for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
       for (int a = 0; a < 4; ++a) tets.push_back(body.first_vertex + body.mesh.tets(t, a));
     const auto boundary = BoundaryTriangles(body.mesh);
@@ -128,6 +129,7 @@ bool WriteMesh(hid_t file, const Scene &scene) {
                         triangles.data());
   ok = ok && WriteArray(group, "vertex_body", H5T_NATIVE_INT32, {V}, vertex_body.data());
   ok = ok && WriteArray(group, "rest_positions", H5T_NATIVE_DOUBLE, {V, 3}, rest.data());
+  ok = ok && WriteArray(group, "body_fixed", H5T_NATIVE_INT32, {body_fixed.size()}, body_fixed.data());
   if (group >= 0) H5Gclose(group);
   return ok;
 }
@@ -187,7 +189,8 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const std::string &path, const 
       const hid_t energy = H5Gcreate2(file_, "/energy", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
       for (hid_t set : {CreateSeries(file_, "/time", {}), CreateSeries(file_, "/positions", {V, 3}),
                         CreateSeries(file_, "/velocities", {V, 3}),
-                        CreateSeries(energy, "kinetic", {}), CreateSeries(energy, "elastic", {})}) {
+                        CreateSeries(energy, "kinetic", {}), CreateSeries(energy, "elastic", {}),
+                        CreateSeries(energy, "gravitational", {})}) {
         ok = ok && set >= 0;
         if (set >= 0) H5Dclose(set);
       }
@@ -207,7 +210,7 @@ PetscErrorCode ResultWriter::Gather(Vec dofs, Vec natural) {
 }
 
 PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec velocities,
-                                        PetscReal kinetic, PetscReal elastic) {
+                                        const EnergySample &energy) {
   PetscFunctionBeginUser;
   PetscCall(Gather(positions, positions_));
   PetscCall(Gather(velocities, velocities_));
@@ -220,8 +223,9 @@ PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec veloc
     ok = AppendToSeries(file_, "/time", frame, &time) &&
          AppendToSeries(file_, "/positions", frame, x) &&
          AppendToSeries(file_, "/velocities", frame, v) &&
-         AppendToSeries(file_, "/energy/kinetic", frame, &kinetic) &&
-         AppendToSeries(file_, "/energy/elastic", frame, &elastic) &&
+         AppendToSeries(file_, "/energy/kinetic", frame, &energy.kinetic) &&
+         AppendToSeries(file_, "/energy/elastic", frame, &energy.elastic) &&
+         AppendToSeries(file_, "/energy/gravitational", frame, &energy.gravitational) &&
          H5Fflush(file_, H5F_SCOPE_LOCAL) >= 0;
     PetscCall(VecRestoreArrayRead(positions_, &x));
     PetscCall(VecRestoreArrayRead(velocities_, &v));

@@ -3,9 +3,10 @@
 // HDF5 (written by rank 0 after a gather; natural vertex order, every vertex of
 // every body, fixed ones included):
 //   /time [F] (s), /positions [F][V][3] (m), /velocities [F][V][3] (m/s),
-//   /energy/kinetic [F], /energy/elastic [F] (J),
+//   /energy/kinetic [F], /energy/elastic [F], /energy/gravitational [F] (J),
 //   /mesh/tets [T][4], /mesh/boundary_triangles [B][3] (0-based natural vertex
-//   indices), /mesh/vertex_body [V], /mesh/rest_positions [V][3].
+//   indices), /mesh/vertex_body [V], /mesh/rest_positions [V][3],
+//   /mesh/body_fixed [bodies] (1 for fixed bodies).
 // Frame 0 is the initial state. The file is flushed after every frame; its root
 // attribute "complete" is 0 until the run has finished (1). An .xdmf beside it
 // (same name), written at the end, describes the frames as a ParaView time series.
@@ -47,8 +48,8 @@ class ResultWriter {
   PetscErrorCode Open(MPI_Comm comm, const std::string &path, const Scene &scene,
                       const DofLayout &layout, Vec like);
   // Collective. Appends one frame.
-  PetscErrorCode WriteFrame(PetscReal time, Vec positions, Vec velocities, PetscReal kinetic,
-                            PetscReal elastic);
+  PetscErrorCode WriteFrame(PetscReal time, Vec positions, Vec velocities,
+                            const EnergySample &energy);
   // Collective. Writes the .xdmf and closes the file.
   PetscErrorCode Close();
 

@@ -6,7 +6,8 @@ namespace softbody {
 
 PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                const IntegratorOptions &o, const OutputOptions &output,
-                               const SolverStatistics &solver, KSP ksp, const RunReport &r) {
+                               const SolverStatistics &solver, KSP ksp, const ContactSolver &contact,
+                               const RunReport &r) {
   PetscFunctionBeginUser;
   int fixed_bodies = 0;
   PetscInt fixed_vertices = 0;
@@ -31,9 +32,24 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
                         " to %" PetscInt_FMT " per rank, METIS partition)\n",
                         3 * layout.num_free(), layout.size, min_dofs, max_dofs));
   PetscCall(PetscPrintf(comm, "  model        %s elasticity, shear scale %g; damping a = %g 1/s, "
-                        "b = %g s; dt = %g s, %" PetscInt_FMT " steps\n",
+                        "b = %g s; dt = %g s, %" PetscInt_FMT " steps",
                         kElasticityModes[o.mode], (double)o.shear_scale, (double)o.alpha, (double)o.beta, (double)o.dt,
                         r.steps));
+  if (o.gravity.squaredNorm() > 0)
+    PetscCall(PetscPrintf(comm, "; gravity (%g, %g, %g) m/s^2", o.gravity[0], o.gravity[1], o.gravity[2]));
+  if (solver.time_step_changes)
+    PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " time step changes", solver.time_step_changes));
+  PetscCall(PetscPrintf(comm, "\n"));
+  if (contact.active()) {
+    const ContactStatistics &c = contact.statistics();
+    PetscCall(PetscPrintf(comm, "  contact      %s; %" PetscInt_FMT " vertex collisions", contact.Description().c_str(),
+                          c.collisions));
+    if (contact.num_constraints())
+      PetscCall(PetscPrintf(comm, "; constraint sweeps %" PetscInt_FMT " total, %" PetscInt_FMT
+                            " max per step, worst relative violation %.1e",
+                            c.constraint_sweeps, c.max_constraint_sweeps, (double)c.max_constraint_violation));
+    PetscCall(PetscPrintf(comm, "\n"));
+  }
 
   PetscCall(PetscPrintf(comm, "  left out     D never formed (A = (1 + a dt) M + (b dt + dt^2) K)"));
   if (o.mode == MODE_COROTATIONAL) PetscCall(PetscPrintf(comm, "; K never formed (A refilled directly)"));
@@ -46,7 +62,8 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscCall(PetscPrintf(comm, "; %d initial velocities on fixed bodies", scene.ignored_fixed_velocities));
   if (o.alpha == 0) PetscCall(PetscPrintf(comm, "; mass damping (a = 0)"));
   if (o.beta == 0) PetscCall(PetscPrintf(comm, "; stiffness damping (b = 0)"));
-  PetscCall(PetscPrintf(comm, "; external force (none in this scene)"));
+  if (o.gravity.squaredNorm() == 0) PetscCall(PetscPrintf(comm, "; external force (no gravity)"));
+  if (!contact.active()) PetscCall(PetscPrintf(comm, "; collision structures and constraint pass (nothing to collide)"));
   if (output.path.empty()) PetscCall(PetscPrintf(comm, "; output (no -output)"));
   PetscCall(PetscPrintf(comm, "\n"));
 
@@ -77,10 +94,15 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscCall(PetscPrintf(comm, "  solver       none: the scene has no unknowns\n"));
   }
   const double per_step = r.steps > 0 ? r.times.loop / r.steps : 0;
-  PetscCall(PetscPrintf(comm, "  time         set-up %.3f s, time loop %.3f s (%.3g ms/step), output %.3f s\n",
-                        r.times.setup, r.times.loop, 1e3 * per_step, r.times.output));
-  PetscCall(PetscPrintf(comm, "  energy       at t = %g s: kinetic %.6e J, elastic %.6e J\n",
-                        (double)r.final_time, (double)r.kinetic, (double)r.elastic));
+  PetscCall(PetscPrintf(comm, "  time         set-up %.3f s, time loop %.3f s (%.3g ms/step", r.times.setup,
+                        r.times.loop, 1e3 * per_step));
+  if (contact.active()) PetscCall(PetscPrintf(comm, ", of which contact %.3f s", contact.statistics().seconds));
+  PetscCall(PetscPrintf(comm, "), output %.3f s\n", r.times.output));
+  PetscCall(PetscPrintf(comm, "  energy       at t = %g s: kinetic %.6e J, elastic %.6e J", (double)r.final_time,
+                        (double)r.energy.kinetic, (double)r.energy.elastic));
+  if (o.gravity.squaredNorm() > 0)
+    PetscCall(PetscPrintf(comm, ", gravitational %.6e J", (double)r.energy.gravitational));
+  PetscCall(PetscPrintf(comm, "\n"));
   if (!output.path.empty())
     PetscCall(PetscPrintf(comm, "  output       %s (%" PetscInt_FMT " frames) and its .xdmf\n",
                           output.path.c_str(), r.frames));

@@ -5,6 +5,7 @@
 
 #include <string>
 
+#include "contact.hpp"
 #include "integrator.hpp"
 #include "output.hpp"
 #include "partition.hpp"
@@ -14,14 +15,14 @@ namespace softbody {
 
 struct RunTimes {
   PetscLogDouble setup = 0;   // s: reading, partitioning, assembly, factorisation
-  PetscLogDouble loop = 0;    // s: the time steps, output excluded
+  PetscLogDouble loop = 0;    // s: the time steps (contact included), output excluded
   PetscLogDouble output = 0;  // s: gathering and writing frames
 };
 
 struct RunReport {
   PetscInt steps = 0;
   PetscReal final_time = 0;
-  PetscReal kinetic = 0, elastic = 0;  // J, at the end
+  EnergySample energy;  // at the end
   PetscInt frames = 0;
   RunTimes times;
 };
@@ -30,6 +31,7 @@ struct RunReport {
 // ksp may be null when the scene has no unknowns.
 PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                const IntegratorOptions &integration, const OutputOptions &output,
-                               const SolverStatistics &solver, KSP ksp, const RunReport &report);
+                               const SolverStatistics &solver, KSP ksp, const ContactSolver &contact,
+                               const RunReport &report);
 
 }  // namespace softbody

@@ -1,10 +1,12 @@
 #include "scene.hpp"
 
 #include <Eigen/Geometry>
+#include <cmath>
 #include <filesystem>
 
 #include "errors.hpp"
 #include "mesh_io.hpp"
+#include "options.hpp"
 #include "text_reader.hpp"
 
 namespace softbody {
@@ -36,7 +38,7 @@ namespace {
 constexpr int kBodyFields = 12;
 
 Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
-                  const std::filesystem::path &folder) {
+                  const std::filesystem::path &folder, const MeshingOptions &meshing) {
   if (fields.size() != kBodyFields)
     in.Fail("expected 12 fields 'file density young poisson is_fixed px py pz qw qx qy qz', found " +
             std::to_string(fields.size()));
@@ -59,7 +61,7 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
   for (int c = 0; c < 4; ++c) quaternion[c] = in.ParseReal(fields[8 + c], "quaternion");
   if (!(quaternion.norm() > 0)) in.Fail("quaternion must be non-zero");
   try {
-    body.mesh = ReadTetMesh(body.mesh_path);
+    body.mesh = ReadTetMesh(body.mesh_path, meshing);
   } catch (const InputError &error) {  // say which scene line named the mesh
     in.Fail(std::string("mesh: ") + error.what());
   }
@@ -69,7 +71,7 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
 
 }  // namespace
 
-Scene ReadScene(const std::string &path) {
+Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
   TextReader in(path);
   const std::filesystem::path folder = std::filesystem::path(path).parent_path();
   Scene scene;
@@ -85,7 +87,7 @@ Scene ReadScene(const std::string &path) {
   for (long b = 0; b < num_meshes; ++b) {
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(num_meshes) + " mesh lines, found " + std::to_string(b));
-    scene.bodies.push_back(ReadBodyLine(in, fields, folder));
+    scene.bodies.push_back(ReadBodyLine(in, fields, folder, meshing));
     scene.bodies.back().first_vertex = first_vertex;
     first_vertex += scene.bodies.back().mesh.num_vertices();
   }
@@ -125,22 +127,68 @@ Scene ReadScene(const std::string &path) {
 
 namespace softbody {
 
-PetscErrorCode ProcessSceneOptions(MPI_Comm comm, std::string *path) {
+PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscFunctionBeginUser;
-  char buffer[PETSC_MAX_PATH_LEN] = "";
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kReal, "-tetgen_max_volume"}}));
+  char path[PETSC_MAX_PATH_LEN] = "";
+  char switches[256];
+  MeshingOptions &meshing = options->meshing;
+  PetscCall(PetscStrncpy(switches, meshing.tetgen_switches.c_str(), sizeof(switches)));
   PetscOptionsBegin(comm, nullptr, "Scene", nullptr);
   PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
-                               nullptr, buffer, buffer, sizeof(buffer), nullptr));
+                               nullptr, path, path, sizeof(path), nullptr));
+  PetscCall(PetscOptionsString("-tetgen_switches",
+                               "TetGen switches for .off surfaces, without '-' (p: mesh the "
+                               "surface, required; q<r>: radius-edge ratio bound r; Y: keep the "
+                               "surface triangles; softbody adds J and Q)",
+                               nullptr, switches, switches, sizeof(switches), nullptr));
+  PetscCall(PetscOptionsReal("-tetgen_max_volume",
+                             "Largest tetrahedron volume for .off surfaces, in the OFF file's "
+                             "units^3 (m^3; 0: no bound; TetGen's a switch)",
+                             nullptr, meshing.max_volume, &meshing.max_volume, nullptr));
   PetscOptionsEnd();
-  *path = buffer;
+  options->path = path;
+  meshing.tetgen_switches = switches;
+  const std::string bad_switches = CheckTetgenSwitches(meshing.tetgen_switches);
+  PetscCheck(bad_switches.empty(), comm, PETSC_ERR_USER_INPUT, "option -tetgen_switches: %s",
+             bad_switches.c_str());
+  PetscCheck(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume), comm,
+             PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %g)",
+             (double)meshing.max_volume);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode LoadScene(MPI_Comm comm, const std::string &path, Scene *scene) {
+namespace {
+
+// FNV-1a hash of every body's vertices and tets.
+uint64_t HashMeshes(const Scene &scene) {
+  uint64_t hash = 14695981039346656037ull;
+  const auto add = [&hash](const void *data, size_t bytes) {
+    for (size_t i = 0; i < bytes; ++i)
+      hash = (hash ^ static_cast<const unsigned char *>(data)[i]) * 1099511628211ull;
+  };
+  for (const Body &body : scene.bodies) {
+    add(body.mesh.vertices.data(), sizeof(double) * body.mesh.vertices.size());
+    add(body.mesh.tets.data(), sizeof(int32_t) * body.mesh.tets.size());
+  }
+  return hash;
+}
+
+}  // namespace
+
+PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scene) {
   PetscFunctionBeginUser;
-  PetscCheck(!path.empty(), comm, PETSC_ERR_USER_INPUT,
+  PetscCheck(!options.path.empty(), comm, PETSC_ERR_USER_INPUT,
              "option -scene: required (path to a scene file; see -help)");
-  SOFTBODY_CATCH_INPUT(comm, *scene = ReadScene(path));
+  SOFTBODY_CATCH_INPUT(comm, *scene = ReadScene(options.path, options.meshing));
+  // Every rank ran its own TetGen: check that they agree, max(h) == min(h) =
+  // ~max(~h) over the ranks' mesh hashes h.
+  const uint64_t hash = HashMeshes(*scene);
+  uint64_t local[2] = {hash, ~hash}, largest[2];
+  PetscCallMPI(MPI_Allreduce(local, largest, 2, MPI_UINT64_T, MPI_MAX, comm));
+  PetscCheck(largest[0] == ~largest[1], comm, PETSC_ERR_PLIB,
+             "the ranks hold different meshes for the scene %s (is the mesher not deterministic?)",
+             options.path.c_str());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

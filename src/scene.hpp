@@ -6,7 +6,9 @@
 //   num_velocities                                                  (optional section)
 //   mesh_index vertex_index vx vy vz                                (0-based indices)
 // Units: density kg/m^3, young Pa, positions m, velocities m/s. Mesh paths are
-// relative to the scene file. Placement: the mesh's volume-weighted centroid is
+// relative to the scene file; a mesh is a MEDIT .mesh, a gmsh .msh or an OFF
+// surface .off, tetrahedralised by TetGen on load (see mesh_io.hpp; the OFF
+// vertices stay the mesh's first vertices, so velocity indices refer to them). Placement: the mesh's volume-weighted centroid is
 // moved to the origin, rotated by the normalised quaternion (w, x, y, z), then
 // translated by p.
 //
@@ -18,6 +20,7 @@
 #include <vector>
 
 #include "mesh.hpp"
+#include "mesh_io.hpp"
 
 namespace softbody {
 
@@ -47,8 +50,9 @@ struct Scene {
   int64_t num_tets() const;
 };
 
-// Reads and validates a scene and its meshes. Not collective; throws InputError.
-Scene ReadScene(const std::string &path);
+// Reads and validates a scene and its meshes (OFF surfaces meshed with `meshing`).
+// Not collective; throws InputError.
+Scene ReadScene(const std::string &path, const MeshingOptions &meshing = MeshingOptions());
 
 // Moves the volume-weighted centroid to the origin, rotates by the quaternion
 // (w, x, y, z; normalised here, must be non-zero), then translates by position.
@@ -61,11 +65,18 @@ void PlaceMesh(const Eigen::Vector3d &position, const Eigen::Vector4d &quaternio
 
 namespace softbody {
 
-// Collective. Reads -scene (the scene file path; required unless -help).
-PetscErrorCode ProcessSceneOptions(MPI_Comm comm, std::string *path);
+struct SceneOptions {
+  std::string path;        // -scene: the scene file
+  MeshingOptions meshing;  // -tetgen_switches, -tetgen_max_volume: for .off meshes
+};
 
-// Collective: every rank reads the whole scene. Input errors become one
-// PETSC_ERR_USER_INPUT error on every rank.
-PetscErrorCode LoadScene(MPI_Comm comm, const std::string &path, Scene *scene);
+// Collective. Reads -scene (the scene file path; required unless -help),
+// -tetgen_switches and -tetgen_max_volume, and checks them.
+PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options);
+
+// Collective: every rank reads the whole scene (and runs TetGen on its OFF
+// surfaces), then the ranks check that they hold the same meshes. Input errors
+// become one PETSC_ERR_USER_INPUT error on every rank.
+PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scene);
 
 }  // namespace softbody

@@ -1,0 +1,598 @@
+#include "contact.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+
+#include "errors.hpp"
+#include "options.hpp"
+#include "text_reader.hpp"
+
+namespace softbody {
+
+PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
+  PetscFunctionBeginUser;
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kReal, "-ground"},
+                                     {OptionSyntax::kReal, "-restitution"},
+                                     {OptionSyntax::kReal, "-friction"},
+                                     {OptionSyntax::kRealList, "-edge_bounds"}}));
+  char path[PETSC_MAX_PATH_LEN] = "";
+  PetscReal bounds[2] = {o->edge_lower, o->edge_upper};
+  PetscInt nbounds = 2;
+  PetscOptionsBegin(comm, nullptr, "Collisions and constraints", nullptr);
+  PetscCall(PetscOptionsReal("-ground", "Ground plane height y0 (m): vertices stay at y >= y0 (off if unset)",
+                             nullptr, o->ground_y, &o->ground_y, &o->ground));
+  PetscCall(PetscOptionsReal("-restitution",
+                             "Coefficient of restitution e of collisions, 0 (no bounce) to 1 (elastic)",
+                             nullptr, o->restitution, &o->restitution, nullptr));
+  PetscCall(PetscOptionsReal("-friction",
+                             "Coulomb friction coefficient mu of collisions (0: frictionless, as the "
+                             "coursework)",
+                             nullptr, o->friction, &o->friction, nullptr));
+  PetscCall(PetscOptionsBool("-impulse_spreading",
+                             "Share each collision impulse among all vertices of the body, by inverse "
+                             "squared distance",
+                             nullptr, o->impulse_spreading, &o->impulse_spreading, nullptr));
+  PetscCall(PetscOptionsString("-constraints",
+                               "Distance constraints file: n, then 'm1 v1 m2 v2 [lo hi]' per line",
+                               nullptr, path, path, sizeof(path), nullptr));
+  PetscCall(PetscOptionsRealArray("-edge_bounds",
+                                  "Keep every boundary edge of the free bodies within lo,hi x its rest "
+                                  "length (off if unset)",
+                                  nullptr, bounds, &nbounds, &o->edge_bounds));
+  PetscOptionsEnd();
+  o->constraints_path = path;
+  PetscCheck(o->friction >= 0, comm, PETSC_ERR_USER_INPUT, "option -friction: must be >= 0 (got %g)",
+             (double)o->friction);
+  PetscCheck(o->restitution >= 0 && o->restitution <= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -restitution: must lie in [0, 1] (got %g)", (double)o->restitution);
+  if (o->edge_bounds) {
+    PetscCheck(nbounds == 2, comm, PETSC_ERR_USER_INPUT, "option -edge_bounds: expected lo,hi");
+    o->edge_lower = bounds[0];
+    o->edge_upper = bounds[1];
+    PetscCheck(o->edge_lower > 0 && o->edge_lower <= 1 && o->edge_upper >= 1, comm, PETSC_ERR_USER_INPUT,
+               "option -edge_bounds: need 0 < lo <= 1 <= hi (got %g,%g)", (double)o->edge_lower,
+               (double)o->edge_upper);
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene) {
+  TextReader in(path);
+  std::vector<std::string_view> fields;
+  std::vector<DistanceConstraint> constraints;
+  if (!in.NextLine(&fields)) return constraints;  // an empty file: no constraints
+  if (fields.size() != 1) in.Fail("expected one field, the number of constraints");
+  const long n = in.ParseInteger(fields[0], "number of constraints");
+  if (n < 0) in.Fail("number of constraints must be >= 0");
+  auto vertex = [&](std::string_view mesh_field, std::string_view vertex_field) {
+    const long m = in.ParseInteger(mesh_field, "mesh index");
+    if (m < 0 || m >= static_cast<long>(scene.bodies.size()))
+      in.Fail("mesh index " + std::to_string(m) + " out of range 0.." +
+              std::to_string(scene.bodies.size() - 1));
+    const TetMesh &mesh = scene.bodies[m].mesh;
+    const long v = in.ParseInteger(vertex_field, "vertex index");
+    if (v < 0 || v >= mesh.num_vertices())
+      in.Fail("vertex index " + std::to_string(v) + " out of range 0.." +
+              std::to_string(mesh.num_vertices() - 1) + " of mesh " + std::to_string(m));
+    return std::pair<int32_t, Point>(scene.bodies[m].first_vertex + static_cast<int32_t>(v),
+                                     mesh.vertices.row(v).transpose());
+  };
+  for (long i = 0; i < n; ++i) {
+    if (!in.NextLine(&fields))
+      in.Fail("expected " + std::to_string(n) + " constraint lines, found " + std::to_string(i));
+    if (fields.size() != 4 && fields.size() != 6)
+      in.Fail("expected 'm1 v1 m2 v2' or 'm1 v1 m2 v2 lo hi', found " + std::to_string(fields.size()) +
+              " fields");
+    const auto [a, xa] = vertex(fields[0], fields[1]);
+    const auto [b, xb] = vertex(fields[2], fields[3]);
+    const double rest = (xb - xa).norm();
+    if (!(rest > 0)) in.Fail("the two vertices coincide: no rest distance to keep");
+    double lo = 1, hi = 1;
+    if (fields.size() == 6) {
+      lo = in.ParseReal(fields[4], "lower bound");
+      hi = in.ParseReal(fields[5], "upper bound");
+      if (!(lo >= 0 && lo <= hi)) in.Fail("need 0 <= lo <= hi");
+    }
+    constraints.push_back({a, b, lo * rest, hi * rest});
+  }
+  if (in.NextLine(&fields)) in.Fail("unexpected content after the constraints");
+  return constraints;
+}
+
+ContactSolver::Timing::Timing(ContactSolver *solver) : solver_(solver) {
+  PetscCallVoid(PetscLogEventBegin(solver->event_, 0, 0, 0, 0));
+  PetscCallVoid(PetscTime(&start_));
+}
+
+ContactSolver::Timing::~Timing() {
+  PetscLogDouble end;
+  PetscCallVoid(PetscTime(&end));
+  solver_->stats_.seconds += end - start_;
+  PetscCallVoid(PetscLogEventEnd(solver_->event_, 0, 0, 0, 0));
+}
+
+ContactSolver::~ContactSolver() {
+  VecScatterDestroy(&to_all_);
+  VecDestroy(&all_x_);
+  VecDestroy(&all_v_);
+}
+
+namespace {
+
+// Edges of the boundary triangles of a mesh, each once (local vertex indices).
+std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh) {
+  const auto triangles = BoundaryTriangles(mesh);
+  std::vector<std::pair<int32_t, int32_t>> edges;
+  for (Eigen::Index t = 0; t < triangles.rows(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = triangles(t, k), b = triangles(t, (k + 1) % 3);
+      edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  return edges;
+}
+
+}  // namespace
+
+PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                                    Vec lumped_mass, const ContactOptions &options) {
+  PetscFunctionBeginUser;
+  PetscClassId class_id;
+  PetscCall(PetscClassIdRegister("softbody contact", &class_id));
+  PetscCall(PetscLogEventRegister("Contact", class_id, &event_));
+  comm_ = comm;
+  scene_ = &scene;
+  layout_ = &layout;
+  options_ = options;
+  int free_bodies = 0, fixed_bodies = 0;
+  for (const Body &body : scene.bodies) (body.fixed ? fixed_bodies : free_bodies)++;
+  ground_ = options.ground && layout.num_free() > 0;
+  obstacles_ = free_bodies >= 1 && (fixed_bodies >= 1 || free_bodies >= 2) && layout.num_free() > 0;
+  free_obstacles_ = obstacles_ && free_bodies >= 2;
+
+  if (!options.constraints_path.empty())
+    SOFTBODY_CATCH_INPUT(comm, constraints_ = ReadConstraints(options.constraints_path, scene));
+  if (options.edge_bounds)
+    for (const Body &body : scene.bodies) {
+      if (body.fixed) continue;
+      for (const auto &[a, b] : BoundaryEdges(body.mesh)) {
+        const double rest = (body.mesh.vertices.row(b) - body.mesh.vertices.row(a)).norm();
+        constraints_.push_back({body.first_vertex + a, body.first_vertex + b,
+                                options.edge_lower * rest, options.edge_upper * rest});
+      }
+    }
+  gather_ = free_obstacles_ || !constraints_.empty() || (options.impulse_spreading && active());
+  if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
+
+  const int32_t V = scene.num_vertices();
+  body_of_.resize(V);
+  world_x_.resize(3 * static_cast<size_t>(V));
+  world_v_.assign(3 * static_cast<size_t>(V), 0.0);
+  body_edge_.assign(scene.bodies.size(), 0.0);
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const Body &body = scene.bodies[b];
+    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
+      body_of_[body.first_vertex + v] = static_cast<int32_t>(b);
+      for (int c = 0; c < 3; ++c) world_x_[3 * (body.first_vertex + v) + c] = body.mesh.vertices(v, c);
+    }
+    double length = 0;
+    const auto edges = BoundaryEdges(body.mesh);
+    for (const auto &[a, c] : edges) length += (body.mesh.vertices.row(c) - body.mesh.vertices.row(a)).norm();
+    body_edge_[b] = edges.empty() ? 1.0 : length / edges.size();
+  }
+
+  owned_natural_.resize(layout.local_count());
+  for (PetscInt f = 0; f < layout.num_free(); ++f) {
+    const PetscInt p = layout.petsc_of_free[f] - layout.local_begin();
+    if (p >= 0 && p < layout.local_count()) owned_natural_[p] = static_cast<int32_t>(layout.natural_of_free[f]);
+  }
+
+  // Inverse masses on every rank (natural order): fixed and stray vertices 0.
+  inverse_mass_.assign(V, 0.0);
+  if (gather_) {
+    PetscCall(VecScatterCreateToAll(lumped_mass, &to_all_, &all_x_));
+    PetscCall(VecDuplicate(all_x_, &all_v_));
+    PetscCall(VecScatterBegin(to_all_, lumped_mass, all_x_, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(to_all_, lumped_mass, all_x_, INSERT_VALUES, SCATTER_FORWARD));
+    const PetscScalar *mass;
+    PetscCall(VecGetArrayRead(all_x_, &mass));
+    for (PetscInt f = 0; f < layout.num_free(); ++f)
+      inverse_mass_[layout.natural_of_free[f]] = 1.0 / mass[3 * layout.petsc_of_free[f]];
+    PetscCall(VecRestoreArrayRead(all_x_, &mass));
+  } else {
+    const PetscScalar *mass;
+    PetscCall(VecGetArrayRead(lumped_mass, &mass));
+    for (PetscInt f = 0; f < layout.num_free(); ++f) {
+      const PetscInt p = layout.petsc_of_free[f] - layout.local_begin();
+      if (p >= 0 && p < layout.local_count()) inverse_mass_[layout.natural_of_free[f]] = 1.0 / mass[3 * p];
+    }
+    PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
+  }
+
+  if (obstacles_) {
+    for (size_t b = 0; b < scene.bodies.size(); ++b) {
+      const Body &body = scene.bodies[b];
+      const auto boundary = BoundaryTriangles(body.mesh);
+      if (!body.fixed)  // queries: this rank's boundary vertices of free bodies
+        for (Eigen::Index f = 0; f < boundary.rows(); ++f)
+          for (int k = 0; k < 3; ++k) {
+            const int32_t natural = body.first_vertex + boundary(f, k);
+            const PetscInt free = layout.free_of_natural[natural];
+            const PetscInt p = free < 0 ? -1 : layout.petsc_of_free[free] - layout.local_begin();
+            if (p >= 0 && p < layout.local_count()) query_vertices_.push_back({p, natural});
+          }
+      if (!body.fixed && !free_obstacles_) continue;  // a lone free body is no obstacle
+      auto &tets = body.fixed ? fixed_tets_ : free_tets_;
+      auto &triangles = body.fixed ? fixed_triangles_ : free_triangles_;
+      for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
+        tets.push_back({body.first_vertex + body.mesh.tets(t, 0), body.first_vertex + body.mesh.tets(t, 1),
+                        body.first_vertex + body.mesh.tets(t, 2), body.first_vertex + body.mesh.tets(t, 3),
+                        static_cast<int32_t>(b)});
+      for (Eigen::Index f = 0; f < boundary.rows(); ++f)
+        triangles.push_back({body.first_vertex + boundary(f, 0), body.first_vertex + boundary(f, 1),
+                             body.first_vertex + boundary(f, 2), static_cast<int32_t>(b)});
+    }
+    std::sort(query_vertices_.begin(), query_vertices_.end());
+    query_vertices_.erase(std::unique(query_vertices_.begin(), query_vertices_.end()), query_vertices_.end());
+    BuildObstacleGrids(true);
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+std::string ContactSolver::Description() const {
+  std::string text;
+  auto add = [&](const std::string &part) { text += (text.empty() ? "" : ", ") + part; };
+  if (ground_) {
+    char text[64];
+    std::snprintf(text, sizeof(text), "ground at y = %g m", options_.ground_y);
+    add(text);
+  }
+  if (obstacles_) add(std::to_string(fixed_tets_.size()) + " fixed and " + std::to_string(free_tets_.size()) +
+                      " moving obstacle tets in uniform grids");
+  if (!constraints_.empty()) add(std::to_string(constraints_.size()) + " distance constraints");
+  if (active() && options_.impulse_spreading) add("impulse spreading");
+  if (active() && (ground_ || obstacles_)) {
+    char text[64];
+    std::snprintf(text, sizeof(text), "restitution %g, friction %g", options_.restitution, options_.friction);
+    add(text);
+  }
+  return text;
+}
+
+void ContactSolver::BuildObstacleGrids(bool fixed_part) {
+  const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
+  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
+  std::vector<Box> boxes(tets.size());
+  for (size_t t = 0; t < tets.size(); ++t)
+    for (int a = 0; a < 4; ++a) boxes[t].Extend(WorldPoint(tets[t][a]));
+  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).Build(boxes);
+  boxes.assign(triangles.size(), Box());
+  for (size_t t = 0; t < triangles.size(); ++t)
+    for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(triangles[t][a]));
+  (fixed_part ? fixed_triangle_grid_ : free_triangle_grid_).Build(boxes);
+}
+
+// World arrays of the free vertices at x + dt v (dt = 0: at x), velocities v.
+PetscErrorCode ContactSolver::Gather(Vec x, Vec v, PetscReal dt) {
+  PetscFunctionBeginUser;
+  for (auto [from, to] : {std::pair<Vec, Vec>(x, all_x_), std::pair<Vec, Vec>(v, all_v_)}) {
+    PetscCall(VecScatterBegin(to_all_, from, to, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(to_all_, from, to, INSERT_VALUES, SCATTER_FORWARD));
+  }
+  const PetscScalar *ax, *av;
+  PetscCall(VecGetArrayRead(all_x_, &ax));
+  PetscCall(VecGetArrayRead(all_v_, &av));
+  for (PetscInt f = 0; f < layout_->num_free(); ++f) {
+    const PetscInt n = layout_->natural_of_free[f], p = layout_->petsc_of_free[f];
+    for (int c = 0; c < 3; ++c) {
+      world_x_[3 * n + c] = ax[3 * p + c] + dt * av[3 * p + c];
+      world_v_[3 * n + c] = av[3 * p + c];
+    }
+  }
+  PetscCall(VecRestoreArrayRead(all_x_, &ax));
+  PetscCall(VecRestoreArrayRead(all_v_, &av));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
+  if (obstacle < 0) {  // the ground
+    *hit = {Point(p[0], options_.ground_y, p[2]), Point(0, 1, 0), Point::Zero(), -1};
+    return true;
+  }
+  const bool fixed_part = scene_->bodies[obstacle].fixed;
+  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
+  const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
+  if (grid.empty()) return false;
+  const double limit = (grid.bounds().upper - grid.bounds().lower).norm() + (grid.bounds().upper - p).norm() +
+                       (grid.bounds().lower - p).norm();
+  double best = 1e300;
+  // Growing neighbourhoods until the closest point found lies within the searched one.
+  for (double radius = grid.cell_size(); best > radius && radius < 2 * limit; radius *= 2)
+    grid.ForEachNear(p, radius, [&](int32_t t) {
+      const auto &tri = triangles[t];
+      if (tri[3] != obstacle) return;
+      const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
+      Eigen::Vector3d w;
+      const Point q = ClosestPointOnTriangle(p, a, b, c, &w);
+      const double distance = (q - p).norm();
+      const Point normal = (b - a).cross(c - a);
+      if (distance >= best || !(normal.norm() > 0)) return;
+      best = distance;
+      hit->point = q;
+      hit->normal = normal.normalized();
+      hit->velocity = w[0] * Point(&world_v_[3 * tri[0]]) + w[1] * Point(&world_v_[3 * tri[1]]) +
+                      w[2] * Point(&world_v_[3 * tri[2]]);
+      hit->body = obstacle;
+    });
+  return best < 1e300;
+}
+
+bool ContactSolver::FindPenetration(const Point &p, int32_t body, SurfaceHit *hit) const {
+  if (ground_ && p[1] < options_.ground_y) return ClosestOnBody(p, -1, hit);
+  for (const bool fixed_part : {true, false}) {
+    const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
+    int32_t inside = -1;
+    (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
+      const auto &tet = tets[t];
+      if (inside >= 0 || tet[4] == body) return;
+      if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]))
+              .minCoeff() > 1e-12)
+        inside = tet[4];
+    });
+    if (inside >= 0) return ClosestOnBody(p, inside, hit);
+  }
+  return false;
+}
+
+// n . v = n . (s - x0) / dt: the vertex ends the step on the plane of the hit.
+void ContactSolver::Constrain(PetscInt local, const Point &x0, PetscReal dt, const SurfaceHit &hit,
+                              const Contact &contact) {
+  velocity_constraints_.push_back({local, hit.normal, hit.normal.dot(hit.point - x0) / dt});
+  contacts_.push_back(contact);
+  constrained_[local] = 1;
+}
+
+PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
+  PetscFunctionBeginUser;
+  Timing timing(this);
+  velocity_constraints_.clear();
+  contacts_.clear();
+  constrained_.assign(owned_natural_.size(), 0);
+  global_constraints_ = 0;
+  if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
+  // Obstacles where they will be if they keep their velocity.
+  if (gather_) PetscCall(Gather(x0, v0, dt));
+  if (free_obstacles_) BuildObstacleGrids(false);
+  const PetscScalar *x;
+  PetscCall(VecGetArrayRead(x0, &x));
+  for (auto &[local, contact] : resting_) {
+    const Point position(&x[3 * local]);
+    SurfaceHit hit;
+    if (!ClosestOnBody(position, contact.body, &hit)) continue;
+    contact.obstacle_velocity = hit.velocity;
+    contact.fresh = false;
+    Constrain(local, position, dt, hit, contact);
+  }
+  PetscCall(VecRestoreArrayRead(x0, &x));
+  PetscCall(CountConstraints());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::CountConstraints() {
+  PetscFunctionBeginUser;
+  const PetscInt local = static_cast<PetscInt>(velocity_constraints_.size());
+  PetscCallMPI(MPIU_Allreduce(&local, &global_constraints_, 1, MPIU_INT, MPI_SUM, comm_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool *added) {
+  PetscFunctionBeginUser;
+  Timing timing(this);
+  *added = false;
+  if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
+  if (gather_) PetscCall(Gather(x0, v, dt));
+  if (free_obstacles_) BuildObstacleGrids(false);
+  const PetscScalar *x, *lv;
+  PetscCall(VecGetArrayRead(x0, &x));
+  PetscCall(VecGetArrayRead(v, &lv));
+  PetscInt found = 0;
+  auto check = [&](PetscInt local, int32_t natural, bool ground_only) {
+    if (constrained_[local]) return;
+    const Point start(&x[3 * local]), velocity(&lv[3 * local]);
+    const Point predicted = start + dt * velocity;
+    SurfaceHit hit;
+    const bool inside = ground_only ? (predicted[1] < options_.ground_y && ClosestOnBody(predicted, -1, &hit))
+                                    : FindPenetration(predicted, body_of_[natural], &hit);
+    if (!inside) return;
+    const double approach = hit.normal.dot(velocity - hit.velocity);
+    Constrain(local, start, dt, hit, {natural, hit.body, hit.velocity, approach, true});
+    ++found;
+  };
+  if (ground_)  // every free vertex
+    for (PetscInt local = 0; local < static_cast<PetscInt>(owned_natural_.size()); ++local)
+      check(local, owned_natural_[local], true);
+  if (obstacles_)  // boundary vertices against bodies
+    for (const auto &[local, natural] : query_vertices_) check(local, natural, false);
+  PetscCall(VecRestoreArrayRead(x0, &x));
+  PetscCall(VecRestoreArrayRead(v, &lv));
+  PetscInt all_found;
+  PetscCallMPI(MPIU_Allreduce(&found, &all_found, 1, MPIU_INT, MPI_SUM, comm_));
+  stats_.collisions += all_found;
+  *added = all_found > 0;
+  global_constraints_ += all_found;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Last resort: vertices still inside an obstacle after the step go to its surface.
+PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions) {
+  PetscFunctionBeginUser;
+  PetscInt projected = 0;
+  auto project = [&](PetscInt local, int32_t natural, bool ground_only) {
+    if (constrained_[local]) return;
+    const Point position(&x[3 * local]);
+    SurfaceHit hit;
+    const bool inside = ground_only ? (position[1] < options_.ground_y && ClosestOnBody(position, -1, &hit))
+                                    : FindPenetration(position, body_of_[natural], &hit);
+    if (!inside) return;
+    const Point velocity(&v[3 * local]);
+    const double approach = hit.normal.dot(velocity - hit.velocity);
+    const Point target = hit.point + 1e-9 * body_edge_[body_of_[natural]] * hit.normal;
+    for (int c = 0; c < 3; ++c) x[3 * local + c] = target[c];
+    if (approach < 0) collisions->push_back({natural, body_of_[natural], target,
+                                             -(1 + options_.restitution) * approach * hit.normal});
+    ++projected;
+  };
+  if (ground_)
+    for (PetscInt local = 0; local < static_cast<PetscInt>(owned_natural_.size()); ++local)
+      project(local, owned_natural_[local], true);
+  if (obstacles_)
+    for (const auto &[local, natural] : query_vertices_) project(local, natural, false);
+  stats_.projections += projected;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions, bool *changed) {
+  PetscFunctionBeginUser;
+  Timing timing(this);
+  *changed = false;
+  if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
+  std::vector<Collision> collisions;
+  if (ground_ || obstacles_) {
+    if (gather_) PetscCall(Gather(x, v, 0.0));
+    if (free_obstacles_) BuildObstacleGrids(false);
+    PetscScalar *lx, *lv;
+    PetscCall(VecGetArray(x, &lx));
+    PetscCall(VecGetArray(v, &lv));
+    // Velocity response of the constrained vertices: relative normal velocity
+    // -e times the approach for a new contact, 0 for a resting one.
+    resting_.clear();
+    for (size_t i = 0; i < contacts_.size(); ++i) {
+      const Contact &contact = contacts_[i];
+      const VelocityConstraint &constraint = velocity_constraints_[i];
+      const Point &n = constraint.normal;
+      const double bounce = contact.fresh && contact.approach < 0 ? -options_.restitution * contact.approach : 0;
+      const Point velocity(&lv[3 * constraint.vertex]);
+      Point dv = (n.dot(contact.obstacle_velocity) + bounce - n.dot(velocity)) * n;
+      // Coulomb friction: at most mu lambda / m off the tangential relative velocity.
+      const Point relative = velocity - contact.obstacle_velocity;
+      const Point tangential = relative - n.dot(relative) * n;
+      const double slip = tangential.norm(), grip = options_.friction * std::max(reactions[i], 0.0) *
+                                                     inverse_mass_[contact.natural];
+      if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
+      collisions.push_back({contact.natural, body_of_[contact.natural], Point(&lx[3 * constraint.vertex]), dv});
+      if (bounce == 0 && reactions[i] >= 0) resting_.push_back({constraint.vertex, contact});
+    }
+    PetscCall(ProjectRemaining(lx, lv, &collisions));
+    if (!options_.impulse_spreading)
+      for (const Collision &c : collisions) {
+        const PetscInt local = layout_->petsc_of_free[layout_->free_of_natural[c.vertex]] - layout_->local_begin();
+        for (int k = 0; k < 3; ++k) lv[3 * local + k] += c.dv[k];
+      }
+    PetscCall(VecRestoreArray(x, &lx));
+    PetscCall(VecRestoreArray(v, &lv));
+    if (options_.impulse_spreading) PetscCall(SpreadImpulses(collisions, v));
+    PetscInt local_changes = static_cast<PetscInt>(collisions.size()), changes;
+    PetscCallMPI(MPIU_Allreduce(&local_changes, &changes, 1, MPIU_INT, MPI_SUM, comm_));
+    *changed = changes > 0;
+  }
+  if (!constraints_.empty()) {
+    PetscCall(Gather(x, v, 0.0));
+    const double violation = ResolveConstraints();
+    stats_.max_constraint_violation = std::max(stats_.max_constraint_violation, violation);
+    PetscScalar *lx, *lv;
+    PetscCall(VecGetArray(x, &lx));
+    PetscCall(VecGetArray(v, &lv));
+    for (PetscInt p = 0; p < static_cast<PetscInt>(owned_natural_.size()); ++p)
+      for (int c = 0; c < 3; ++c) {
+        lx[3 * p + c] = world_x_[3 * owned_natural_[p] + c];
+        lv[3 * p + c] = world_v_[3 * owned_natural_[p] + c];
+      }
+    PetscCall(VecRestoreArray(x, &lx));
+    PetscCall(VecRestoreArray(v, &lv));
+    *changed = true;
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::SpreadImpulses(const std::vector<Collision> &local, Vec v) {
+  PetscFunctionBeginUser;
+  // Every rank gets every collision: 8 numbers each (vertex, body, position, dv).
+  std::vector<double> packed;
+  for (const Collision &c : local) {
+    packed.insert(packed.end(), {double(c.vertex), double(c.body)});
+    packed.insert(packed.end(), c.position.data(), c.position.data() + 3);
+    packed.insert(packed.end(), c.dv.data(), c.dv.data() + 3);
+  }
+  PetscMPIInt size, count = static_cast<PetscMPIInt>(packed.size());
+  PetscCallMPI(MPI_Comm_size(comm_, &size));
+  std::vector<PetscMPIInt> counts(size), offsets(size + 1, 0);
+  PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_));
+  for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + counts[r];
+  std::vector<double> all(offsets[size]);
+  PetscCallMPI(MPI_Allgatherv(packed.data(), count, MPI_DOUBLE, all.data(), counts.data(), offsets.data(),
+                              MPI_DOUBLE, comm_));
+  PetscScalar *lv;
+  PetscCall(VecGetArray(v, &lv));
+  for (size_t i = 0; i < all.size(); i += 8) {
+    const int32_t vertex = static_cast<int32_t>(all[i]), body = static_cast<int32_t>(all[i + 1]);
+    const Point at(all[i + 2], all[i + 3], all[i + 4]), dv(all[i + 5], all[i + 6], all[i + 7]);
+    const Body &b = scene_->bodies[body];
+    const double l = body_edge_[body];
+    // Weights over the body's free vertices; the impulse m_c dv shared by them.
+    double total = 0;
+    for (int32_t k = 0; k < b.mesh.num_vertices(); ++k) {
+      const int32_t n = b.first_vertex + k;
+      if (inverse_mass_[n] > 0 || n == vertex) total += 1 / std::pow(l + (WorldPoint(n) - at).norm(), 2);
+    }
+    const Point impulse = dv / inverse_mass_[vertex];
+    for (PetscInt p = 0; p < static_cast<PetscInt>(owned_natural_.size()); ++p) {
+      const int32_t n = owned_natural_[p];
+      if (body_of_[n] != body) continue;
+      const double share = 1 / std::pow(l + (WorldPoint(n) - at).norm(), 2) / total;
+      for (int c = 0; c < 3; ++c) lv[3 * p + c] += share * inverse_mass_[n] * impulse[c];
+    }
+  }
+  PetscCall(VecRestoreArray(v, &lv));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+double ContactSolver::ResolveConstraints() {
+  auto point = [](std::vector<double> &a, int32_t n) { return Eigen::Map<Point>(&a[3 * n]); };
+  double violation = 0;
+  PetscInt sweep = 0;
+  for (; sweep < 500; ++sweep) {
+    violation = 0;
+    for (const DistanceConstraint &c : constraints_) {
+      const double wa = inverse_mass_[c.a], wb = inverse_mass_[c.b], w = wa + wb;
+      Eigen::Map<Point> xa = point(world_x_, c.a), xb = point(world_x_, c.b);
+      const Point d = xb - xa;
+      const double length = d.norm();
+      if (w == 0 || !(length > 0)) continue;
+      const double target = std::clamp(length, c.lower, c.upper);
+      violation = std::max(violation, std::abs(length - target) / c.upper);
+      const Point n = d / length;
+      // Positions: both ends move along n, inversely to their masses.
+      const double error = length - target;
+      xa += (wa / w) * error * n;
+      xb -= (wb / w) * error * n;
+      // Velocities: no relative motion further out of the bounds.
+      Eigen::Map<Point> va = point(world_v_, c.a), vb = point(world_v_, c.b);
+      const double separating = (vb - va).dot(n);
+      if ((target == c.upper && separating > 0 && length >= c.upper) ||
+          (target == c.lower && separating < 0 && length <= c.lower)) {
+        va += (wa / w) * separating * n;
+        vb -= (wb / w) * separating * n;
+      }
+    }
+    if (violation < 1e-12) break;
+  }
+  stats_.constraint_sweeps += sweep + 1;
+  stats_.max_constraint_sweeps = std::max<PetscInt>(stats_.max_constraint_sweeps, sweep + 1);
+  return violation;
+}
+
+}  // namespace softbody

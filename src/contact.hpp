@@ -1,0 +1,192 @@
+// Collisions and distance constraints.
+//
+// Collisions are part of the implicit step (see projected_solve.hpp): a free
+// vertex that the step would take inside an obstacle gets a velocity constraint
+// n . v = n . (s - x0) / dt, so that it ends the step on the obstacle's surface
+// (s its closest surface point, n the surface's outward normal); the step is then
+// solved again with the constraint, so the whole body feels the contact in the
+// same step. Obstacles: the ground half-space y < y0 (-ground; every free vertex
+// is checked), fixed bodies and the other free bodies (their tets tell inside,
+// their boundary triangles give the closest surface point; the boundary vertices
+// of free bodies are checked). Detection uses uniform grids over tets and
+// triangles, never all pairs. After the step, a new contact's normal velocity
+// relative to the obstacle is reflected with the coefficient of restitution e,
+// v_n <- -e v_n, and Coulomb friction (-friction mu) takes from the tangential
+// relative velocity at most mu lambda / m (lambda the contact's normal impulse,
+// m the vertex mass): sticking when that suffices; with e = 0 the vertex
+// rests on the surface and stays constrained while the obstacle pushes it
+// (reaction >= 0), and is released when it would pull. Whatever still ends inside
+// (an interior vertex, say) is projected to the surface as a last resort.
+//
+// Impulse spreading (-impulse_spreading): the momentum m_c dv_c that the
+// velocity response gives a contact vertex c is shared by all vertices j of its
+// body with weights w_j = 1 / (l + |x_j - x_c|)^2 (l the body's mean boundary
+// edge length), m_j dv_j = m_c dv_c w_j / sum_k w_k: the body receives the same
+// impulse, the nearest vertices most of it.
+//
+// Distance constraints (-constraints FILE, and -edge_bounds lo,hi on every
+// boundary edge of the free bodies), resolved after the step: |x_b - x_a| is kept
+// within [lo, hi] x the rest distance by mass-weighted projection of both
+// positions along the constraint, with the relative velocity along it removed
+// when it points out of the bounds; Gauss-Seidel sweeps until every constraint
+// holds to 1e-12 relative (at most 500). Fixed and stray vertices have infinite mass.
+//
+// Parallel model: the free state is gathered on every rank when free bodies
+// collide with each other, constraints exist or impulses spread; each rank then
+// detects the contacts of its own vertices, every rank resolves all distance
+// constraints identically, and each keeps its own vertices' results. The ground
+// alone and fixed obstacles alone need no gather.
+#pragma once
+
+#include <petscvec.h>
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "geometry.hpp"
+#include "projected_solve.hpp"
+#include "partition.hpp"
+#include "scene.hpp"
+
+namespace softbody {
+
+struct ContactOptions {
+  PetscBool ground = PETSC_FALSE;
+  PetscReal ground_y = 0;             // m
+  PetscReal restitution = 0;          // e in [0, 1]
+  PetscReal friction = 0;             // Coulomb coefficient mu >= 0
+  PetscBool impulse_spreading = PETSC_FALSE;
+  std::string constraints_path;       // "" = none
+  PetscBool edge_bounds = PETSC_FALSE;
+  PetscReal edge_lower = 1, edge_upper = 1;  // x rest length
+};
+
+// Collective. Reads -ground -restitution -impulse_spreading -constraints -edge_bounds.
+PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
+
+// A distance constraint between natural vertices a and b: lower <= |x_b - x_a| <= upper (m).
+struct DistanceConstraint {
+  int32_t a, b;
+  double lower, upper;
+};
+
+// Reads a constraints file: n, then n lines "m1 v1 m2 v2" (rest distance kept)
+// or "m1 v1 m2 v2 lo hi" (within [lo, hi] x rest distance), 0-based mesh and
+// vertex indices. Not collective; throws InputError naming file and line.
+std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene);
+
+struct ContactStatistics {
+  PetscInt collisions = 0;          // new vertex contacts, all steps, all ranks
+  PetscInt projections = 0;         // last-resort projections, all steps, all ranks
+  PetscLogDouble seconds = 0;       // wall time in contact detection and response
+  PetscInt constraint_sweeps = 0;   // Gauss-Seidel sweeps, all steps
+  PetscInt max_constraint_sweeps = 0;
+  PetscReal max_constraint_violation = 0;  // relative, after resolution
+};
+
+class ContactSolver {
+ public:
+  ContactSolver() = default;
+  ContactSolver(const ContactSolver &) = delete;
+  ContactSolver &operator=(const ContactSolver &) = delete;
+  ~ContactSolver();
+
+  // Collective. Builds only what the scene and options need.
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                       Vec lumped_mass, const ContactOptions &options);
+  // Anything to resolve at all.
+  bool active() const { return ground_ || obstacles_ || !constraints_.empty(); }
+
+  // The step's contact protocol (collective calls):
+  // 1. BeginStep: the resting contacts of the last step, re-aimed at the surface
+  //    for positions x0 (v0: the obstacles' velocities) and step dt.
+  PetscErrorCode BeginStep(Vec x0, Vec v0, PetscReal dt);
+  // 2. After a solve giving v: constrains every unconstrained vertex that
+  //    x0 + dt v puts inside an obstacle; *added tells any rank added one.
+  PetscErrorCode AddPenetrations(Vec x0, Vec v, PetscReal dt, bool *added);
+  // The constraints for the solve (owned vertices, local numbering), and how
+  // many there are on all ranks (the same on every rank: decides collectively
+  // whether the step needs the constrained solve).
+  const std::vector<VelocityConstraint> &velocity_constraints() const { return velocity_constraints_; }
+  PetscInt global_constraint_count() const { return global_constraints_; }
+  // 3. After x1 = x0 + dt v1 with the constraints' reactions: velocity response,
+  //    impulse spreading, resting contacts for the next step, last-resort
+  //    projection, distance constraints. *changed: x or v modified here.
+  PetscErrorCode EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions, bool *changed);
+
+  const ContactStatistics &statistics() const { return stats_; }
+  size_t num_constraints() const { return constraints_.size(); }
+  // What Setup built, for the run summary.
+  std::string Description() const;
+
+ private:
+  // Where a point meets an obstacle: closest surface point, outward normal, the
+  // surface's velocity there, the obstacle (-1: the ground).
+  struct SurfaceHit {
+    Point point, normal, velocity;
+    int32_t body;
+  };
+  // A constrained vertex (parallel to velocity_constraints_).
+  struct Contact {
+    int32_t natural;
+    int32_t body;           // obstacle, -1 for the ground
+    Point obstacle_velocity;
+    double approach;        // n . (v - u) when it was detected (< 0), for restitution
+    bool fresh;             // detected this step
+  };
+  struct Collision {  // a velocity response, for impulse spreading
+    int32_t vertex;
+    int32_t body;
+    Point position, dv;
+  };
+  PetscErrorCode Gather(Vec x, Vec v, PetscReal dt);
+  void BuildObstacleGrids(bool fixed_part);
+  Point WorldPoint(int32_t n) const { return Point(world_x_[3 * n], world_x_[3 * n + 1], world_x_[3 * n + 2]); }
+  bool FindPenetration(const Point &p, int32_t body, SurfaceHit *hit) const;
+  bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
+  void Constrain(PetscInt local, const Point &x0, PetscReal dt, const SurfaceHit &hit, const Contact &contact);
+  PetscErrorCode ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions);
+  PetscErrorCode SpreadImpulses(const std::vector<Collision> &local, Vec v);
+  double ResolveConstraints();
+
+  // Times a public method: the "Contact" event of -log_view and stats_.seconds.
+  class Timing {
+   public:
+    explicit Timing(ContactSolver *solver);
+    ~Timing();
+
+   private:
+    ContactSolver *solver_;
+    PetscLogDouble start_ = 0;
+  };
+  PetscLogEvent event_ = 0;
+  MPI_Comm comm_ = MPI_COMM_NULL;
+  const Scene *scene_ = nullptr;
+  const DofLayout *layout_ = nullptr;
+  ContactOptions options_;
+  bool ground_ = false, obstacles_ = false, free_obstacles_ = false, gather_ = false;
+  std::vector<int32_t> body_of_;           // natural vertex -> body
+  std::vector<int32_t> owned_natural_;     // local vertex -> natural vertex
+  std::vector<double> inverse_mass_;       // natural vertex (0: fixed or stray)
+  std::vector<double> world_x_, world_v_;  // natural, 3 per vertex (free ones gathered)
+  VecScatter to_all_ = nullptr;
+  Vec all_x_ = nullptr, all_v_ = nullptr;
+  // Obstacles: tets and boundary triangles as natural vertex indices + body.
+  std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
+  std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
+  UniformGrid fixed_tet_grid_, free_tet_grid_, fixed_triangle_grid_, free_triangle_grid_;
+  std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned boundary vertices of free
+                                                               // bodies: (local, natural)
+  std::vector<double> body_edge_;          // mean boundary edge length per body
+  std::vector<VelocityConstraint> velocity_constraints_;
+  PetscInt global_constraints_ = 0;
+  PetscErrorCode CountConstraints();
+  std::vector<Contact> contacts_;
+  std::vector<char> constrained_;          // local vertex -> has a constraint this step
+  std::vector<std::pair<PetscInt, Contact>> resting_;  // kept for the next step
+  std::vector<DistanceConstraint> constraints_;
+  ContactStatistics stats_;
+};
+
+}  // namespace softbody

@@ -1,0 +1,74 @@
+// Geometric queries for contact: point-in-tet, closest point on a triangle, and a
+// uniform grid that bins boxes for fast candidate look-up. Not collective.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+namespace softbody {
+
+using Point = Eigen::Vector3d;
+
+struct Box {
+  Point lower = Point::Constant(1e300), upper = Point::Constant(-1e300);
+  void Extend(const Point &p) {
+    lower = lower.cwiseMin(p);
+    upper = upper.cwiseMax(p);
+  }
+  void Extend(const Box &b) {
+    lower = lower.cwiseMin(b.lower);
+    upper = upper.cwiseMax(b.upper);
+  }
+  bool Contains(const Point &p, double margin = 0) const {
+    return (p.array() >= lower.array() - margin).all() && (p.array() <= upper.array() + margin).all();
+  }
+  bool Empty() const { return (lower.array() > upper.array()).any(); }
+};
+
+// Barycentric coordinates of p in the tet (a, b, c, d); p is inside (or on the
+// boundary, up to -tolerance) when all four are >= -tolerance.
+Eigen::Vector4d Barycentric(const Point &p, const Point &a, const Point &b, const Point &c,
+                            const Point &d);
+
+// Closest point to p on the triangle (a, b, c) (Ericson, Real-Time Collision
+// Detection, 5.1.5); also its barycentric coordinates.
+Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, const Point &c,
+                             Eigen::Vector3d *weights);
+
+// Uniform grid over the boxes of a set of items (tets or triangles): each item is
+// listed in every cell its box overlaps. Cell size h: the mean box edge, so an
+// item overlaps a few cells.
+class UniformGrid {
+ public:
+  void Build(const std::vector<Box> &boxes);
+  bool empty() const { return item_start_.empty(); }
+  // Items whose cells overlap the box around p of half-width radius (each once
+  // per cell: callers may see an item more than once).
+  template <typename Visit>
+  void ForEachNear(const Point &p, double radius, Visit visit) const {
+    if (empty() || !bounds_.Contains(p, radius)) return;
+    const Eigen::Array3i lo = CellOf(p.array() - radius), hi = CellOf(p.array() + radius);
+    for (int k = lo[2]; k <= hi[2]; ++k)
+      for (int j = lo[1]; j <= hi[1]; ++j)
+        for (int i = lo[0]; i <= hi[0]; ++i) {
+          const int64_t cell = Index(i, j, k);
+          for (int64_t n = cell_start_[cell]; n < cell_start_[cell + 1]; ++n) visit(items_[n]);
+        }
+  }
+  double cell_size() const { return h_; }
+  const Box &bounds() const { return bounds_; }
+
+ private:
+  Eigen::Array3i CellOf(const Eigen::Array3d &p) const;
+  int64_t Index(int i, int j, int k) const;
+
+  Box bounds_;
+  double h_ = 1;
+  Eigen::Array3i cells_ = Eigen::Array3i::Zero();
+  std::vector<int64_t> cell_start_;  // CSR over cells
+  std::vector<int32_t> items_;
+  std::vector<int32_t> item_start_;  // marks the grid as built
+};
+
+}  // namespace softbody

@@ -1,0 +1,127 @@
+#include "projected_solve.hpp"
+
+namespace softbody {
+
+ProjectedSolver::~ProjectedSolver() {
+  KSPDestroy(&inner_);
+  MatDestroy(&shell_);
+  VecDestroy(&work_);
+  VecDestroy(&work2_);
+  VecDestroy(&z_);
+  VecDestroy(&rhs_);
+  VecDestroy(&w_);
+}
+
+void ProjectedSolver::Project(const PetscScalar *w, PetscScalar *y, bool project) const {
+  for (const VelocityConstraint &c : *constraints_) {
+    const Eigen::Vector3d wi(w[3 * c.vertex], w[3 * c.vertex + 1], w[3 * c.vertex + 2]);
+    const Eigen::Vector3d normal_part = c.normal.dot(wi) * c.normal;
+    const Eigen::Vector3d yi = project ? Eigen::Vector3d(wi - normal_part) : normal_part;
+    for (int k = 0; k < 3; ++k) y[3 * c.vertex + k] = yi[k];
+  }
+}
+
+PetscErrorCode ProjectedSolver::ProjectVec(Vec w, Vec y, bool project) const {
+  PetscFunctionBeginUser;
+  if (project) PetscCall(VecCopy(w, y));
+  else PetscCall(VecZeroEntries(y));
+  const PetscScalar *win;
+  PetscScalar *yout;
+  PetscCall(VecGetArrayRead(w, &win));
+  PetscCall(VecGetArray(y, &yout));
+  Project(win, yout, project);
+  PetscCall(VecRestoreArrayRead(w, &win));
+  PetscCall(VecRestoreArray(y, &yout));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// y = P A P w + (I - P) w
+PetscErrorCode ProjectedSolver::ApplyOperator(Mat shell, Vec w, Vec y) {
+  PetscFunctionBeginUser;
+  ProjectedSolver *self;
+  PetscCall(MatShellGetContext(shell, &self));
+  PetscCall(self->ProjectVec(w, self->work_, true));
+  PetscCall(MatMult(self->A_, self->work_, self->work2_));
+  PetscCall(self->ProjectVec(self->work2_, y, true));
+  PetscCall(self->ProjectVec(w, self->work_, false));
+  PetscCall(VecAXPY(y, 1.0, self->work_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// y = P M^-1 P w + (I - P) w
+PetscErrorCode ProjectedSolver::ApplyPreconditioner(PC shell, Vec w, Vec y) {
+  PetscFunctionBeginUser;
+  ProjectedSolver *self;
+  PetscCall(PCShellGetContext(shell, &self));
+  PetscCall(self->ProjectVec(w, self->work_, true));
+  PetscCall(PCApply(self->unconstrained_pc_, self->work_, self->work2_));
+  PetscCall(self->ProjectVec(self->work2_, y, true));
+  PetscCall(self->ProjectVec(w, self->work_, false));
+  PetscCall(VecAXPY(y, 1.0, self->work_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b, const std::vector<VelocityConstraint> &constraints,
+                                      Vec v, std::vector<PetscReal> *reactions, PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  PetscCall(KSPSetUp(solver));  // refreshes the preconditioner if A changed
+  PetscCall(KSPGetOperators(solver, &A_, nullptr));
+  PetscCall(KSPGetPC(solver, &unconstrained_pc_));
+  constraints_ = &constraints;
+  if (!inner_) {
+    PetscInt n, N;
+    PetscCall(VecGetLocalSize(b, &n));
+    PetscCall(VecGetSize(b, &N));
+    for (Vec *work : {&work_, &work2_, &z_, &rhs_, &w_}) PetscCall(VecDuplicate(b, work));
+    PetscCall(MatCreateShell(PetscObjectComm((PetscObject)b), n, n, N, N, this, &shell_));
+    PetscCall(MatShellSetOperation(shell_, MATOP_MULT, (void (*)(void))ApplyOperator));
+    PetscCall(KSPCreate(PetscObjectComm((PetscObject)b), &inner_));
+    PetscCall(KSPSetOptionsPrefix(inner_, "contact_"));
+    PetscCall(KSPSetType(inner_, KSPCG));
+    PetscCall(KSPSetTolerances(inner_, 1e-10, PETSC_DEFAULT, PETSC_DEFAULT, 10000));
+    PetscCall(KSPSetOperators(inner_, shell_, shell_));
+    PC pc;
+    PetscCall(KSPGetPC(inner_, &pc));
+    PetscCall(PCSetType(pc, PCSHELL));
+    PetscCall(PCShellSetContext(pc, this));
+    PetscCall(PCShellSetApply(pc, ApplyPreconditioner));
+    PetscCall(PCShellSetName(pc, "P M^-1 P + I - P"));
+    PetscCall(KSPSetInitialGuessNonzero(inner_, PETSC_TRUE));
+    PetscCall(KSPSetFromOptions(inner_));
+  }
+  // z: the prescribed normal velocities; rhs = P (b - A z); w from the guess.
+  PetscCall(VecZeroEntries(z_));
+  PetscScalar *z;
+  PetscCall(VecGetArray(z_, &z));
+  for (const VelocityConstraint &c : constraints)
+    for (int k = 0; k < 3; ++k) z[3 * c.vertex + k] = c.velocity * c.normal[k];
+  PetscCall(VecRestoreArray(z_, &z));
+  PetscCall(MatMult(A_, z_, work_));
+  PetscCall(VecAYPX(work_, -1.0, b));
+  PetscCall(ProjectVec(work_, rhs_, true));
+  PetscCall(ProjectVec(v, w_, true));
+  PetscCall(KSPSolve(inner_, rhs_, w_));
+  KSPConvergedReason reason;
+  PetscCall(KSPGetConvergedReason(inner_, &reason));
+  PetscCall(KSPGetIterationNumber(inner_, iterations));
+  PetscCheck(reason >= 0, PetscObjectComm((PetscObject)b), PETSC_ERR_NOT_CONVERGED,
+             "the contact-constrained solve did not converge (%s after %" PetscInt_FMT " iterations)",
+             KSPConvergedReasons[reason], *iterations);
+  // v = P w + z; reactions from A v - b.
+  PetscCall(ProjectVec(w_, v, true));
+  PetscCall(VecAXPY(v, 1.0, z_));
+  PetscCall(MatMult(A_, v, work_));
+  PetscCall(VecAXPY(work_, -1.0, b));
+  const PetscScalar *residual;
+  PetscCall(VecGetArrayRead(work_, &residual));
+  reactions->resize(constraints.size());
+  for (size_t i = 0; i < constraints.size(); ++i) {
+    const VelocityConstraint &c = constraints[i];
+    (*reactions)[i] = c.normal.dot(Eigen::Vector3d(residual[3 * c.vertex], residual[3 * c.vertex + 1],
+                                                    residual[3 * c.vertex + 2]));
+  }
+  PetscCall(VecRestoreArrayRead(work_, &residual));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
