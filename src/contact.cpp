@@ -300,7 +300,7 @@ PetscErrorCode ContactSolver::Gather(Vec x, Vec v, PetscReal dt) {
 
 bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
   if (obstacle < 0) {  // the ground
-    *hit = {Point(p[0], options_.ground_y, p[2]), Point(0, 1, 0), Point::Zero(), -1};
+    *hit = {Point(p[0], options_.ground_y, p[2]), Point(0, 1, 0), Point::Zero(), 0.0, -1};
     return true;
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
@@ -326,6 +326,8 @@ bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *
       hit->normal = normal.normalized();
       hit->velocity = w[0] * Point(&world_v_[3 * tri[0]]) + w[1] * Point(&world_v_[3 * tri[1]]) +
                       w[2] * Point(&world_v_[3 * tri[2]]);
+      hit->inverse_mass = w[0] * inverse_mass_[tri[0]] + w[1] * inverse_mass_[tri[1]] +
+                          w[2] * inverse_mass_[tri[2]];
       hit->body = obstacle;
     });
   return best < 1e300;
@@ -340,7 +342,7 @@ bool ContactSolver::FindPenetration(const Point &p, int32_t body, SurfaceHit *hi
       const auto &tet = tets[t];
       if (inside >= 0 || tet[4] == body) return;
       if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]))
-              .minCoeff() > 1e-12)
+              .minCoeff() >= -1e-12)  // faces count: p may lie on one shared by two tets
         inside = tet[4];
     });
     if (inside >= 0) return ClosestOnBody(p, inside, hit);
@@ -348,11 +350,17 @@ bool ContactSolver::FindPenetration(const Point &p, int32_t body, SurfaceHit *hi
   return false;
 }
 
-// n . v = n . (s - x0) / dt: the vertex ends the step on the plane of the hit.
-void ContactSolver::Constrain(PetscInt local, const Point &x0, PetscReal dt, const SurfaceHit &hit,
-                              const Contact &contact) {
-  velocity_constraints_.push_back({local, hit.normal, hit.normal.dot(hit.point - x0) / dt});
-  contacts_.push_back(contact);
+void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0, const Point &predicted,
+                              const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh) {
+  const Point &n = hit.normal;
+  const double w = inverse_mass_[natural], w_obstacle = hit.inverse_mass;
+  const double share = w / (w + w_obstacle);  // 1 against a fixed obstacle
+  const Point target = predicted + share * (hit.point - predicted);
+  const double approach = n.dot(velocity - hit.velocity);  // < 0: closing
+  const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
+  const double bounce = fresh && approach < 0 ? -options_.restitution * share * approach : 0;
+  velocity_constraints_.push_back({local, n, n.dot(target - x0) / dt});
+  contacts_.push_back({natural, hit.body, common + bounce});
   constrained_[local] = 1;
 }
 
@@ -367,17 +375,17 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   // Obstacles where they will be if they keep their velocity.
   if (gather_) PetscCall(Gather(x0, v0, dt));
   if (free_obstacles_) BuildObstacleGrids(false);
-  const PetscScalar *x;
+  const PetscScalar *x, *v;
   PetscCall(VecGetArrayRead(x0, &x));
-  for (auto &[local, contact] : resting_) {
-    const Point position(&x[3 * local]);
+  PetscCall(VecGetArrayRead(v0, &v));
+  for (const auto &[local, contact] : resting_) {
+    const Point position(&x[3 * local]), velocity(&v[3 * local]);
     SurfaceHit hit;
-    if (!ClosestOnBody(position, contact.body, &hit)) continue;
-    contact.obstacle_velocity = hit.velocity;
-    contact.fresh = false;
-    Constrain(local, position, dt, hit, contact);
+    if (ClosestOnBody(position + dt * velocity, contact.body, &hit))
+      Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt, hit, false);
   }
   PetscCall(VecRestoreArrayRead(x0, &x));
+  PetscCall(VecRestoreArrayRead(v0, &v));
   PetscCall(CountConstraints());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -408,8 +416,7 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
     const bool inside = ground_only ? (predicted[1] < options_.ground_y && ClosestOnBody(predicted, -1, &hit))
                                     : FindPenetration(predicted, body_of_[natural], &hit);
     if (!inside) return;
-    const double approach = hit.normal.dot(velocity - hit.velocity);
-    Constrain(local, start, dt, hit, {natural, hit.body, hit.velocity, approach, true});
+    Constrain(local, natural, start, predicted, velocity, dt, hit, true);
     ++found;
   };
   if (ground_)  // every free vertex
@@ -474,17 +481,22 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
       const Contact &contact = contacts_[i];
       const VelocityConstraint &constraint = velocity_constraints_[i];
       const Point &n = constraint.normal;
-      const double bounce = contact.fresh && contact.approach < 0 ? -options_.restitution * contact.approach : 0;
       const Point velocity(&lv[3 * constraint.vertex]);
-      Point dv = (n.dot(contact.obstacle_velocity) + bounce - n.dot(velocity)) * n;
-      // Coulomb friction: at most mu lambda / m off the tangential relative velocity.
-      const Point relative = velocity - contact.obstacle_velocity;
+      Point dv = (contact.normal_velocity - n.dot(velocity)) * n;
+      // Coulomb friction: at most mu lambda / m off the tangential velocity
+      // relative to the obstacle's surface.
+      SurfaceHit hit;
+      const Point surface_velocity = ClosestOnBody(Point(&lx[3 * constraint.vertex]), contact.body, &hit)
+                                         ? hit.velocity : Point::Zero();
+      const Point relative = velocity - surface_velocity;
       const Point tangential = relative - n.dot(relative) * n;
       const double slip = tangential.norm(), grip = options_.friction * std::max(reactions[i], 0.0) *
                                                      inverse_mass_[contact.natural];
       if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
       collisions.push_back({contact.natural, body_of_[contact.natural], Point(&lx[3 * constraint.vertex]), dv});
-      if (bounce == 0 && reactions[i] >= 0) resting_.push_back({constraint.vertex, contact});
+      // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
+      if (reactions[i] >= 0 && contact.normal_velocity <= n.dot(surface_velocity) + 1e-12)
+        resting_.push_back({constraint.vertex, contact});
     }
     PetscCall(ProjectRemaining(lx, lv, &collisions));
     if (!options_.impulse_spreading)

@@ -122,18 +122,18 @@ class ContactSolver {
 
  private:
   // Where a point meets an obstacle: closest surface point, outward normal, the
-  // surface's velocity there, the obstacle (-1: the ground).
+  // surface's velocity and inverse mass there (0: fixed or ground), the obstacle
+  // (-1: the ground).
   struct SurfaceHit {
     Point point, normal, velocity;
+    double inverse_mass;
     int32_t body;
   };
   // A constrained vertex (parallel to velocity_constraints_).
   struct Contact {
     int32_t natural;
-    int32_t body;           // obstacle, -1 for the ground
-    Point obstacle_velocity;
-    double approach;        // n . (v - u) when it was detected (< 0), for restitution
-    bool fresh;             // detected this step
+    int32_t body;              // obstacle, -1 for the ground
+    double normal_velocity;    // n . v after the step's velocity response
   };
   struct Collision {  // a velocity response, for impulse spreading
     int32_t vertex;
@@ -145,7 +145,13 @@ class ContactSolver {
   Point WorldPoint(int32_t n) const { return Point(world_x_[3 * n], world_x_[3 * n + 1], world_x_[3 * n + 2]); }
   bool FindPenetration(const Point &p, int32_t body, SurfaceHit *hit) const;
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
-  void Constrain(PetscInt local, const Point &x0, PetscReal dt, const SurfaceHit &hit, const Contact &contact);
+  // Constrains owned vertex `local` (at x0, heading for `predicted`) against the
+  // hit: it ends the step on the plane where the two sides meet, the overlap
+  // split by inverse mass (all of it for a fixed obstacle or the ground), and
+  // leaves with the two sides' momentum-weighted normal velocity, less e times
+  // its share of the approach for a new contact.
+  void Constrain(PetscInt local, int32_t natural, const Point &x0, const Point &predicted,
+                 const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh);
   PetscErrorCode ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions);
   PetscErrorCode SpreadImpulses(const std::vector<Collision> &local, Vec v);
   double ResolveConstraints();
