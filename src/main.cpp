@@ -171,7 +171,18 @@ PetscErrorCode Run(MPI_Comm comm) {
     }
   }
   if (writer) {
-    PetscCall(writer->Close());
+    const SolverStatistics &solver = integrator.statistics();
+    PetscCall(writer->Close({{"setup_seconds", report.times.setup},
+                             {"loop_seconds", report.times.loop},
+                             {"output_seconds", report.times.output},
+                             {"steps", double(report.steps)},
+                             {"final_time", report.final_time},
+                             {"ranks", double(layout.size)},
+                             {"dofs", 3.0 * layout.num_free()},
+                             {"solves", double(solver.solves)},
+                             {"solver_iterations", double(solver.total_iterations)},
+                             {"contact_solves", double(solver.contact_solves)},
+                             {"contact_seconds", contact.statistics().seconds}}));
     report.frames = writer->frames();
   }
 

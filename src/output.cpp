@@ -92,16 +92,22 @@ bool WriteArray(hid_t location, const char *name, hid_t type, const std::vector<
   return ok;
 }
 
-// Root attribute "complete": 0 while the run goes on, 1 once it has finished.
-bool MarkComplete(hid_t file, int complete) {
+// A scalar root attribute, created or overwritten.
+template <typename T>
+bool SetRootAttribute(hid_t file, const char *name, hid_t type, T value) {
   const hid_t space = H5Screate(H5S_SCALAR);
-  const hid_t attribute = H5Aexists(file, "complete") > 0
-                              ? H5Aopen(file, "complete", H5P_DEFAULT)
-                              : H5Acreate2(file, "complete", H5T_NATIVE_INT, space, H5P_DEFAULT, H5P_DEFAULT);
-  const bool ok = attribute >= 0 && H5Awrite(attribute, H5T_NATIVE_INT, &complete) >= 0;
+  const hid_t attribute = H5Aexists(file, name) > 0
+                              ? H5Aopen(file, name, H5P_DEFAULT)
+                              : H5Acreate2(file, name, type, space, H5P_DEFAULT, H5P_DEFAULT);
+  const bool ok = attribute >= 0 && H5Awrite(attribute, type, &value) >= 0;
   if (attribute >= 0) H5Aclose(attribute);
   H5Sclose(space);
   return ok;
+}
+
+// Root attribute "complete": 0 while the run goes on, 1 once it has finished.
+bool MarkComplete(hid_t file, int complete) {
+  return SetRootAttribute(file, "complete", H5T_NATIVE_INT, complete);
 }
 
 // Rank 0: the static mesh datasets under /mesh.
@@ -235,11 +241,13 @@ PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec veloc
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ResultWriter::Close() {
+PetscErrorCode ResultWriter::Close(const std::vector<std::pair<std::string, double>> &statistics) {
   PetscFunctionBeginUser;
   bool ok = true;
   if (rank_ == 0 && file_ >= 0) {
-    ok = MarkComplete(file_, 1) && H5Fclose(file_) >= 0;
+    for (const auto &[name, value] : statistics)
+      ok = ok && SetRootAttribute(file_, name.c_str(), H5T_NATIVE_DOUBLE, value);
+    ok = ok && MarkComplete(file_, 1) && H5Fclose(file_) >= 0;
     file_ = -1;
     // XDMF 3, as ParaView's default reader (Xdmf3ReaderS) takes it: a temporal
     // collection of grids sharing the tets; frame f of a [F][V][3] series is the

@@ -8,7 +8,8 @@
 //   indices), /mesh/vertex_body [V], /mesh/rest_positions [V][3],
 //   /mesh/body_fixed [bodies] (1 for fixed bodies).
 // Frame 0 is the initial state. The file is flushed after every frame; its root
-// attribute "complete" is 0 until the run has finished (1). An .xdmf beside it
+// attribute "complete" is 0 until the run has finished (1); then the run's
+// statistics (set-up and loop seconds, solver iterations, ...) are root attributes. An .xdmf beside it
 // (same name), written at the end, describes the frames as a ParaView time series.
 //
 // Matrices: PETSc binary files of M, K and D in the natural order of the free
@@ -19,6 +20,7 @@
 #include <petscmat.h>
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "assembly.hpp"
@@ -50,8 +52,9 @@ class ResultWriter {
   // Collective. Appends one frame.
   PetscErrorCode WriteFrame(PetscReal time, Vec positions, Vec velocities,
                             const EnergySample &energy);
-  // Collective. Writes the .xdmf and closes the file.
-  PetscErrorCode Close();
+  // Collective. Writes the run's statistics as root attributes (name, value:
+  // e.g. "loop_seconds"), marks the file complete, writes the .xdmf and closes.
+  PetscErrorCode Close(const std::vector<std::pair<std::string, double>> &statistics);
 
   PetscInt frames() const { return static_cast<PetscInt>(times_.size()); }
 
