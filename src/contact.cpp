@@ -246,19 +246,18 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
 std::string ContactSolver::Description() const {
   std::string text;
   auto add = [&](const std::string &part) { text += (text.empty() ? "" : ", ") + part; };
+  char buffer[64];
   if (ground_) {
-    char text[64];
-    std::snprintf(text, sizeof(text), "ground at y = %g m", options_.ground_y);
-    add(text);
+    std::snprintf(buffer, sizeof(buffer), "ground at y = %g m", options_.ground_y);
+    add(buffer);
   }
   if (obstacles_) add(std::to_string(fixed_tets_.size()) + " fixed and " + std::to_string(free_tets_.size()) +
                       " moving obstacle tets in uniform grids");
   if (!constraints_.empty()) add(std::to_string(constraints_.size()) + " distance constraints");
   if (active() && options_.impulse_spreading) add("impulse spreading");
   if (active() && (ground_ || obstacles_)) {
-    char text[64];
-    std::snprintf(text, sizeof(text), "restitution %g, friction %g", options_.restitution, options_.friction);
-    add(text);
+    std::snprintf(buffer, sizeof(buffer), "restitution %g, friction %g", options_.restitution, options_.friction);
+    add(buffer);
   }
   return text;
 }
