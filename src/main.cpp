@@ -13,6 +13,8 @@
 // (solve, then contact) -> HDF5 frames in natural vertex order.
 #include <petscksp.h>
 
+#include <cstdio>
+#include <cstring>
 #include <optional>
 
 #include "assembly.hpp"
@@ -192,12 +194,38 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Every -options_file on the command line can be opened; otherwise rank 0 says
+// which cannot. Not collective beyond MPI_Comm_rank.
+bool OptionsFilesReadable(int argc, char **argv) {
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "-options_file") != 0) continue;
+    const char *path = i + 1 < argc ? argv[i + 1] : "";
+    if (std::FILE *file = std::fopen(path, "r")) {
+      std::fclose(file);
+      continue;
+    }
+    if (rank == 0) std::fprintf(stderr, "softbody: error: option -options_file: cannot open '%s'\n", path);
+    return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 int main(int argc, char **argv) {
+  // MPI first: an unreadable -options_file is reported as one line by rank 0,
+  // before PETSc would stop inside PetscInitialize with a traceback.
+  MPI_Init(&argc, &argv);
+  if (!OptionsFilesReadable(argc, argv)) {
+    MPI_Finalize();
+    return 1;
+  }
   PetscCall(PetscInitialize(&argc, &argv, nullptr, help));
   PetscCall(InstallErrorHandler());
   const PetscErrorCode status = Run(PETSC_COMM_WORLD);
   PetscCall(PetscFinalize());
+  MPI_Finalize();
   return status == PETSC_SUCCESS ? 0 : 1;
 }

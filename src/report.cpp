@@ -81,7 +81,8 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscCall(PetscPrintf(comm, "  solver       %s + %s%s%s", ksp_type, pc_type,
                           factor_package ? " " : "", factor_package ? factor_package : ""));
     if (o.mode == MODE_LINEAR)
-      PetscCall(PetscPrintf(comm, ", factorised once in %.3g s", solver.factor_seconds));
+      PetscCall(PetscPrintf(comm, ", %s once in %.3g s", factored ? "factorised" : "set up",
+                            solver.factor_seconds));
     else
       PetscCall(PetscPrintf(comm, ", A refilled and set up again every step"));
     PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " solves", solver.solves));
