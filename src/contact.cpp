@@ -213,18 +213,25 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
   }
 
+  // Body masses: the owned vertices' lumped masses, summed over ranks.
+  std::vector<double> owned_mass(scene.bodies.size(), 0.0);
+  for (const int32_t natural : owned_natural_) owned_mass[body_of_[natural]] += 1.0 / inverse_mass_[natural];
+  body_mass_.resize(scene.bodies.size());
+  PetscCallMPI(MPI_Allreduce(owned_mass.data(), body_mass_.data(), static_cast<int>(owned_mass.size()),
+                             MPI_DOUBLE, MPI_SUM, comm));
+
   if (obstacles_) {
     for (size_t b = 0; b < scene.bodies.size(); ++b) {
       const Body &body = scene.bodies[b];
       const auto boundary = BoundaryTriangles(body.mesh);
-      if (!body.fixed)  // queries: this rank's boundary vertices of free bodies
-        for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-          for (int k = 0; k < 3; ++k) {
-            const int32_t natural = body.first_vertex + boundary(f, k);
-            const PetscInt free = layout.free_of_natural[natural];
-            const PetscInt p = free < 0 ? -1 : layout.petsc_of_free[free] - layout.local_begin();
-            if (p >= 0 && p < layout.local_count()) query_vertices_.push_back({p, natural});
-          }
+      if (!body.fixed)  // queries: this rank's vertices of free bodies (interior ones too:
+                        // a soft body hitting hard can push them through its surface)
+        for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
+          const int32_t natural = body.first_vertex + v;
+          const PetscInt free = layout.free_of_natural[natural];
+          const PetscInt p = free < 0 ? -1 : layout.petsc_of_free[free] - layout.local_begin();
+          if (p >= 0 && p < layout.local_count()) query_vertices_.push_back({p, natural});
+        }
       if (!body.fixed && !free_obstacles_) continue;  // a lone free body is no obstacle
       auto &tets = body.fixed ? fixed_tets_ : free_tets_;
       auto &triangles = body.fixed ? fixed_triangles_ : free_triangles_;
@@ -357,9 +364,8 @@ void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0, 
   const Point target = predicted + share * (hit.point - predicted);
   const double approach = n.dot(velocity - hit.velocity);  // < 0: closing
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
-  const double bounce = fresh && approach < 0 ? -options_.restitution * share * approach : 0;
   velocity_constraints_.push_back({local, n, n.dot(target - x0) / dt});
-  contacts_.push_back({natural, hit.body, common + bounce});
+  contacts_.push_back({natural, hit.body, common, fresh && approach < -bounce_speed_});
   constrained_[local] = 1;
 }
 
@@ -370,6 +376,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   contacts_.clear();
   constrained_.assign(owned_natural_.size(), 0);
   global_constraints_ = 0;
+  bounce_speed_ = 2 * options_.gravity * dt;
   if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
   // Obstacles where they will be if they keep their velocity.
   if (gather_) PetscCall(Gather(x0, v0, dt));
@@ -494,7 +501,7 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
       if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
       collisions.push_back({contact.natural, body_of_[contact.natural], Point(&lx[3 * constraint.vertex]), dv});
       // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
-      if (reactions[i] >= 0 && contact.normal_velocity <= n.dot(surface_velocity) + 1e-12)
+      if (reactions[i] >= 0 && !(options_.restitution > 0 && contact.impact))
         resting_.push_back({constraint.vertex, contact});
     }
     PetscCall(ProjectRemaining(lx, lv, &collisions));
@@ -506,6 +513,7 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
     PetscCall(VecRestoreArray(x, &lx));
     PetscCall(VecRestoreArray(v, &lv));
     if (options_.impulse_spreading) PetscCall(SpreadImpulses(collisions, v));
+    if (options_.restitution > 0) PetscCall(Bounce(reactions, v));
     PetscInt local_changes = static_cast<PetscInt>(collisions.size()), changes;
     PetscCallMPI(MPIU_Allreduce(&local_changes, &changes, 1, MPIU_INT, MPI_SUM, comm_));
     *changed = changes > 0;
@@ -526,6 +534,28 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
     PetscCall(VecRestoreArray(v, &lv));
     *changed = true;
   }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Restitution: body b gets e J_b / M_b, J_b the normal impulse of its impacts.
+PetscErrorCode ContactSolver::Bounce(const std::vector<PetscReal> &reactions, Vec v) {
+  PetscFunctionBeginUser;
+  const size_t bodies = scene_->bodies.size();
+  std::vector<double> local(3 * bodies, 0.0), impulse(3 * bodies);
+  for (size_t i = 0; i < contacts_.size(); ++i) {
+    if (!contacts_[i].impact || reactions[i] <= 0) continue;
+    const int32_t body = body_of_[contacts_[i].natural];
+    for (int k = 0; k < 3; ++k) local[3 * body + k] += reactions[i] * velocity_constraints_[i].normal[k];
+  }
+  PetscCallMPI(MPI_Allreduce(local.data(), impulse.data(), static_cast<int>(local.size()), MPI_DOUBLE,
+                             MPI_SUM, comm_));
+  PetscScalar *lv;
+  PetscCall(VecGetArray(v, &lv));
+  for (PetscInt p = 0; p < static_cast<PetscInt>(owned_natural_.size()); ++p) {
+    const int32_t body = body_of_[owned_natural_[p]];
+    for (int k = 0; k < 3; ++k) lv[3 * p + k] += options_.restitution * impulse[3 * body + k] / body_mass_[body];
+  }
+  PetscCall(VecRestoreArray(v, &lv));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

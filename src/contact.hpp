@@ -7,16 +7,20 @@
 // solved again with the constraint, so the whole body feels the contact in the
 // same step. Obstacles: the ground half-space y < y0 (-ground; every free vertex
 // is checked), fixed bodies and the other free bodies (their tets tell inside,
-// their boundary triangles give the closest surface point; the boundary vertices
-// of free bodies are checked). Detection uses uniform grids over tets and
-// triangles, never all pairs. After the step, a new contact's normal velocity
-// relative to the obstacle is reflected with the coefficient of restitution e,
-// v_n <- -e v_n, and Coulomb friction (-friction mu) takes from the tangential
-// relative velocity at most mu lambda / m (lambda the contact's normal impulse,
-// m the vertex mass): sticking when that suffices; with e = 0 the vertex
-// rests on the surface and stays constrained while the obstacle pushes it
-// (reaction >= 0), and is released when it would pull. Whatever still ends inside
-// (an interior vertex, say) is projected to the surface as a last resort.
+// their boundary triangles give the closest surface point; every vertex of the
+// free bodies is checked). Detection uses uniform grids over tets and
+// triangles, never all pairs. After the step a contact vertex leaves with the
+// two sides' momentum-weighted normal velocity, and Coulomb friction (-friction
+// mu) takes from its tangential relative velocity at most mu lambda / m (lambda
+// the contact's normal impulse, m the vertex mass); it stays constrained while
+// the obstacle pushes it (lambda >= 0) and is released when it would pull.
+// Restitution (-restitution e): new contacts closing faster than 2 |g| dt (what
+// gravity adds in a step; slower ones are resting contact) give the body back e
+// times the normal impulse J they received, as the uniform velocity change
+// e J / M (M the body's mass): a bounce that never adds energy. (A soft body's
+// impact lasts several steps and damps part of it: the rebound is below a rigid
+// body's e^2 of the fall height.) Whatever still ends inside an obstacle is projected to its surface as a
+// last resort.
 //
 // Impulse spreading (-impulse_spreading): the momentum m_c dv_c that the
 // velocity response gives a contact vertex c is shared by all vertices j of its
@@ -56,6 +60,7 @@ struct ContactOptions {
   PetscReal ground_y = 0;             // m
   PetscReal restitution = 0;          // e in [0, 1]
   PetscReal friction = 0;             // Coulomb coefficient mu >= 0
+  PetscReal gravity = 0;              // |g| (m/s^2), set by the caller: no bounce below 2 |g| dt
   PetscBool impulse_spreading = PETSC_FALSE;
   std::string constraints_path;       // "" = none
   PetscBool edge_bounds = PETSC_FALSE;
@@ -134,6 +139,7 @@ class ContactSolver {
     int32_t natural;
     int32_t body;              // obstacle, -1 for the ground
     double normal_velocity;    // n . v after the step's velocity response
+    bool impact;               // new this step and closing faster than bounce_speed_
   };
   struct Collision {  // a velocity response, for impulse spreading
     int32_t vertex;
@@ -148,8 +154,7 @@ class ContactSolver {
   // Constrains owned vertex `local` (at x0, heading for `predicted`) against the
   // hit: it ends the step on the plane where the two sides meet, the overlap
   // split by inverse mass (all of it for a fixed obstacle or the ground), and
-  // leaves with the two sides' momentum-weighted normal velocity, less e times
-  // its share of the approach for a new contact.
+  // leaves with the two sides' momentum-weighted normal velocity.
   void Constrain(PetscInt local, int32_t natural, const Point &x0, const Point &predicted,
                  const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh);
   PetscErrorCode ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions);
@@ -182,9 +187,11 @@ class ContactSolver {
   std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
   std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
   UniformGrid fixed_tet_grid_, free_tet_grid_, fixed_triangle_grid_, free_triangle_grid_;
-  std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned boundary vertices of free
-                                                               // bodies: (local, natural)
+  std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned free-body vertices: (local, natural)
   std::vector<double> body_edge_;          // mean boundary edge length per body
+  std::vector<double> body_mass_;          // total lumped mass per body (kg)
+  double bounce_speed_ = 0;                // slower impacts do not bounce (m/s)
+  PetscErrorCode Bounce(const std::vector<PetscReal> &reactions, Vec v);
   std::vector<VelocityConstraint> velocity_constraints_;
   PetscInt global_constraints_ = 0;
   PetscErrorCode CountConstraints();

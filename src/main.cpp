@@ -48,7 +48,7 @@ PetscErrorCode PrintSolverHelp(MPI_Comm comm) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Prescribed deformations due at `time` (s), before the step that starts then.
+// Prescribed deformations due at `time` (s), applied to the state at that time.
 PetscErrorCode ApplyDeformations(const Scene &scene, const DofLayout &layout, PetscReal time,
                                  PetscReal dt, const State &state, ImplicitEuler *integrator,
                                  std::vector<Deformation> *deformations) {
@@ -135,6 +135,7 @@ PetscErrorCode Run(MPI_Comm comm) {
     PetscCall(ExportMatrices(output.matrix_dir, layout, elements, integration.shear_scale,
                              state.lumped_mass, integration.alpha, integration.beta));
   ContactSolver contact;
+  contact_options.gravity = integration.gravity.norm();
   PetscCall(contact.Setup(comm, scene, layout, state.lumped_mass, contact_options));
 
   // 6. Deformations due at t = 0, the output file with the mesh, frame 0.
@@ -158,9 +159,10 @@ PetscErrorCode Run(MPI_Comm comm) {
       Timed timer(step_stage, &report.times.loop);
       const PetscReal dt = TimeStepAt(integration, time);
       if (has_unknowns && dt != integrator.time_step()) PetscCall(integrator.SetTimeStep(dt));
-      PetscCall(ApplyDeformations(scene, layout, time, dt, state, &integrator, &deformations));
       if (has_unknowns) PetscCall(integrator.Step(state.positions, state.velocities, &contact));
       time += dt;
+      // Deformations due by the new time: the frame at that time shows them.
+      PetscCall(ApplyDeformations(scene, layout, time, dt, state, &integrator, &deformations));
       // The corotational element pass behind the energies is reused by the next step.
       if (has_unknowns && (frame || step == integration.steps))
         PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
