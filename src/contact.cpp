@@ -339,14 +339,15 @@ bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *
   return best < 1e300;
 }
 
-bool ContactSolver::FindPenetration(const Point &p, int32_t body, SurfaceHit *hit) const {
-  if (ground_ && p[1] < options_.ground_y) return ClosestOnBody(p, -1, hit);
+bool ContactSolver::FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
+                                    SurfaceHit *hit) const {
+  if (ground_ && p[1] < options_.ground_y && !skip.Has(-1)) return ClosestOnBody(p, -1, hit);
   for (const bool fixed_part : {true, false}) {
     const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
     int32_t inside = -1;
     (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
       const auto &tet = tets[t];
-      if (inside >= 0 || tet[4] == body) return;
+      if (inside >= 0 || tet[4] == body || skip.Has(tet[4])) return;
       if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]))
               .minCoeff() >= -1e-12)  // faces count: p may lie on one shared by two tets
         inside = tet[4];
@@ -366,7 +367,8 @@ void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0, 
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
   velocity_constraints_.push_back({local, n, n.dot(target - x0) / dt});
   contacts_.push_back({natural, hit.body, common, fresh && approach < -bounce_speed_});
-  constrained_[local] = 1;
+  VertexObstacles &obstacles = constrained_[local];
+  obstacles.obstacle[obstacles.count++] = hit.body;
 }
 
 PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
@@ -374,7 +376,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   Timing timing(this);
   velocity_constraints_.clear();
   contacts_.clear();
-  constrained_.assign(owned_natural_.size(), 0);
+  constrained_.assign(owned_natural_.size(), VertexObstacles());
   global_constraints_ = 0;
   bounce_speed_ = 2 * options_.gravity * dt;
   if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
@@ -414,22 +416,22 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
   PetscCall(VecGetArrayRead(x0, &x));
   PetscCall(VecGetArrayRead(v, &lv));
   PetscInt found = 0;
-  auto check = [&](PetscInt local, int32_t natural, bool ground_only) {
-    if (constrained_[local]) return;
+  // A vertex can be held by up to three obstacles (a corner); each adds one.
+  auto check = [&](PetscInt local, int32_t natural) {
+    const VertexObstacles &held = constrained_[local];
+    if (held.count == 3) return;
     const Point start(&x[3 * local]), velocity(&lv[3 * local]);
     const Point predicted = start + dt * velocity;
     SurfaceHit hit;
-    const bool inside = ground_only ? (predicted[1] < options_.ground_y && ClosestOnBody(predicted, -1, &hit))
-                                    : FindPenetration(predicted, body_of_[natural], &hit);
-    if (!inside) return;
+    if (!FindPenetration(predicted, body_of_[natural], held, &hit)) return;
     Constrain(local, natural, start, predicted, velocity, dt, hit, true);
     ++found;
   };
-  if (ground_)  // every free vertex
+  if (obstacles_)  // every free vertex, against bodies and the ground
+    for (const auto &[local, natural] : query_vertices_) check(local, natural);
+  else  // the ground alone
     for (PetscInt local = 0; local < static_cast<PetscInt>(owned_natural_.size()); ++local)
-      check(local, owned_natural_[local], true);
-  if (obstacles_)  // boundary vertices against bodies
-    for (const auto &[local, natural] : query_vertices_) check(local, natural, false);
+      check(local, owned_natural_[local]);
   PetscCall(VecRestoreArrayRead(x0, &x));
   PetscCall(VecRestoreArrayRead(v, &lv));
   PetscInt all_found;
@@ -444,13 +446,11 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
 PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions) {
   PetscFunctionBeginUser;
   PetscInt projected = 0;
-  auto project = [&](PetscInt local, int32_t natural, bool ground_only) {
-    if (constrained_[local]) return;
+  auto project = [&](PetscInt local, int32_t natural) {
+    if (constrained_[local].count) return;
     const Point position(&x[3 * local]);
     SurfaceHit hit;
-    const bool inside = ground_only ? (position[1] < options_.ground_y && ClosestOnBody(position, -1, &hit))
-                                    : FindPenetration(position, body_of_[natural], &hit);
-    if (!inside) return;
+    if (!FindPenetration(position, body_of_[natural], VertexObstacles(), &hit)) return;
     const Point velocity(&v[3 * local]);
     const double approach = hit.normal.dot(velocity - hit.velocity);
     const Point target = hit.point + 1e-9 * body_edge_[body_of_[natural]] * hit.normal;
@@ -459,11 +459,11 @@ PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, s
                                              -(1 + options_.restitution) * approach * hit.normal});
     ++projected;
   };
-  if (ground_)
-    for (PetscInt local = 0; local < static_cast<PetscInt>(owned_natural_.size()); ++local)
-      project(local, owned_natural_[local], true);
   if (obstacles_)
-    for (const auto &[local, natural] : query_vertices_) project(local, natural, false);
+    for (const auto &[local, natural] : query_vertices_) project(local, natural);
+  else
+    for (PetscInt local = 0; local < static_cast<PetscInt>(owned_natural_.size()); ++local)
+      project(local, owned_natural_[local]);
   stats_.projections += projected;
   PetscFunctionReturn(PETSC_SUCCESS);
 }

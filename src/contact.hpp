@@ -44,6 +44,7 @@
 
 #include <petscvec.h>
 
+#include <algorithm>
 #include <array>
 #include <string>
 #include <vector>
@@ -149,7 +150,14 @@ class ContactSolver {
   PetscErrorCode Gather(Vec x, Vec v, PetscReal dt);
   void BuildObstacleGrids(bool fixed_part);
   Point WorldPoint(int32_t n) const { return Point(world_x_[3 * n], world_x_[3 * n + 1], world_x_[3 * n + 2]); }
-  bool FindPenetration(const Point &p, int32_t body, SurfaceHit *hit) const;
+  // Per local vertex, the obstacles constraining it this step (-1: the ground).
+  struct VertexObstacles {
+    int count = 0;
+    int32_t obstacle[3];
+    bool Has(int32_t o) const { return std::find(obstacle, obstacle + count, o) != obstacle + count; }
+  };
+  // The first obstacle other than `body` and those in `skip` that contains p.
+  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip, SurfaceHit *hit) const;
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
   // Constrains owned vertex `local` (at x0, heading for `predicted`) against the
   // hit: it ends the step on the plane where the two sides meet, the overlap
@@ -196,7 +204,7 @@ class ContactSolver {
   PetscInt global_constraints_ = 0;
   PetscErrorCode CountConstraints();
   std::vector<Contact> contacts_;
-  std::vector<char> constrained_;          // local vertex -> has a constraint this step
+  std::vector<VertexObstacles> constrained_;  // per local vertex
   std::vector<std::pair<PetscInt, Contact>> resting_;  // kept for the next step
   std::vector<DistanceConstraint> constraints_;
   ContactStatistics stats_;

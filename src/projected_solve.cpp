@@ -1,5 +1,8 @@
 #include "projected_solve.hpp"
 
+#include <Eigen/Dense>
+#include <map>
+
 namespace softbody {
 
 ProjectedSolver::~ProjectedSolver() {
@@ -12,11 +15,37 @@ ProjectedSolver::~ProjectedSolver() {
   VecDestroy(&w_);
 }
 
+void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &constraints) {
+  std::map<PetscInt, std::vector<const VelocityConstraint *>> by_vertex;
+  for (const VelocityConstraint &c : constraints) by_vertex[c.vertex].push_back(&c);
+  vertices_.clear();
+  for (const auto &[vertex, list] : by_vertex) {
+    // Directions and targets: N^T v = c. Gram-Schmidt on N (dropping dependent
+    // directions); the prescribed part is the least-norm v in span(N) with N^T v = c.
+    const int k = static_cast<int>(list.size());
+    Eigen::MatrixXd N(3, k);
+    Eigen::VectorXd c(k);
+    for (int j = 0; j < k; ++j) {
+      N.col(j) = list[j]->normal;
+      c[j] = list[j]->velocity;
+    }
+    ConstrainedVertex entry{vertex, Eigen::Matrix3d::Zero(), 0, Eigen::Vector3d::Zero()};
+    for (int j = 0; j < k && entry.rank < 3; ++j) {
+      Eigen::Vector3d q = N.col(j);
+      for (int i = 0; i < entry.rank; ++i) q -= entry.basis.col(i).dot(q) * entry.basis.col(i);
+      if (q.norm() > 1e-6) entry.basis.col(entry.rank++) = q.normalized();
+    }
+    entry.prescribed = N.transpose().completeOrthogonalDecomposition().solve(c);
+    vertices_.push_back(entry);
+  }
+}
+
 void ProjectedSolver::Project(const PetscScalar *w, PetscScalar *y, bool project) const {
-  for (const VelocityConstraint &c : *constraints_) {
+  for (const ConstrainedVertex &c : vertices_) {
     const Eigen::Vector3d wi(w[3 * c.vertex], w[3 * c.vertex + 1], w[3 * c.vertex + 2]);
-    const Eigen::Vector3d normal_part = c.normal.dot(wi) * c.normal;
-    const Eigen::Vector3d yi = project ? Eigen::Vector3d(wi - normal_part) : normal_part;
+    const auto Q = c.basis.leftCols(c.rank);
+    const Eigen::Vector3d constrained = Q * (Q.transpose() * wi);
+    const Eigen::Vector3d yi = project ? Eigen::Vector3d(wi - constrained) : constrained;
     for (int k = 0; k < 3; ++k) y[3 * c.vertex + k] = yi[k];
   }
 }
@@ -67,7 +96,7 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b, const std::vector<Veloc
   PetscCall(KSPSetUp(solver));  // refreshes the preconditioner if A changed
   PetscCall(KSPGetOperators(solver, &A_, nullptr));
   PetscCall(KSPGetPC(solver, &unconstrained_pc_));
-  constraints_ = &constraints;
+  GroupByVertex(constraints);
   if (!inner_) {
     PetscInt n, N;
     PetscCall(VecGetLocalSize(b, &n));
@@ -94,8 +123,8 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b, const std::vector<Veloc
   PetscCall(VecZeroEntries(z_));
   PetscScalar *z;
   PetscCall(VecGetArray(z_, &z));
-  for (const VelocityConstraint &c : constraints)
-    for (int k = 0; k < 3; ++k) z[3 * c.vertex + k] = c.velocity * c.normal[k];
+  for (const ConstrainedVertex &c : vertices_)
+    for (int k = 0; k < 3; ++k) z[3 * c.vertex + k] = c.prescribed[k];
   PetscCall(VecRestoreArray(z_, &z));
   PetscCall(MatMult(A_, z_, work_));
   PetscCall(VecAYPX(work_, -1.0, b));

@@ -1,8 +1,9 @@
 // The implicit step's linear solve with contact: A v = b subject to velocity
-// constraints n_i . v_i = c_i on some vertices (frictionless: the tangential
+// constraints n_k . v_i = c_k on some vertices (one to three per vertex, e.g. a
+// normal, or a normal and two tangents for a sticking contact; the rest of the
 // velocity stays free), in the spirit of Baraff & Witkin 1998 ("Large steps in
-// cloth simulation", the filtered CG). With P the projection that removes the
-// constrained normal components and z the vector of the prescribed ones,
+// cloth simulation", the filtered CG). With P the projection that removes, per
+// vertex, the span of its constraint directions and z the prescribed part,
 // v = P w + z where
 //
 //     (P A P + I - P) w = P (b - A z),
@@ -24,8 +25,16 @@ namespace softbody {
 
 struct VelocityConstraint {
   PetscInt vertex;          // local vertex index (owned)
-  Eigen::Vector3d normal;   // unit
+  Eigen::Vector3d normal;   // unit direction n
   PetscReal velocity;       // prescribed n . v (m/s)
+};
+// The constraints of one vertex: an orthonormal basis of their directions and
+// the velocity component in its span that satisfies them all.
+struct ConstrainedVertex {
+  PetscInt vertex;
+  Eigen::Matrix3d basis;    // first `rank` columns
+  int rank;
+  Eigen::Vector3d prescribed;
 };
 
 class ProjectedSolver {
@@ -45,13 +54,16 @@ class ProjectedSolver {
   static PetscErrorCode ApplyPreconditioner(PC shell, Vec w, Vec y);
   // y = P w (project == true) or y = (I - P) w.
   void Project(const PetscScalar *w, PetscScalar *y, bool project) const;
+  // Groups the constraints by vertex (they must come vertex by vertex or not:
+  // any order).
+  void GroupByVertex(const std::vector<VelocityConstraint> &constraints);
   PetscErrorCode ProjectVec(Vec w, Vec y, bool project) const;
 
   KSP inner_ = nullptr;
   Mat shell_ = nullptr;
   Mat A_ = nullptr;                 // not owned
   PC unconstrained_pc_ = nullptr;   // not owned
-  const std::vector<VelocityConstraint> *constraints_ = nullptr;
+  std::vector<ConstrainedVertex> vertices_;
   Vec work_ = nullptr, work2_ = nullptr, z_ = nullptr, rhs_ = nullptr, w_ = nullptr;
 };
 
