@@ -14,6 +14,9 @@
 // mu) takes from its tangential relative velocity at most mu lambda / m (lambda
 // the contact's normal impulse, m the vertex mass); it stays constrained while
 // the obstacle pushes it (lambda >= 0) and is released when it would pull.
+// (Friction acts on the contact vertices after the solve: a sliding body
+// decelerates at about mu g, but the last of its motion dies out over a few
+// steps instead of stopping at once.)
 // Restitution (-restitution e): new contacts closing faster than 2 |g| dt (what
 // gravity adds in a step; slower ones are resting contact) give the body back e
 // times the normal impulse J they received, as the uniform velocity change
