@@ -272,6 +272,13 @@ std::string ContactSolver::Description() const {
 void ContactSolver::BuildObstacleGrids(bool fixed_part) {
   const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
   const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
+  body_box_.resize(scene_->bodies.size());
+  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
+    const Body &body = scene_->bodies[b];
+    if (body.fixed != fixed_part) continue;
+    body_box_[b] = Box();
+    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) body_box_[b].Extend(WorldPoint(body.first_vertex + v));
+  }
   std::vector<Box> boxes(tets.size());
   for (size_t t = 0; t < tets.size(); ++t)
     for (int a = 0; a < 4; ++a) boxes[t].Extend(WorldPoint(tets[t][a]));
@@ -342,6 +349,11 @@ bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *
 bool ContactSolver::FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
                                     SurfaceHit *hit) const {
   if (ground_ && p[1] < options_.ground_y && !skip.Has(-1)) return ClosestOnBody(p, -1, hit);
+  // Broad phase: only bodies whose box holds p.
+  bool near = false;
+  for (size_t b = 0; b < body_box_.size() && !near; ++b)
+    near = static_cast<int32_t>(b) != body && body_box_[b].Contains(p);
+  if (!near) return false;
   for (const bool fixed_part : {true, false}) {
     const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
     int32_t inside = -1;

@@ -198,6 +198,7 @@ class ContactSolver {
   std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
   std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
   UniformGrid fixed_tet_grid_, free_tet_grid_, fixed_triangle_grid_, free_triangle_grid_;
+  std::vector<Box> body_box_;              // broad phase: each obstacle body's bounding box
   std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned free-body vertices: (local, natural)
   std::vector<double> body_edge_;          // mean boundary edge length per body
   std::vector<double> body_mass_;          // total lumped mass per body (kg)
