@@ -85,6 +85,14 @@ void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
   }
 }
 
+// Positions of element e's vertices from a touched-vertex array.
+static TetPositions ElementPositions(const LocalElements &elements, size_t e, const PetscScalar *touched) {
+  TetPositions x;
+  for (int a = 0; a < 4; ++a)
+    for (int c = 0; c < 3; ++c) x(a, c) = touched[3 * elements.touched_index[e][a] + c];
+  return x;
+}
+
 double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
                                 const PetscScalar *x_touched, const PetscScalar *X_touched,
                                 double stiffness_scale, CooValues *values,
@@ -93,12 +101,8 @@ double CorotatedStiffnessValues(const LocalElements &elements, double shear_scal
   PetscScalar *out = values->data();
   double energy = 0;
   for (size_t e = 0; e < elements.size(); ++e) {
-    TetPositions x, X, force;
-    for (int a = 0; a < 4; ++a)
-      for (int c = 0; c < 3; ++c) {
-        x(a, c) = x_touched[3 * elements.touched_index[e][a] + c];
-        X(a, c) = X_touched[3 * elements.touched_index[e][a] + c];
-      }
+    const TetPositions x = ElementPositions(elements, e, x_touched), X = ElementPositions(elements, e, X_touched);
+    TetPositions force;
     Mat12 K;
     double element_energy;
     CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale, x, X,
@@ -108,6 +112,20 @@ double CorotatedStiffnessValues(const LocalElements &elements, double shear_scal
       for (int c = 0; c < 3; ++c) force_touched[3 * elements.touched_index[e][a] + c] += force(a, c);
     for (int i = 0; i < 12; ++i)
       for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
+  }
+  return energy;
+}
+
+double LinearStrainEnergy(const LocalElements &elements, double shear_scale,
+                          const PetscScalar *x_touched, const PetscScalar *X_touched) {
+  double energy = 0;
+  for (size_t e = 0; e < elements.size(); ++e) {
+    TetPositions force;
+    double element_energy;
+    ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
+                          ElementPositions(elements, e, x_touched) - ElementPositions(elements, e, X_touched),
+                          &force, &element_energy);
+    energy += element_energy;
   }
   return energy;
 }

@@ -65,6 +65,12 @@ double CorotatedStiffnessValues(const LocalElements &elements, double shear_scal
                                 double stiffness_scale, CooValues *values,
                                 PetscScalar *force_touched);
 
+// Not collective. Linear strain energy sum_e V strain . C strain / 2 (J) of the
+// local elements at positions x_touched (rest X_touched), element by element:
+// every term is non-negative, unlike u^T K u / 2 summed in floating point.
+double LinearStrainEnergy(const LocalElements &elements, double shear_scale,
+                          const PetscScalar *x_touched, const PetscScalar *X_touched);
+
 // Collective. Writes mass_scale x lumped_mass into the diagonal part of values
 // (when lumped_mass is given) and sets the matrix's values from them.
 PetscErrorCode SetElasticMatrixValues(Vec lumped_mass, double mass_scale, CooValues *values,

@@ -59,7 +59,11 @@ Mat12 ElementStiffness(const ShapeGradients &grad, double volume, const Lame &la
 void ElasticForceAndEnergy(const ShapeGradients &grad, double volume, const Lame &lame,
                            double shear_scale, const TetPositions &u, TetPositions *force,
                            double *energy) {
-  const Mat3 H = u.transpose() * grad;  // displacement gradient du_i/dX_j
+  // Displacement gradient du_i/dX_j from differences to vertex 0 (the gradients
+  // sum to zero, so this is the same H, without the round-off of a large common
+  // translation: stiff bodies far from their rest place keep exact energies).
+  const TetPositions relative = u.rowwise() - u.row(0);
+  const Mat3 H = relative.transpose() * grad;
   const double trace = H.trace(), sm = shear_scale * lame.mu;
   Mat3 stress = sm * (H + H.transpose());
   stress.diagonal() = (lame.lambda * trace) * Vec3::Ones() + 2.0 * lame.mu * H.diagonal();

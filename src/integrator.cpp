@@ -132,8 +132,10 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
   if (options.mode == MODE_LINEAR) {
     PetscCall(CreateStiffnessMatrix(comm, layout, elements, options.shear_scale, &K_));
     PetscCall(VecDuplicate(rest_, &displacement_));
-  } else {
-    // Gather plan: owned and ghost positions of every vertex the local elements touch.
+  }
+  {
+    // Gather plan: owned and ghost positions of every vertex the local elements
+    // touch (corotational steps; energies in both modes).
     const PetscInt touched = static_cast<PetscInt>(elements.touched_vertices.size());
     IS from;
     PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, touched, elements.touched_vertices.data(),
@@ -191,11 +193,9 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
   PetscFunctionBeginUser;
   if (elastic_state_current_) PetscFunctionReturn(PETSC_SUCCESS);
   if (options_.mode == MODE_LINEAR) {
-    // f_el = K (x - X), energy = (x - X) . f_el / 2
+    // f_el = K (x - X); its energy only when asked for (Energies).
     PetscCall(VecWAXPY(displacement_, -1.0, rest_, x));
     PetscCall(MatMult(K_, displacement_, elastic_force_));
-    PetscCall(VecDot(displacement_, elastic_force_, &elastic_energy_));
-    elastic_energy_ *= 0.5;
   } else {
     PetscCall(VecScatterBegin(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
     PetscCall(VecScatterEnd(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
@@ -286,6 +286,18 @@ PetscErrorCode ImplicitEuler::Energies(Vec x, Vec v, EnergySample *energy) {
   PetscFunctionBeginUser;
   PetscCall(UpdateElasticState(x));
   energy->elastic = elastic_energy_;
+  if (options_.mode == MODE_LINEAR) {  // element by element: see LinearStrainEnergy
+    PetscCall(VecScatterBegin(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
+    const PetscScalar *x_touched, *X_touched;
+    PetscCall(VecGetArrayRead(x_touched_, &x_touched));
+    PetscCall(VecGetArrayRead(X_touched_, &X_touched));
+    const double local_energy = LinearStrainEnergy(*elements_, options_.shear_scale, x_touched, X_touched);
+    PetscCall(VecRestoreArrayRead(x_touched_, &x_touched));
+    PetscCall(VecRestoreArrayRead(X_touched_, &X_touched));
+    PetscCall(MPIU_Allreduce(&local_energy, &energy->elastic, 1, MPIU_REAL, MPIU_SUM,
+                             PetscObjectComm((PetscObject)x)));
+  }
   energy->gravitational = 0;
   if (gravity_force_) {
     PetscCall(VecDot(gravity_force_, x, &energy->gravitational));

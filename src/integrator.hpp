@@ -17,7 +17,8 @@
 //   K = K(R) = sum_e R K_e R^T and f_el = sum_e R K_e (R^T x_e - X_e); A's values
 //   are refilled into the same pattern (no symbolic work) and solved again,
 //   by default with CG + GAMG warm-started from the previous velocity.
-// Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode,
+// Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode
+// (summed element by element, each term non-negative),
 // sum_e y_e^T K_e y_e / 2 with y_e = R^T x_e - X_e in corotational mode (J).
 // External force: gravity, f_ext = M g.
 #pragma once
@@ -117,14 +118,15 @@ class ImplicitEuler {
   Vec x_start_ = nullptr;                 // x0 during a step with contact
   ProjectedSolver projected_;
   std::vector<PetscReal> reactions_;
-  PetscReal elastic_energy_ = 0;
+  PetscReal elastic_energy_ = 0;           // corotational mode (linear: in Energies)
   bool elastic_state_current_ = false;
   bool gamg_ = false;                     // the PC uses the near-null space
   CooValues values_;                      // A's COO values
   // Linear mode: the rest stiffness and a work vector for x - X.
   Mat K_ = nullptr;
   Vec displacement_ = nullptr;
-  // Corotational mode: positions of the vertices the local elements touch.
+  // Positions of the vertices the local elements touch (corotational steps,
+  // element-wise energies).
   VecScatter touched_scatter_ = nullptr;
   Vec x_touched_ = nullptr, X_touched_ = nullptr, force_touched_ = nullptr;
   SolverStatistics stats_;
