@@ -279,10 +279,12 @@ void ContactSolver::BuildObstacleGrids(bool fixed_part) {
     body_box_[b] = Box();
     for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) body_box_[b].Extend(WorldPoint(body.first_vertex + v));
   }
-  std::vector<Box> boxes(tets.size());
+  std::vector<Box> &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
+  tet_boxes.assign(tets.size(), Box());
   for (size_t t = 0; t < tets.size(); ++t)
-    for (int a = 0; a < 4; ++a) boxes[t].Extend(WorldPoint(tets[t][a]));
-  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).Build(boxes);
+    for (int a = 0; a < 4; ++a) tet_boxes[t].Extend(WorldPoint(tets[t][a]));
+  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).Build(tet_boxes);
+  std::vector<Box> boxes;
   boxes.assign(triangles.size(), Box());
   for (size_t t = 0; t < triangles.size(); ++t)
     for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(triangles[t][a]));
@@ -356,10 +358,11 @@ bool ContactSolver::FindPenetration(const Point &p, int32_t body, const VertexOb
   if (!near) return false;
   for (const bool fixed_part : {true, false}) {
     const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
+    const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
     int32_t inside = -1;
     (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
       const auto &tet = tets[t];
-      if (inside >= 0 || tet[4] == body || skip.Has(tet[4])) return;
+      if (inside >= 0 || tet[4] == body || skip.Has(tet[4]) || !tet_boxes[t].Contains(p, 1e-12)) return;
       if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]))
               .minCoeff() >= -1e-12)  // faces count: p may lie on one shared by two tets
         inside = tet[4];
@@ -377,7 +380,13 @@ void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0, 
   const Point target = predicted + share * (hit.point - predicted);
   const double approach = n.dot(velocity - hit.velocity);  // < 0: closing
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
-  velocity_constraints_.push_back({local, n, n.dot(target - x0) / dt});
+  // A vertex already inside at the start of the step (bodies placed overlapping,
+  // say) comes out gradually: at most a tenth of its body's edge length per step
+  // faster than the obstacle, not all the depth at once.
+  const double recovery = n.dot(hit.velocity) + 0.1 * body_edge_[body_of_[natural]] / dt;
+  double normal_velocity = n.dot(target - x0) / dt;
+  if (n.dot(hit.point - x0) > 0) normal_velocity = std::min(normal_velocity, recovery);
+  velocity_constraints_.push_back({local, n, normal_velocity});
   contacts_.push_back({natural, hit.body, common, fresh && approach < -bounce_speed_});
   VertexObstacles &obstacles = constrained_[local];
   obstacles.obstacle[obstacles.count++] = hit.body;
@@ -463,6 +472,9 @@ PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, s
     const Point position(&x[3 * local]);
     SurfaceHit hit;
     if (!FindPenetration(position, body_of_[natural], VertexObstacles(), &hit)) return;
+    // Deeper than a tenth of an edge: left to the next step's constraints, which
+    // bring it out gradually (a jump of that size would be a huge strain).
+    if ((hit.point - position).norm() > 0.1 * body_edge_[body_of_[natural]]) return;
     const Point velocity(&v[3 * local]);
     const double approach = hit.normal.dot(velocity - hit.velocity);
     const Point target = hit.point + 1e-9 * body_edge_[body_of_[natural]] * hit.normal;
@@ -504,13 +516,13 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
       // Coulomb friction: at most mu lambda / m off the tangential velocity
       // relative to the obstacle's surface.
       SurfaceHit hit;
-      const Point surface_velocity = ClosestOnBody(Point(&lx[3 * constraint.vertex]), contact.body, &hit)
-                                         ? hit.velocity : Point::Zero();
-      const Point relative = velocity - surface_velocity;
-      const Point tangential = relative - n.dot(relative) * n;
-      const double slip = tangential.norm(), grip = options_.friction * std::max(reactions[i], 0.0) *
-                                                     inverse_mass_[contact.natural];
-      if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
+      if (options_.friction > 0 && ClosestOnBody(Point(&lx[3 * constraint.vertex]), contact.body, &hit)) {
+        const Point relative = velocity - hit.velocity;
+        const Point tangential = relative - n.dot(relative) * n;
+        const double slip = tangential.norm(), grip = options_.friction * std::max(reactions[i], 0.0) *
+                                                       inverse_mass_[contact.natural];
+        if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
+      }
       collisions.push_back({contact.natural, body_of_[contact.natural], Point(&lx[3 * constraint.vertex]), dv});
       // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
       if (reactions[i] >= 0 && !(options_.restitution > 0 && contact.impact))

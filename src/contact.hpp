@@ -3,7 +3,9 @@
 // Collisions are part of the implicit step (see projected_solve.hpp): a free
 // vertex that the step would take inside an obstacle gets a velocity constraint
 // n . v = n . (s - x0) / dt, so that it ends the step on the obstacle's surface
-// (s its closest surface point, n the surface's outward normal); the step is then
+// (s its closest surface point, n the surface's outward normal; a vertex that is
+// already inside at the start of the step leaves at most a tenth of its body's
+// mean edge length per step faster than the obstacle); the step is then
 // solved again with the constraint, so the whole body feels the contact in the
 // same step. Obstacles: the ground half-space y < y0 (-ground; every free vertex
 // is checked), fixed bodies and the other free bodies (their tets tell inside,
@@ -199,6 +201,7 @@ class ContactSolver {
   std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
   UniformGrid fixed_tet_grid_, free_tet_grid_, fixed_triangle_grid_, free_triangle_grid_;
   std::vector<Box> body_box_;              // broad phase: each obstacle body's bounding box
+  std::vector<Box> fixed_tet_box_, free_tet_box_;  // each obstacle tet's box (cheap rejection)
   std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned free-body vertices: (local, natural)
   std::vector<double> body_edge_;          // mean boundary edge length per body
   std::vector<double> body_mass_;          // total lumped mass per body (kg)

@@ -1,6 +1,6 @@
 #include "geometry.hpp"
 
-#include <Eigen/Dense>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 
@@ -8,10 +8,14 @@ namespace softbody {
 
 Eigen::Vector4d Barycentric(const Point &p, const Point &a, const Point &b, const Point &c,
                             const Point &d) {
-  Eigen::Matrix3d T;
-  T << b - a, c - a, d - a;
-  const Eigen::Vector3d l = T.partialPivLu().solve(p - a);
-  return {1 - l.sum(), l[0], l[1], l[2]};
+  // Cramer's rule with triple products: l_b = det[p-a, c-a, d-a] / det[b-a, c-a, d-a], ...
+  const Point ab = b - a, ac = c - a, ad = d - a, ap = p - a;
+  const Point cd = ac.cross(ad);
+  const double volume = ab.dot(cd);
+  const double lb = ap.dot(cd) / volume;
+  const double lc = ab.dot(ap.cross(ad)) / volume;
+  const double ld = ab.dot(ac.cross(ap)) / volume;
+  return {1 - lb - lc - ld, lb, lc, ld};
 }
 
 Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, const Point &c,
