@@ -68,12 +68,25 @@ def write_scene(path, bodies, velocities=None):
 
 
 def read_frames(path):
-    """Returns a dict of numpy arrays from a softbody HDF5 result."""
+    """Returns a dict of numpy arrays from a softbody HDF5 result, and its
+    "complete" attribute (0 or 1)."""
     import h5py
     with h5py.File(path, "r") as f:
-        return {name: f[name][()] for name in
-                ("time", "positions", "velocities", "energy/kinetic", "energy/elastic",
-                 "mesh/tets", "mesh/boundary_triangles", "mesh/vertex_body", "mesh/rest_positions")}
+        frames = {name: f[name][()] for name in
+                  ("time", "positions", "velocities", "energy/kinetic", "energy/elastic",
+                   "energy/gravitational", "mesh/tets", "mesh/boundary_triangles", "mesh/vertex_body",
+                   "mesh/rest_positions", "mesh/body_fixed")}
+        frames["complete"] = int(f.attrs["complete"])
+    return frames
+
+
+def box_mesh(args, name, size, cells):
+    """Writes a box mesh (tools/box_mesh.py) into the work folder; returns its path."""
+    tools = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools")
+    path = os.path.join(args.work, name)
+    subprocess.run([sys.executable, os.path.join(tools, "box_mesh.py"), path, "--size", *map(str, size),
+                    "--cells", *map(str, cells)], check=True, capture_output=True)
+    return path
 
 
 def read_petsc_aij(path):

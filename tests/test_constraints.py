@@ -28,8 +28,6 @@ Every distance is recomputed here from /positions and the rest distance from
     "softbody: error: FILE:LINE: ...", non-zero exit.
 """
 import os
-import re
-import subprocess
 import sys
 import time
 
@@ -41,28 +39,16 @@ import harness  # noqa: E402
 args = harness.arguments()
 checks = harness.Checks()
 HERE = os.path.dirname(os.path.abspath(__file__))
-TOOLS = os.path.join(HERE, "..", "tools")
 INPUTS = os.path.join(HERE, "constraints")
 P3 = os.path.join(HERE, "..", "config", "practical3.opts")
 TOL = 1e-6
 
 
 def box_mesh(name, size, cells):
-    path = os.path.join(args.work, name)
-    subprocess.run([sys.executable, os.path.join(TOOLS, "box_mesh.py"), path, "--size", *map(str, size),
-                    "--cells", *map(str, cells)], check=True, capture_output=True)
-    return path
+    return harness.box_mesh(args, name, size, cells)
 
 
-def read(path):
-    import h5py
-    with h5py.File(path, "r") as f:
-        r = {name: f[name][()] for name in
-             ("time", "positions", "velocities", "energy/kinetic", "energy/elastic", "energy/gravitational",
-              "mesh/tets", "mesh/boundary_triangles", "mesh/vertex_body", "mesh/rest_positions",
-              "mesh/body_fixed")}
-        r["complete"] = int(f.attrs["complete"])
-    return r
+read = harness.read_frames
 
 
 def simulate(name, scene, options, ranks=2):

@@ -42,7 +42,6 @@ at 0.75 m, a 0.75 m fall to the ground).
 """
 import os
 import re
-import subprocess
 import sys
 import time
 
@@ -53,7 +52,6 @@ import harness  # noqa: E402
 
 args = harness.arguments()
 checks = harness.Checks()
-TOOLS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools")
 
 SIZE = 0.5            # cube edge (m)
 RHO, YOUNG, NU = 1000.0, 1e6, 0.3
@@ -65,21 +63,10 @@ ALPHA = 0.1                    # default Rayleigh mass damping (1/s)
 
 
 def box_mesh(name, size, cells):
-    path = os.path.join(args.work, name)
-    subprocess.run([sys.executable, os.path.join(TOOLS, "box_mesh.py"), path, "--size", *map(str, size),
-                    "--cells", *map(str, cells)], check=True, capture_output=True)
-    return path
+    return harness.box_mesh(args, name, size, cells)
 
 
-def read(path):
-    import h5py
-    with h5py.File(path, "r") as f:
-        r = {name: f[name][()] for name in
-             ("time", "positions", "velocities", "energy/kinetic", "energy/elastic", "energy/gravitational",
-              "mesh/tets", "mesh/boundary_triangles", "mesh/vertex_body", "mesh/rest_positions",
-              "mesh/body_fixed")}
-        r["complete"] = int(f.attrs["complete"])
-    return r
+read = harness.read_frames
 
 
 def simulate(name, scene, options, ranks=2, check=True):

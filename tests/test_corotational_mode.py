@@ -14,8 +14,6 @@
     partial result file is not marked complete.
 """
 import os
-import subprocess
-import sys
 
 import numpy as np
 
@@ -23,14 +21,10 @@ import harness
 
 args = harness.arguments()
 checks = harness.Checks()
-TOOLS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools")
 
 
 def box_mesh(name, size, cells):
-    path = os.path.join(args.work, name)
-    subprocess.run([sys.executable, os.path.join(TOOLS, "box_mesh.py"), path, "--size", *map(str, size),
-                    "--cells", *map(str, cells)], check=True, capture_output=True)
-    return path
+    return harness.box_mesh(args, name, size, cells)
 
 
 def rest_vertices(mesh):
