@@ -4,6 +4,8 @@
 
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <string>
 
 namespace softbody {
@@ -33,6 +35,20 @@ std::string Duration(double seconds) {
   return text;
 }
 
+// Whether stderr reaches a terminal: directly, or through mpirun, which passes
+// the ranks' stderr through a pipe and writes it to its own stderr (a rank's
+// parent is mpirun on mpirun's node; Linux: /proc/<parent>/fd/2).
+bool StderrIsTerminal() {
+  if (isatty(STDERR_FILENO)) return true;
+  if (!std::getenv("OMPI_COMM_WORLD_SIZE")) return false;
+  char link[64], target[256];
+  std::snprintf(link, sizeof(link), "/proc/%d/fd/2", static_cast<int>(getppid()));
+  const ssize_t length = readlink(link, target, sizeof(target) - 1);
+  if (length <= 0) return false;
+  target[length] = '\0';
+  return std::strncmp(target, "/dev/pts/", 9) == 0 || std::strncmp(target, "/dev/tty", 8) == 0;
+}
+
 }  // namespace
 
 PetscErrorCode ProcessRunControlOptions(MPI_Comm comm, RunControlOptions *o) {
@@ -46,7 +62,9 @@ PetscErrorCode ProcessRunControlOptions(MPI_Comm comm, RunControlOptions *o) {
                              "default: when stderr is a terminal and not -quiet",
                              nullptr, o->progress, &o->progress, &progress_set));
   PetscOptionsEnd();
-  if (!progress_set) o->progress = !o->quiet && isatty(STDERR_FILENO) ? PETSC_TRUE : PETSC_FALSE;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  if (!progress_set) o->progress = rank == 0 && !o->quiet && StderrIsTerminal() ? PETSC_TRUE : PETSC_FALSE;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -1,7 +1,8 @@
 // Run control: what a run tells its user while it goes, and how it stops.
 //
 // Progress: rank 0 keeps one line on stderr up to date, at most four times a
-// second, when stderr is a terminal (or with -progress; -progress 0 never):
+// second, when stderr is a terminal (also through mpirun: its own stderr) or
+// with -progress (-progress 0: never):
 //     step 120/500  t = 2.4 s  31.5 steps/s  ETA 12 s  solver its 17
 // -quiet prints nothing but errors (no run summary; no progress line unless
 // -progress asks for it).
