@@ -83,7 +83,8 @@ std::string SceneMismatch(hid_t file, const Scene &scene) {
     return "it has no readable /mesh group";
   const size_t bodies = scene.bodies.size();
   if (body_fixed.size() != bodies)
-    return "it has " + std::to_string(body_fixed.size()) + " bodies, the scene " + std::to_string(bodies);
+    return "it has " + std::to_string(body_fixed.size()) + (body_fixed.size() == 1 ? " body" : " bodies") +
+           ", the scene " + std::to_string(bodies);
   std::vector<int32_t> counts(bodies, 0);
   for (int32_t b : vertex_body)
     if (b >= 0 && static_cast<size_t>(b) < bodies) ++counts[b];
