@@ -224,7 +224,7 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   //    -output_every steps, a checkpoint every -checkpoint_every steps. After
   //    SIGINT/SIGTERM the ranks stop together after the step, with its frame.
   ProgressLine progress;
-  progress.Start(comm, control, start.step, integration.steps);
+  PetscCall(progress.Start(comm, control, start.step, integration.steps));
   report.first_step = report.steps = start.step;
   PetscReal time = report.final_time = start.time;
   int stop_signal;

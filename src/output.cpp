@@ -289,6 +289,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
     PetscCallMPI(MPI_Bcast(&count, 1, MPIU_INT, 0, comm));
     times_.resize(count);
     PetscCallMPI(MPI_Bcast(times_.data(), static_cast<int>(count), MPI_DOUBLE, 0, comm));
+    xdmf_frames_ = times_.size();  // listed by the .xdmf just written: every rank counts from here
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }

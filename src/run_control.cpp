@@ -95,15 +95,17 @@ const char *SignalName(int signal) {
   return other;
 }
 
-void ProgressLine::Start(MPI_Comm comm, const RunControlOptions &options, PetscInt first_step,
-                         PetscInt last_step) {
-  PetscMPIInt rank = 0;
-  MPI_Comm_rank(comm, &rank);
+PetscErrorCode ProgressLine::Start(MPI_Comm comm, const RunControlOptions &options, PetscInt first_step,
+                                   PetscInt last_step) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
   enabled_ = rank == 0 && options.progress && last_step > first_step;
   first_ = step_ = first_step;
   last_ = last_step;
-  PetscTime(&start_);
+  PetscCall(PetscTime(&start_));
   printed_ = start_;
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 void ProgressLine::Update(PetscInt step, PetscReal time, PetscInt iterations) {
@@ -112,7 +114,7 @@ void ProgressLine::Update(PetscInt step, PetscReal time, PetscInt iterations) {
   time_ = time;
   iterations_ = iterations;
   PetscLogDouble now;
-  PetscTime(&now);
+  PetscCallVoid(PetscTime(&now));
   if (now - printed_ < 0.25) return;
   printed_ = now;
   Print(false);
@@ -126,7 +128,7 @@ void ProgressLine::Finish() {
 
 void ProgressLine::Print(bool final_line) {
   PetscLogDouble now;
-  PetscTime(&now);
+  PetscCallVoid(PetscTime(&now));
   const double elapsed = now - start_, done = static_cast<double>(step_ - first_);
   const double rate = elapsed > 0 ? done / elapsed : 0;
   char text[160];

@@ -11,8 +11,8 @@ mesh with velocity as a point field (issue 7, item 3).
     file is opened): while a run goes on it lists exactly the frames already
     in the file. Checked on a run stopped by SIGKILL, and with -flush_every 4
     on a finished run (all frames listed at the end).
-(c) A restarted run's file (in place and copied) has an .xdmf listing all its
-    frames, the continued ones and the new ones.
+(c) A restarted run's file (in place and copied, with -flush_every 1 and 3)
+    has an .xdmf listing all its frames, the continued ones and the new ones.
 """
 import os
 import signal
@@ -99,4 +99,6 @@ same_as_file(copy, "(c) restart into a new file")
 harness.run(args, 2, ["-scene", scene, "-steps", 10, "-restart", part, "-quiet"])
 r = same_as_file(part, "(c) restart in place")
 checks.check(len(r["time"]) == 11, f"(c) the continued file holds frames 0..10 ({len(r['time'])})")
+harness.run(args, 2, ["-scene", scene, "-steps", 15, "-restart", part, "-flush_every", 3, "-quiet"])
+r = same_as_file(part, "(c) restart in place again, -flush_every 3")
 checks.exit()
