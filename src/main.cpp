@@ -186,6 +186,8 @@ PetscErrorCode Run(MPI_Comm comm) {
                              {"solves", double(solver.solves)},
                              {"solver_iterations", double(solver.total_iterations)},
                              {"contact_solves", double(solver.contact_solves)},
+                             {"newton_iterations", double(solver.newton_iterations)},
+                             {"max_newton_iterations", double(solver.max_newton_iterations)},
                              {"contact_seconds", contact.statistics().seconds}}));
     report.frames = writer->frames();
   }

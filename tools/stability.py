@@ -358,7 +358,7 @@ def judge_rejection(case, result):
     return problems
 
 
-def judge_run(case, prepared, steps, result, metrics):
+def judge_run(case, mode, prepared, steps, result, metrics):
     """Fills metrics; returns the list of failed criteria (empty: pass)."""
     import h5py
     problems = []
@@ -395,7 +395,9 @@ def judge_run(case, prepared, steps, result, metrics):
             problems.append("result file not marked complete")
         if done != steps or len(P) != steps + 1:
             problems.append(f"{done} of {steps} steps, {len(P)} frames")
-        if not all_fixed and metrics["solves"] != steps:
+        # Linear mode: one solve per step. Corotational mode: a step that would
+        # gain energy iterates (the program stops with an error if it does not converge).
+        if not all_fixed and (metrics["solves"] < steps or (mode == "linear" and metrics["solves"] != steps)):
             problems.append(f"{metrics['solves']} solves for {steps} steps")
     E = sum(energy.values())
     finite = bool(np.isfinite(P).all() and np.isfinite(V).all() and np.isfinite(E).all())
@@ -476,7 +478,7 @@ def run_case(case, mode, prepared, args, work):
         lines = error_lines(stderr)
         metrics["error"] = lines[0] if lines else ""
     else:
-        problems = judge_run(case, prepared, args.steps, result, metrics)
+        problems = judge_run(case, mode, prepared, args.steps, result, metrics)
     if not args.keep:
         for suffix in (".h5", ".xdmf"):
             path = os.path.join(work, stem + suffix)
