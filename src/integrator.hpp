@@ -32,7 +32,8 @@
 //   iterate is Mueller & Gross's single linearised step with D = a M + b K(R0);
 //   it stands unless it gains energy (|v1|_M^2 / 2 + E(x1) - dt f_ext . v1 >
 //   |v0|_M^2 / 2 + E(x0)); such steps iterate until |g| <= -newton_rtol
-//   (|M v0| + dt |f_el(x0)| + dt |f_ext|) (-newton_always: every step does).
+//   (|M v0| + dt |f_el(x0)| + dt |f_ext|) (-newton_always: every step does), or
+//   until the iteration stalls at an iterate that gains no energy (reported).
 //   With contact, the step is the single linearised solve (projected_solve.hpp).
 // Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode
 // (summed element by element, each term non-negative),
@@ -91,6 +92,7 @@ struct SolverStatistics {
   PetscInt newton_iterations = 0;     // corotational: linearised solves, all steps
   PetscInt max_newton_iterations = 0; // corotational: most in one step
   PetscInt backtracks = 0;            // corotational: line-search step halvings
+  PetscInt newton_stopped_short = 0;  // corotational: dissipative steps that stalled above -newton_rtol
 };
 
 class ImplicitEuler {
@@ -104,6 +106,13 @@ class ImplicitEuler {
   // assembles and factorises A). rest_positions and lumped_mass are referenced.
   PetscErrorCode Setup(MPI_Comm comm, const DofLayout &layout, const LocalElements &elements,
                        Vec rest_positions, Vec lumped_mass, const IntegratorOptions &options);
+  // Collective. Linear mode: owned_body[i] is the body of owned vertex i; each
+  // step then takes every body's rigid-body velocity (translation and
+  // infinitesimal rotation about its rest centre of mass) from its momentum:
+  // K annihilates these modes exactly, so (1 + a dt) Z^T M Z y = Z^T (M v0 + dt f_ext)
+  // holds for them, and the factorisation, which cannot resolve them when the
+  // mass part of A is below K's round-off (stiff slivers), is not asked to.
+  PetscErrorCode SetBodies(std::vector<int32_t> owned_body, int num_bodies);
   // Collective. New time step size (s); linear mode refills A and refactorises.
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step; the external
@@ -131,6 +140,9 @@ class ImplicitEuler {
   // v = A^-1 rhs_ (v: initial guess), with the contact's velocity constraints
   // when any rank has one.
   PetscErrorCode Solve(Vec v, const ContactSolver *contact);
+  // Linear mode: per body, the momentum and angular momentum about the rest
+  // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
+  PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
   // Corotational step without contact: the Newton-type iteration above.
   PetscErrorCode CorotationalStep(Vec x, Vec v);
   // g(v) and the merit P(v) for the state at x0 + dt v (element pass done).
@@ -161,6 +173,15 @@ class ImplicitEuler {
   bool elastic_state_current_ = false;
   bool gamg_ = false;                     // the PC uses the near-null space
   CooValues values_;                      // A's COO values
+  // Linear mode, rigid-body velocities (SetBodies): per body mass (kg), rest centre
+  // of mass (m) and inverse rotational inertia about it (1/(kg m^2)).
+  struct RigidBody {
+    double mass = 0;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d inverse_inertia = Eigen::Matrix3d::Zero();
+  };
+  std::vector<int32_t> owned_body_;
+  std::vector<RigidBody> rigid_;
   // Linear mode: the rest stiffness and a work vector for x - X.
   Mat K_ = nullptr;
   Vec displacement_ = nullptr;

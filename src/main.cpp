@@ -128,9 +128,11 @@ PetscErrorCode Run(MPI_Comm comm) {
   //    collision structures and constraints, only as far as the scene needs them.
   ImplicitEuler integrator;
   integration.dt = TimeStepAt(integration, 0.0);
-  if (has_unknowns)
+  if (has_unknowns) {
     PetscCall(integrator.Setup(comm, layout, elements, state.rest_positions, state.lumped_mass,
                                integration));
+    PetscCall(integrator.SetBodies(OwnedVertexBodies(scene, layout), static_cast<int>(scene.bodies.size())));
+  }
   if (!output.matrix_dir.empty() && has_unknowns)
     PetscCall(ExportMatrices(output.matrix_dir, layout, elements, integration.shear_scale,
                              state.lumped_mass, integration.alpha, integration.beta));
@@ -188,6 +190,7 @@ PetscErrorCode Run(MPI_Comm comm) {
                              {"contact_solves", double(solver.contact_solves)},
                              {"newton_iterations", double(solver.newton_iterations)},
                              {"max_newton_iterations", double(solver.max_newton_iterations)},
+                             {"newton_stopped_short", double(solver.newton_stopped_short)},
                              {"contact_seconds", contact.statistics().seconds}}));
     report.frames = writer->frames();
   }
