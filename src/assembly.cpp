@@ -96,8 +96,14 @@ static TetPositions ElementPositions(const LocalElements &elements, size_t e, co
 double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
                                 const PetscScalar *x_touched, const PetscScalar *X_touched,
                                 double stiffness_scale, CooValues *values,
-                                PetscScalar *force_touched) {
-  std::fill(force_touched, force_touched + 3 * elements.touched_vertices.size(), 0.0);
+                                PetscScalar *force_touched, CorotatedDamping *damping) {
+  const size_t touched = 3 * elements.touched_vertices.size();
+  std::fill(force_touched, force_touched + touched, 0.0);
+  if (damping) {
+    damping->current->resize(12 * elements.size());
+    damping->energy = 0;
+    if (damping->start) std::fill(damping->force_touched, damping->force_touched + touched, 0.0);
+  }
   PetscScalar *out = values->data();
   double energy = 0;
   for (size_t e = 0; e < elements.size(); ++e) {
@@ -105,11 +111,27 @@ double CorotatedStiffnessValues(const LocalElements &elements, double shear_scal
     TetPositions force;
     Mat12 K;
     double element_energy;
-    CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale, x, X,
-                     &force, &element_energy, &K);
+    const Mat3 R = CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
+                                    x, X, &force, &element_energy, &K);
     energy += element_energy;
     for (int a = 0; a < 4; ++a)
       for (int c = 0; c < 3; ++c) force_touched[3 * elements.touched_index[e][a] + c] += force(a, c);
+    if (damping) {
+      Eigen::Map<Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y(damping->current->data() + 12 * e);
+      y = x * R - X;  // rows R^T x_a - X_a
+      if (damping->start) {
+        const Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y_start(damping->start + 12 * e);
+        TetPositions increment_force;
+        double increment_energy;
+        ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
+                              y - y_start, &increment_force, &increment_energy);
+        damping->energy += increment_energy;
+        increment_force = increment_force * R.transpose();
+        for (int a = 0; a < 4; ++a)
+          for (int c = 0; c < 3; ++c)
+            damping->force_touched[3 * elements.touched_index[e][a] + c] += increment_force(a, c);
+      }
+    }
     for (int i = 0; i < 12; ++i)
       for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
   }

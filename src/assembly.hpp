@@ -59,11 +59,21 @@ void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
 // elements at positions x_touched (3 per touched vertex, m), rest positions
 // X_touched: element part of values = stiffness_scale R K_e R^T; force_touched
 // (zeroed here, 3 per touched vertex) += R K_e (R^T x_e - X_e); returns the local
-// strain energy sum_e y^T K_e y / 2 (J).
+// strain energy sum_e y^T K_e y / 2 (J). With damping: also records every y_e
+// (12 per element) and, when damping->start holds y_e at the start of the step,
+// adds R K_e (y_e - y_e,start) to damping->force_touched (zeroed here) and
+// sum_e |y_e - y_e,start|_K_e^2 / 2 to damping->energy: the rotation-free
+// deformation increment behind the corotated stiffness damping (integrator.hpp).
+struct CorotatedDamping {
+  std::vector<double> *current = nullptr;  // out: y_e
+  const double *start = nullptr;           // in: y_e at the start of the step, or null
+  PetscScalar *force_touched = nullptr;    // out (when start)
+  double energy = 0;                       // out (when start), J
+};
 double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
                                 const PetscScalar *x_touched, const PetscScalar *X_touched,
                                 double stiffness_scale, CooValues *values,
-                                PetscScalar *force_touched);
+                                PetscScalar *force_touched, CorotatedDamping *damping = nullptr);
 
 // Not collective. Linear strain energy sum_e V strain . C strain / 2 (J) of the
 // local elements at positions x_touched (rest X_touched), element by element:

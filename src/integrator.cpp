@@ -18,7 +18,10 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                                      {OptionSyntax::kInteger, "-steps"},
                                      {OptionSyntax::kReal, "-alpha"},
                                      {OptionSyntax::kReal, "-beta"},
-                                     {OptionSyntax::kReal, "-shear_scale"}}));
+                                     {OptionSyntax::kReal, "-shear_scale"},
+                                     {OptionSyntax::kReal, "-newton_rtol"},
+                                     {OptionSyntax::kInteger, "-newton_max_it"},
+                                     {OptionSyntax::kBool, "-newton_always"}}));
   char schedule[PETSC_MAX_PATH_LEN] = "";
   PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
   PetscInt gravity_count = 3;
@@ -46,6 +49,18 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              "Factor s on the shear block of the elasticity tensor (1: standard "
                              "linear elasticity, 0.25: the coursework grader's convention)",
                              nullptr, o->shear_scale, &o->shear_scale, nullptr));
+  PetscCall(PetscOptionsReal("-newton_rtol",
+                             "Corotational mode: a step is done when its residual |g| is below "
+                             "this times |M v0| + dt |f_el(x0)| + dt |f_ext| (integrator.hpp)",
+                             nullptr, o->newton_rtol, &o->newton_rtol, nullptr));
+  PetscCall(PetscOptionsBool("-newton_always",
+                             "Corotational mode: iterate every step to -newton_rtol (default: only "
+                             "steps whose single linearised solve would gain energy)",
+                             nullptr, o->newton_always, &o->newton_always, nullptr));
+  PetscCall(PetscOptionsInt("-newton_max_it",
+                            "Corotational mode: most linearised solves per step (1: the single "
+                            "linearised step, no check)",
+                            nullptr, o->newton_max_it, &o->newton_max_it, nullptr));
   PetscOptionsEnd();
   if (gravity_set) {
     PetscCheck(gravity_count == 3, comm, PETSC_ERR_USER_INPUT, "option -gravity: expected gx,gy,gz");
@@ -76,6 +91,10 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
              (double)o->alpha);
   PetscCheck(o->beta >= 0, comm, PETSC_ERR_USER_INPUT, "option -beta: must be >= 0 (got %g)",
              (double)o->beta);
+  PetscCheck(o->newton_rtol > 0, comm, PETSC_ERR_USER_INPUT, "option -newton_rtol: must be > 0 (got %g)",
+             (double)o->newton_rtol);
+  PetscCheck(o->newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o->newton_max_it);
   PetscCheck(o->shear_scale > 0, comm, PETSC_ERR_USER_INPUT,
              "option -shear_scale: must be > 0 (got %g)", (double)o->shear_scale);
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -92,6 +111,13 @@ PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time) {
 ImplicitEuler::~ImplicitEuler() {
   VecDestroy(&gravity_force_);
   VecDestroy(&x_start_);
+  VecDestroy(&v_start_);
+  VecDestroy(&iterate_);
+  VecDestroy(&direction_);
+  VecDestroy(&work_);
+  VecDestroy(&v_trial_base_);
+  VecDestroy(&damping_force_);
+  VecDestroy(&damping_touched_);
   KSPDestroy(&ksp_);
   MatDestroy(&A_);
   MatDestroy(&K_);
@@ -160,6 +186,65 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode ImplicitEuler::SetBodies(std::vector<int32_t> owned_body, int num_bodies) {
+  PetscFunctionBeginUser;
+  if (options_.mode != MODE_LINEAR) PetscFunctionReturn(PETSC_SUCCESS);
+  owned_body_ = std::move(owned_body);
+  const MPI_Comm comm = PetscObjectComm((PetscObject)rest_);
+  const PetscScalar *X, *m;
+  PetscCall(VecGetArrayRead(rest_, &X));
+  PetscCall(VecGetArrayRead(mass_, &m));
+  // Mass and first moments, then second moments about the centres.
+  std::vector<double> sums(4 * num_bodies, 0.0), second(9 * num_bodies, 0.0);
+  for (size_t i = 0; i < owned_body_.size(); ++i) {
+    double *sum = &sums[4 * owned_body_[i]];
+    sum[0] += m[3 * i];
+    for (int c = 0; c < 3; ++c) sum[1 + c] += m[3 * i] * X[3 * i + c];
+  }
+  PetscCall(MPIU_Allreduce(MPI_IN_PLACE, sums.data(), 4 * num_bodies, MPI_DOUBLE, MPI_SUM, comm));
+  rigid_.assign(num_bodies, RigidBody());
+  for (int b = 0; b < num_bodies; ++b) {
+    rigid_[b].mass = sums[4 * b];
+    if (rigid_[b].mass > 0) rigid_[b].centre = Eigen::Vector3d(&sums[4 * b + 1]) / rigid_[b].mass;
+  }
+  for (size_t i = 0; i < owned_body_.size(); ++i) {
+    const int b = owned_body_[i];
+    const Eigen::Vector3d r = Eigen::Vector3d(&X[3 * i]) - rigid_[b].centre;
+    Eigen::Map<Eigen::Matrix3d> inertia(&second[9 * b]);
+    inertia += m[3 * i] * (r.squaredNorm() * Eigen::Matrix3d::Identity() - r * r.transpose());
+  }
+  PetscCall(VecRestoreArrayRead(rest_, &X));
+  PetscCall(VecRestoreArrayRead(mass_, &m));
+  PetscCall(MPIU_Allreduce(MPI_IN_PLACE, second.data(), 9 * num_bodies, MPI_DOUBLE, MPI_SUM, comm));
+  for (int b = 0; b < num_bodies; ++b)
+    if (rigid_[b].mass > 0) rigid_[b].inverse_inertia = Eigen::Map<Eigen::Matrix3d>(&second[9 * b]).inverse();
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta) {
+  PetscFunctionBeginUser;
+  const PetscScalar *X, *m, *v, *f = nullptr;
+  PetscCall(VecGetArrayRead(rest_, &X));
+  PetscCall(VecGetArrayRead(mass_, &m));
+  PetscCall(VecGetArrayRead(w, &v));
+  if (with_force && gravity_force_) PetscCall(VecGetArrayRead(gravity_force_, &f));
+  momenta->assign(2 * rigid_.size(), Eigen::Vector3d::Zero());  // per body: p, L
+  for (size_t i = 0; i < owned_body_.size(); ++i) {
+    const int b = owned_body_[i];
+    Eigen::Vector3d p = Eigen::Vector3d(m[3 * i] * v[3 * i], m[3 * i + 1] * v[3 * i + 1], m[3 * i + 2] * v[3 * i + 2]);
+    if (f) p += dt_ * Eigen::Vector3d(&f[3 * i]);
+    (*momenta)[2 * b] += p;
+    (*momenta)[2 * b + 1] += (Eigen::Vector3d(&X[3 * i]) - rigid_[b].centre).cross(p);
+  }
+  PetscCall(VecRestoreArrayRead(rest_, &X));
+  PetscCall(VecRestoreArrayRead(mass_, &m));
+  PetscCall(VecRestoreArrayRead(w, &v));
+  if (f) PetscCall(VecRestoreArrayRead(gravity_force_, &f));
+  PetscCall(MPIU_Allreduce(MPI_IN_PLACE, momenta->data(), 6 * static_cast<int>(rigid_.size()), MPI_DOUBLE,
+                           MPI_SUM, PetscObjectComm((PetscObject)w)));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscFunctionBeginUser;
   if (dt_ > 0) ++stats_.time_step_changes;
@@ -205,9 +290,18 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     PetscCall(VecGetArrayRead(X_touched_, &X_touched));
     PetscCall(VecGetArrayWrite(force_touched_, &force_touched));
     const PetscReal a = options_.alpha, b = options_.beta;
+    // Stiffness damping: the corotated displacements y_e, and within a step their
+    // increments since its start.
+    PetscScalar *damping_touched = nullptr;
+    if (b > 0 && !damping_touched_) {
+      PetscCall(VecDuplicate(force_touched_, &damping_touched_));
+      PetscCall(VecDuplicate(elastic_force_, &damping_force_));
+    }
+    if (step_started_) PetscCall(VecGetArrayWrite(damping_touched_, &damping_touched));
+    CorotatedDamping damping{&corotated_, step_started_ ? corotated_start_.data() : nullptr, damping_touched};
     const double local_energy = CorotatedStiffnessValues(
         *elements_, options_.shear_scale, x_touched, X_touched, b * dt_ + dt_ * dt_, &values_,
-        force_touched);
+        force_touched, b > 0 ? &damping : nullptr);
     PetscCall(VecRestoreArrayRead(x_touched_, &x_touched));
     PetscCall(VecRestoreArrayRead(X_touched_, &X_touched));
     PetscCall(VecRestoreArrayWrite(force_touched_, &force_touched));
@@ -215,8 +309,17 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     PetscCall(VecZeroEntries(elastic_force_));
     PetscCall(VecScatterBegin(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
     PetscCall(VecScatterEnd(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
-    PetscCall(MPIU_Allreduce(&local_energy, &elastic_energy_, 1, MPIU_REAL, MPIU_SUM,
-                             PetscObjectComm((PetscObject)x)));
+    const double local[2] = {local_energy, damping.energy};
+    double global[2];
+    PetscCall(MPIU_Allreduce(local, global, 2, MPIU_REAL, MPIU_SUM, PetscObjectComm((PetscObject)x)));
+    elastic_energy_ = global[0];
+    if (step_started_) {
+      damping_energy_ = global[1];
+      PetscCall(VecRestoreArrayWrite(damping_touched_, &damping_touched));
+      PetscCall(VecZeroEntries(damping_force_));
+      PetscCall(VecScatterBegin(touched_scatter_, damping_touched_, damping_force_, ADD_VALUES, SCATTER_REVERSE));
+      PetscCall(VecScatterEnd(touched_scatter_, damping_touched_, damping_force_, ADD_VALUES, SCATTER_REVERSE));
+    }
     if (gamg_) PetscCall(UpdateNearNullSpace(x));
   }
   elastic_state_current_ = true;
@@ -270,8 +373,29 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
   if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
   if (!contact || !contact->active()) {
-    // A v1 = rhs; v holds v0, the initial guess of iterative solvers.
+    if (options_.mode == MODE_COROTATIONAL) PetscFunctionReturn(CorotationalStep(x, v));
+    // A v1 = rhs; v holds v0, the initial guess of iterative solvers. Then each
+    // body's rigid-body velocity from its momentum (SetBodies).
+    std::vector<Eigen::Vector3d> target, solved;
+    if (!rigid_.empty()) PetscCall(BodyMomenta(v, true, &target));
     PetscCall(Solve(v, nullptr));
+    if (!rigid_.empty()) {
+      PetscCall(BodyMomenta(v, false, &solved));
+      PetscScalar *w;
+      const PetscScalar *X;
+      PetscCall(VecGetArray(v, &w));
+      PetscCall(VecGetArrayRead(rest_, &X));
+      const double damping = 1.0 + options_.alpha * dt_;
+      for (size_t i = 0; i < owned_body_.size(); ++i) {
+        const RigidBody &body = rigid_[owned_body_[i]];
+        const Eigen::Vector3d dp = target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
+        const Eigen::Vector3d dL = target[2 * owned_body_[i] + 1] / damping - solved[2 * owned_body_[i] + 1];
+        const Eigen::Vector3d r = Eigen::Vector3d(&X[3 * i]) - body.centre;
+        Eigen::Map<Eigen::Vector3d>(&w[3 * i]) += dp / body.mass + (body.inverse_inertia * dL).cross(r);
+      }
+      PetscCall(VecRestoreArray(v, &w));
+      PetscCall(VecRestoreArrayRead(rest_, &X));
+    }
     PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
     elastic_state_current_ = false;
     PetscFunctionReturn(PETSC_SUCCESS);
@@ -292,6 +416,136 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   bool changed;
   PetscCall(contact->EndStep(x, v, reactions_, &changed));
   elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
+  PetscFunctionBeginUser;
+  const PetscReal a = options_.alpha, b = options_.beta, dt = dt_;
+  // g = M (v - v0) + a dt M v + dt f_el + b h - dt f_ext
+  PetscCall(VecWAXPY(work_, -1.0, v_start_, v));      // v - v0
+  PetscCall(VecPointwiseMult(g, mass_, work_));
+  PetscReal inertia, mass_damping = 0, external = 0;
+  PetscCall(VecDot(g, work_, &inertia));              // |v - v0|_M^2
+  if (a > 0) {
+    PetscCall(VecPointwiseMult(work_, mass_, v));
+    PetscCall(VecDot(work_, v, &mass_damping));      // |v|_M^2
+    PetscCall(VecAXPY(g, a * dt, work_));
+  }
+  PetscCall(VecAXPY(g, dt, elastic_force_));
+  if (b > 0) PetscCall(VecAXPY(g, b, damping_force_));
+  if (gravity_force_) {
+    PetscCall(VecAXPY(g, -dt, gravity_force_));
+    PetscCall(VecDot(gravity_force_, v, &external));
+  }
+  // P = |v - v0|_M^2 / 2 + a dt |v|_M^2 / 2 + E + (b / dt) Psi - dt f_ext . v
+  *merit = 0.5 * inertia + 0.5 * a * dt * mass_damping + elastic_energy_ + (b > 0 ? b / dt * damping_energy_ : 0) -
+           dt * external;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
+  if (!v_start_) {
+    PetscCall(VecDuplicate(x, &v_start_));
+    PetscCall(VecDuplicate(x, &iterate_));
+    PetscCall(VecDuplicate(x, &direction_));
+    PetscCall(VecDuplicate(x, &work_));
+    PetscCall(VecDuplicate(x, &v_trial_base_));
+  }
+  PetscCall(VecCopy(x, x_start_));
+  PetscCall(VecCopy(v, v_start_));
+  if (options_.beta > 0) {  // the step's deformation increments count from here: h = 0, Psi = 0
+    corotated_start_.swap(corotated_);
+    PetscCall(VecZeroEntries(damping_force_));
+    damping_energy_ = 0;
+    step_started_ = true;
+  }
+  // Scale of g: |M v0| + dt |f_el(x0)| + dt |f_ext|; total energy at the start,
+  // |v0|_M^2 / 2 + E(x0) (gravity's reference: x0).
+  PetscReal momentum, force, external = 0, start_kinetic;
+  PetscCall(VecPointwiseMult(work_, mass_, v));
+  PetscCall(VecNorm(work_, NORM_2, &momentum));
+  PetscCall(VecDot(work_, v, &start_kinetic));
+  PetscCall(VecNorm(elastic_force_, NORM_2, &force));
+  if (gravity_force_) PetscCall(VecNorm(gravity_force_, NORM_2, &external));
+  const PetscReal scale = momentum + dt_ * (force + external);
+  const PetscReal tolerance = options_.newton_rtol * scale;
+  const PetscReal start_energy = 0.5 * start_kinetic + elastic_energy_;
+
+  PetscCall(VecZeroEntries(iterate_));  // v_0 = 0: x = x0
+  PetscReal merit, residual = PETSC_MAX_REAL;
+  PetscCall(Residual(iterate_, rhs_, &merit));
+  PetscInt k = 0;
+  bool dissipative = false;
+  for (; k < options_.newton_max_it; ++k) {
+    // A_k d = -g(v_k); the first direction is v1 itself, guessed as v0.
+    PetscCall(VecScale(rhs_, -1.0));
+    if (k == 0) PetscCall(VecCopy(v_start_, direction_));
+    else PetscCall(VecZeroEntries(direction_));
+    PetscCall(Solve(direction_, nullptr));
+    PetscReal slope;
+    PetscCall(VecDot(rhs_, direction_, &slope));
+    slope = -slope;  // g.d < 0
+    // Armijo on P. Near the root |g| decides: round-off in P (stiff elements: y is
+    // a small difference) hides the decrease, and the left-out rotation
+    // derivatives of the damping term move P's minimum off g's root by a little.
+    const PetscReal last_merit = merit, last_residual = residual;
+    PetscCall(VecCopy(iterate_, v_trial_base_));
+    PetscReal s = 1;
+    for (int halvings = 0;; ++halvings) {
+      PetscCall(VecWAXPY(iterate_, s, direction_, v_trial_base_));
+      PetscCall(VecWAXPY(x, dt_, iterate_, x_start_));
+      elastic_state_current_ = false;
+      PetscCall(UpdateElasticState(x));
+      PetscCall(Residual(iterate_, rhs_, &merit));
+      PetscCall(VecNorm(rhs_, NORM_2, &residual));
+      const bool near_root = last_residual <= 1e-2 * scale;
+      if (merit <= last_merit + 1e-4 * s * slope || (near_root && residual <= (1 - 1e-4 * s) * last_residual) ||
+          halvings == 40)
+        break;
+      s *= 0.5;
+      ++stats_.backtracks;
+    }
+    // Energy gain of the iterate: |v_k|_M^2 / 2 + E(x_k) - dt f_ext.v_k - start_energy.
+    PetscReal kinetic, work = 0;
+    PetscCall(VecPointwiseMult(work_, mass_, iterate_));
+    PetscCall(VecDot(work_, iterate_, &kinetic));
+    if (gravity_force_) PetscCall(VecDot(gravity_force_, iterate_, &work));
+    const PetscReal energy = 0.5 * kinetic + elastic_energy_ - dt_ * work;
+    const PetscReal gain = energy - start_energy;
+    PetscCall(PetscInfo(ksp_,
+                        "corotational iterate %" PetscInt_FMT ": |g| = %g (%g of the scale), step length %g, "
+                        "energy gain %g J of %g J\n",
+                        k + 1, (double)residual, (double)(residual / scale), (double)s, (double)gain,
+                        (double)start_energy));
+    if (residual <= tolerance) break;
+    // The linearised step stands unless it gains energy (round-off allowed).
+    const PetscReal round_off = 1e-12 * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
+    dissipative = gain <= round_off;
+    if (k == 0 && !options_.newton_always && dissipative) break;
+    // A dissipative iterate also stands once the iteration stalls (|g| falls by
+    // less than a tenth: a kink of R at an inverted element, or the left-out
+    // rotation derivative with lambda >> mu); counted as stopped short.
+    if (k > 0 && dissipative && residual > 0.9 * last_residual) {
+      ++stats_.newton_stopped_short;
+      break;
+    }
+  }
+  step_started_ = false;
+  const PetscInt iterations = PetscMin(k + 1, options_.newton_max_it);
+  stats_.newton_iterations += iterations;
+  stats_.max_newton_iterations = PetscMax(stats_.max_newton_iterations, iterations);
+  if (iterations == options_.newton_max_it && residual > tolerance && options_.newton_max_it > 1) {
+    PetscCheck(dissipative, PetscObjectComm((PetscObject)x), PETSC_ERR_NOT_CONVERGED,
+               "step: the corotational iteration did not converge (|g| = %g > %g after %" PetscInt_FMT
+               " iterations) and its last iterate gains energy; try a smaller -dt or a larger -newton_max_it",
+               (double)residual, (double)tolerance, iterations);
+    ++stats_.newton_stopped_short;
+  }
+  // x = x0 + dt v_k and the elastic state of x are current: the next step starts from them.
+  PetscCall(VecCopy(iterate_, v));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -17,6 +17,24 @@
 //   K = K(R) = sum_e R K_e R^T and f_el = sum_e R K_e (R^T x_e - X_e); A's values
 //   are refilled into the same pattern (no symbolic work) and solved again,
 //   by default with CG + GAMG warm-started from the previous velocity.
+//   The step is the root of
+//       g(v) = M (v - v0) + a dt M v + dt f_el(x) + b h(x) - dt f_ext,  x = x0 + dt v,
+//   h = sum_e R K_e (y_e - y_e0), y_e = R^T x_e - X_e: the stiffness damping acts on
+//   the rotation-free deformation increment of the step, (y_e - y_e0) / dt, so a
+//   rigid rotation is not damped (b K(R) v would damp a chord's centripetal part
+//   and, for stiff bodies, pump energy into strain). g is the gradient of
+//       P(v) = |v - v0|_M^2 / 2 + a dt |v|_M^2 / 2 + E(x) + (b / dt) Psi(x) - dt f_ext . v,
+//   Psi = sum_e |y_e - y_e0|_K_e^2 / 2 (up to rotation derivatives of the damping
+//   term), and is solved from v_0 = 0 by
+//       A_k d = -g(v_k),  A_k = (1 + a dt) M + (b dt + dt^2) K(R_k)  (the rotation's
+//       own derivative left out: A_k is SPD, d descends),  v_k+1 = v_k + s d,
+//   s halved until P falls (Armijo; near the root, until |g| falls). The first
+//   iterate is Mueller & Gross's single linearised step with D = a M + b K(R0);
+//   it stands unless it gains energy (|v1|_M^2 / 2 + E(x1) - dt f_ext . v1 >
+//   |v0|_M^2 / 2 + E(x0)); such steps iterate until |g| <= -newton_rtol
+//   (|M v0| + dt |f_el(x0)| + dt |f_ext|) (-newton_always: every step does), or
+//   until the iteration stalls at an iterate that gains no energy (reported).
+//   With contact, the step is the single linearised solve (projected_solve.hpp).
 // Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode
 // (summed element by element, each term non-negative),
 // sum_e y_e^T K_e y_e / 2 with y_e = R^T x_e - X_e in corotational mode (J).
@@ -47,6 +65,11 @@ struct IntegratorOptions {
   PetscReal alpha = 0.1;   // mass damping a, 1/s
   PetscReal beta = 0.1;    // stiffness damping b, s
   PetscReal shear_scale = 1.0;
+  // Corotational mode: the step's nonlinear equation is solved by Newton-type
+  // iterations until |g| <= newton_rtol |g(0)| (see CorotationalStep).
+  PetscReal newton_rtol = 1e-4;
+  PetscInt newton_max_it = 50;
+  PetscBool newton_always = PETSC_FALSE;
 };
 
 // The time step at time t (s): -dt until the first -dt_schedule entry applies.
@@ -66,6 +89,10 @@ struct SolverStatistics {
   PetscInt time_step_changes = 0;     // SetTimeStep calls after the first
   PetscInt contact_solves = 0;        // solves with contact constraints
   PetscInt contact_iterations = 0;    // their CG iterations
+  PetscInt newton_iterations = 0;     // corotational: linearised solves, all steps
+  PetscInt max_newton_iterations = 0; // corotational: most in one step
+  PetscInt backtracks = 0;            // corotational: line-search step halvings
+  PetscInt newton_stopped_short = 0;  // corotational: dissipative steps that stalled above -newton_rtol
 };
 
 class ImplicitEuler {
@@ -79,6 +106,13 @@ class ImplicitEuler {
   // assembles and factorises A). rest_positions and lumped_mass are referenced.
   PetscErrorCode Setup(MPI_Comm comm, const DofLayout &layout, const LocalElements &elements,
                        Vec rest_positions, Vec lumped_mass, const IntegratorOptions &options);
+  // Collective. Linear mode: owned_body[i] is the body of owned vertex i; each
+  // step then takes every body's rigid-body velocity (translation and
+  // infinitesimal rotation about its rest centre of mass) from its momentum:
+  // K annihilates these modes exactly, so (1 + a dt) Z^T M Z y = Z^T (M v0 + dt f_ext)
+  // holds for them, and the factorisation, which cannot resolve them when the
+  // mass part of A is below K's round-off (stiff slivers), is not asked to.
+  PetscErrorCode SetBodies(std::vector<int32_t> owned_body, int num_bodies);
   // Collective. New time step size (s); linear mode refills A and refactorises.
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step; the external
@@ -112,6 +146,13 @@ class ImplicitEuler {
   // v = A^-1 rhs_ (v: initial guess), with the contact's velocity constraints
   // when any rank has one.
   PetscErrorCode Solve(Vec v, const ContactSolver *contact);
+  // Linear mode: per body, the momentum and angular momentum about the rest
+  // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
+  PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
+  // Corotational step without contact: the Newton-type iteration above.
+  PetscErrorCode CorotationalStep(Vec x, Vec v);
+  // g(v) and the merit P(v) for the state at x0 + dt v (element pass done).
+  PetscErrorCode Residual(Vec v, Vec g, PetscReal *merit);
 
   const LocalElements *elements_ = nullptr;
   IntegratorOptions options_;
@@ -122,12 +163,31 @@ class ImplicitEuler {
   Vec elastic_force_ = nullptr, rhs_ = nullptr;
   Vec gravity_force_ = nullptr;           // M g, only when g != 0
   Vec x_start_ = nullptr;                 // x0 during a step with contact
+  // Corotational iteration: v0, the iterate v_k (and v_k before its line search),
+  // the direction d, a work vector.
+  Vec v_start_ = nullptr, iterate_ = nullptr, v_trial_base_ = nullptr, direction_ = nullptr,
+      work_ = nullptr;
+  // Corotational stiffness damping (b > 0): y_e of the last element pass and at the
+  // start of the step, h = sum_e R K_e (y_e - y_e,start) and Psi (during a step).
+  std::vector<double> corotated_, corotated_start_;
+  bool step_started_ = false;
+  Vec damping_force_ = nullptr, damping_touched_ = nullptr;
+  PetscReal damping_energy_ = 0;
   ProjectedSolver projected_;
   std::vector<PetscReal> reactions_;
   PetscReal elastic_energy_ = 0;           // corotational mode (linear: in Energies)
   bool elastic_state_current_ = false;
   bool gamg_ = false;                     // the PC uses the near-null space
   CooValues values_;                      // A's COO values
+  // Linear mode, rigid-body velocities (SetBodies): per body mass (kg), rest centre
+  // of mass (m) and inverse rotational inertia about it (1/(kg m^2)).
+  struct RigidBody {
+    double mass = 0;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d inverse_inertia = Eigen::Matrix3d::Zero();
+  };
+  std::vector<int32_t> owned_body_;
+  std::vector<RigidBody> rigid_;
   // Linear mode: the rest stiffness and a work vector for x - X.
   Mat K_ = nullptr;
   Vec displacement_ = nullptr;

@@ -194,9 +194,11 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   ImplicitEuler integrator;
   const PetscReal dt_first = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start.time);
-  if (has_unknowns)
+  if (has_unknowns) {
     PetscCall(integrator.Setup(comm, layout, elements, state.rest_positions, state.lumped_mass,
                                integration));
+    PetscCall(integrator.SetBodies(OwnedVertexBodies(scene, layout), static_cast<int>(scene.bodies.size())));
+  }
   if (!output.matrix_dir.empty() && has_unknowns)
     PetscCall(ExportMatrices(output.matrix_dir, layout, elements, integration.shear_scale,
                              state.lumped_mass, integration.alpha, integration.beta));
@@ -274,6 +276,9 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
                              {"solves", double(solver.solves)},
                              {"solver_iterations", double(solver.total_iterations)},
                              {"contact_solves", double(solver.contact_solves)},
+                             {"newton_iterations", double(solver.newton_iterations)},
+                             {"max_newton_iterations", double(solver.max_newton_iterations)},
+                             {"newton_stopped_short", double(solver.newton_stopped_short)},
                              {"contact_seconds", contact.statistics().seconds}},
                             stop_signal));
     report.frames = writer->frames();

@@ -53,6 +53,13 @@ PetscErrorCode CheckOptionSyntax(MPI_Comm comm, std::initializer_list<OptionSynt
         PetscCheck(ParseNumber(value, &integer), comm, PETSC_ERR_USER_INPUT,
                    "option %s: '%s' is not an integer", option.name, value);
         break;
+      case OptionSyntax::kBool: {  // PetscOptionsBool's spellings; no value means true
+        static const char *const kBools[] = {"",  "1",   "0",    "true", "false", "yes", "no",
+                                             "on", "off", "bool", "",     nullptr};
+        PetscCheck(IsChoice(value, kBools), comm, PETSC_ERR_USER_INPUT,
+                   "option %s: '%s' is not true or false", option.name, value);
+        break;
+      }
       case OptionSyntax::kChoice: {
         std::string list;
         for (int i = 0; option.choices[i + 2]; ++i) list += std::string(" ") + option.choices[i];

@@ -13,7 +13,7 @@
 namespace softbody {
 
 struct OptionSyntax {
-  enum Kind { kReal, kRealList, kInteger, kChoice } kind;  // kRealList: comma-separated
+  enum Kind { kReal, kRealList, kInteger, kChoice, kBool } kind;  // kRealList: comma-separated
   const char *name;                       // "-dt"
   const char *const *choices = nullptr;   // kChoice: PetscOptionsEnum-style list
 };

@@ -88,4 +88,17 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layo
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout) {
+  std::vector<int32_t> body_of_natural(scene.num_vertices());
+  for (size_t b = 0; b < scene.bodies.size(); ++b)
+    std::fill_n(body_of_natural.begin() + scene.bodies[b].first_vertex, scene.bodies[b].mesh.num_vertices(),
+                static_cast<int32_t>(b));
+  std::vector<int32_t> owned(layout.local_count());
+  for (PetscInt f = 0; f < layout.num_free(); ++f) {
+    const PetscInt local = layout.petsc_of_free[f] - layout.local_begin();
+    if (local >= 0 && local < layout.local_count()) owned[local] = body_of_natural[layout.natural_of_free[f]];
+  }
+  return owned;
+}
+
 }  // namespace softbody

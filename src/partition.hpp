@@ -35,4 +35,7 @@ struct DofLayout {
 // Collective. Rank 0 partitions with METIS and broadcasts the parts.
 PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layout);
 
+// Not collective. The body of each vertex this rank owns, in PETSc order.
+std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout);
+
 }  // namespace softbody

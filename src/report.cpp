@@ -107,6 +107,13 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
                             (double)solver.total_iterations / solver.solves, solver.min_iterations,
                             solver.max_iterations));
     PetscCall(PetscPrintf(comm, "\n"));
+    if (solver.newton_iterations > 0)
+      PetscCall(PetscPrintf(comm,
+                            "  corotational %" PetscInt_FMT " linearised solves without contact, at most %" PetscInt_FMT
+                            " in one step, %" PetscInt_FMT " line-search halvings, %" PetscInt_FMT
+                            " steps stopped short of -newton_rtol (stalled, no energy gain)\n",
+                            solver.newton_iterations, solver.max_newton_iterations, solver.backtracks,
+                            solver.newton_stopped_short));
   } else {
     PetscCall(PetscPrintf(comm, "  solver       none: the scene has no unknowns\n"));
   }
