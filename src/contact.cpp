@@ -660,4 +660,34 @@ double ContactSolver::ResolveConstraints() {
   return violation;
 }
 
+PetscErrorCode ContactSolver::GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const {
+  PetscFunctionBeginUser;
+  std::vector<int32_t> local;
+  for (const auto &[vertex, contact] : resting_) local.insert(local.end(), {contact.natural, contact.body});
+  PetscMPIInt rank, size, count = static_cast<PetscMPIInt>(local.size());
+  PetscCallMPI(MPI_Comm_rank(comm_, &rank));
+  PetscCallMPI(MPI_Comm_size(comm_, &size));
+  std::vector<PetscMPIInt> counts(size), offsets(size + 1, 0);
+  PetscCallMPI(MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_));
+  for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + (rank == 0 ? counts[r] : 0);
+  std::vector<int32_t> gathered(offsets[size]);
+  PetscCallMPI(MPI_Gatherv(local.data(), count, MPI_INT32_T, gathered.data(), counts.data(), offsets.data(),
+                           MPI_INT32_T, 0, comm_));
+  all->resize(gathered.size() / 2);
+  for (size_t i = 0; i < all->size(); ++i) (*all)[i] = {gathered[2 * i], gathered[2 * i + 1]};
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void ContactSolver::RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all) {
+  resting_.clear();
+  for (const auto &[natural, body] : all) {
+    if (body < 0 ? !ground_ : !obstacles_ || static_cast<size_t>(body) >= scene_->bodies.size()) continue;
+    if (natural < 0 || static_cast<size_t>(natural) >= layout_->free_of_natural.size()) continue;
+    const PetscInt free = layout_->free_of_natural[natural];
+    const PetscInt local = free < 0 ? -1 : layout_->petsc_of_free[free] - layout_->local_begin();
+    if (local < 0 || local >= layout_->local_count()) continue;
+    resting_.push_back({local, Contact{natural, body, 0.0, false}});
+  }
+}
+
 }  // namespace softbody

@@ -126,6 +126,14 @@ class ContactSolver {
   //    projection, distance constraints. *changed: x or v modified here.
   PetscErrorCode EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions, bool *changed);
 
+  // Checkpoints: the resting contacts carried into the next step, as (natural
+  // vertex, obstacle body; -1 the ground). Gather: collective, every rank's in
+  // rank order, on rank 0 (empty elsewhere). Restore: not collective, each rank
+  // keeps its own vertices' entries in the list's order (entries this run's
+  // obstacles do not have are dropped).
+  PetscErrorCode GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const;
+  void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all);
+
   const ContactStatistics &statistics() const { return stats_; }
   size_t num_constraints() const { return constraints_.size(); }
   // What Setup built, for the run summary.

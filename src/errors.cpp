@@ -2,6 +2,8 @@
 
 #include <cstdio>
 
+#include "run_control.hpp"
+
 namespace softbody {
 
 std::string Where(const std::string &path, long line, const std::string &what) {
@@ -20,6 +22,7 @@ PetscErrorCode OneLineInputErrorHandler(MPI_Comm comm, int line, const char *fun
     PetscMPIInt rank = 0;
     MPI_Comm_rank(comm, &rank);
     if (rank == 0) {
+      EndProgressLine();
       std::fprintf(stderr, "softbody: error: %s\n", message);
       std::fflush(stderr);
     }

@@ -326,6 +326,19 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode ImplicitEuler::PrimeSolver(Vec x_first, PetscReal dt_first) {
+  PetscFunctionBeginUser;
+  if (options_.mode == MODE_LINEAR) PetscFunctionReturn(PETSC_SUCCESS);
+  const PetscReal dt = dt_;
+  dt_ = dt_first;
+  elastic_state_current_ = false;
+  PetscCall(UpdateElasticState(x_first));
+  PetscCall(KSPSetUp(ksp_));
+  dt_ = dt;
+  elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
   PetscFunctionBeginUser;
   KSPConvergedReason reason = KSP_CONVERGED_ITS;

@@ -121,6 +121,12 @@ class ImplicitEuler {
   // again with the constraints until no new one appears (contact.hpp), then the
   // contact's velocity response and distance constraints.
   PetscErrorCode Step(Vec x, Vec v, ContactSolver *contact);
+  // Collective. For a restart: sets the solver up once for the original run's
+  // first step (positions x_first, time step dt_first), so that a solver that
+  // keeps state from its first set-up holds what it held in the uninterrupted
+  // run (GAMG keeps its first near-null space and eigenvalue estimate through
+  // every later set-up). Nothing to do in linear mode.
+  PetscErrorCode PrimeSolver(Vec x_first, PetscReal dt_first);
   // Not collective. To be called after positions were changed outside Step.
   void PositionsChanged() { elastic_state_current_ = false; }
   // Collective. Kinetic, elastic and gravitational energy (J) of the state (x, v);

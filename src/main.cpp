@@ -6,11 +6,14 @@
 //   mpirun -n 2 softbody -scene S.txt -options_file config/cg-jacobi.opts -ksp_monitor
 //   mpirun -n 2 softbody -scene S.txt -mode corotational -ksp_converged_reason
 //   mpirun -n 2 softbody -scene S.txt -options_file config/practical3.opts -constraints C.txt
+//   mpirun -n 2 softbody -scene S.txt -steps 1000 -output run.h5 -checkpoint_every 50
+//   mpirun -n 2 softbody -scene S.txt -steps 2000 -restart run.h5    # continues run.h5
 //
 // Equations (linear and corotational): see integrator.hpp; collisions and
 // constraints: contact.hpp. Data flow: scene -> free DOFs (METIS partition) ->
 // element kernels on each rank's elements -> COO assembly -> KSP -> time loop
-// (solve, then contact) -> HDF5 frames in natural vertex order.
+// (solve, then contact) -> HDF5 frames in natural vertex order; checkpoints and
+// restart: checkpoint.hpp; progress line, -quiet and signals: run_control.hpp.
 #include <petscksp.h>
 
 #include <cstdio>
@@ -18,6 +21,7 @@
 #include <optional>
 
 #include "assembly.hpp"
+#include "checkpoint.hpp"
 #include "contact.hpp"
 #include "deformation.hpp"
 #include "errors.hpp"
@@ -25,6 +29,7 @@
 #include "output.hpp"
 #include "partition.hpp"
 #include "report.hpp"
+#include "run_control.hpp"
 #include "scene.hpp"
 #include "solver.hpp"
 
@@ -80,7 +85,40 @@ class Timed {
   PetscLogDouble *total_, start_ = 0;
 };
 
-PetscErrorCode Run(MPI_Comm comm) {
+// Collective. Stores the loop state after `step` as a checkpoint in the result file.
+PetscErrorCode Checkpoint(ResultWriter *writer, PetscInt step, PetscReal time,
+                          const std::vector<Deformation> &deformations, const ContactSolver &contact,
+                          const State &state) {
+  PetscFunctionBeginUser;
+  LoopState loop;
+  loop.step = step;
+  loop.time = time;
+  loop.frames = writer->frames();
+  for (const Deformation &d : deformations) loop.deformations_applied.push_back(d.applied ? 1 : 0);
+  PetscCall(contact.GatherRestingContacts(&loop.resting_contacts));
+  PetscCall(WriteCheckpoint(writer, loop, state.positions, state.velocities));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. What a restart takes over from its checkpoint besides x and v:
+// the loop state, and the solver state of the original run (primed with that
+// run's first step: its initial positions, deformed as due at t = 0).
+PetscErrorCode Resume(const LoopState &loop, const Scene &scene, const DofLayout &layout,
+                      const State &state, Vec initial_positions, PetscReal dt_first,
+                      ImplicitEuler *integrator, ContactSolver *contact,
+                      std::vector<Deformation> *deformations) {
+  PetscFunctionBeginUser;
+  std::vector<Deformation> at_start = *deformations;
+  bool changed;
+  PetscCall(ApplyDueDeformations(scene, layout, 0.0, 0.5 * dt_first, state.lumped_mass, initial_positions,
+                                 &at_start, &changed));
+  if (layout.num_free() > 0) PetscCall(integrator->PrimeSolver(initial_positions, dt_first));
+  for (size_t i = 0; i < deformations->size(); ++i) (*deformations)[i].applied = loop.deformations_applied[i] != 0;
+  contact->RestoreRestingContacts(loop.resting_contacts);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   PetscFunctionBeginUser;
   PetscLogStage setup_stage, step_stage, output_stage;
   PetscCall(PetscLogStageRegister("Set-up", &setup_stage));
@@ -95,11 +133,15 @@ PetscErrorCode Run(MPI_Comm comm) {
   IntegratorOptions integration;
   ContactOptions contact_options;
   OutputOptions output;
+  CheckpointOptions checkpoints;
+  RunControlOptions control;
   PetscCall(ProcessSceneOptions(comm, &scene_options));
   PetscCall(ProcessIntegratorOptions(comm, &integration));
   PetscCall(ProcessContactOptions(comm, &contact_options));
   PetscCall(ProcessDeformationOptions(comm, &deform_text));
   PetscCall(ProcessOutputOptions(comm, &output));
+  PetscCall(ProcessCheckpointOptions(comm, output, &checkpoints));
+  PetscCall(ProcessRunControlOptions(comm, &control));
   PetscBool help;
   PetscCall(PetscOptionsHasHelp(nullptr, &help));
   if (help) {
@@ -108,26 +150,50 @@ PetscErrorCode Run(MPI_Comm comm) {
     PetscFunctionReturn(PETSC_SUCCESS);
   }
 
-  // 2. Every rank reads and validates the scene and its meshes.
+  // 2. Fail early: the output can be written, the restart file has a checkpoint.
+  //    A restart without -output continues the restart file itself.
+  const bool restart = !checkpoints.restart_path.empty();
+  if (restart && output.path.empty()) output.path = checkpoints.restart_path;
+  if (!output.path.empty()) PetscCall(CheckOutputPath(comm, "-output", output.path));
+  if (restart) PetscCall(CheckRestartFile(comm, checkpoints.restart_path));
+
+  // 3. Every rank reads and validates the scene and its meshes.
   Scene scene;
   PetscCall(LoadScene(comm, scene_options, &scene));
   std::vector<Deformation> deformations;
   PetscCall(ParseDeformations(comm, deform_text, scene, &deformations));
 
-  // 3. Free vertices, METIS partition, contiguous block per rank.
+  // 4. Free vertices, METIS partition, contiguous block per rank.
   DofLayout layout;
   PetscCall(BuildDofLayout(comm, scene, &layout));
   const bool has_unknowns = layout.num_free() > 0;
 
-  // 4. This rank's elements, the lumped mass and the initial state.
+  // 5. This rank's elements, the lumped mass and the initial state; a restart
+  //    replaces the state by its checkpoint's (checked against the scene).
   const LocalElements elements = CollectLocalElements(scene, layout);
   State state;
   PetscCall(CreateState(comm, scene, layout, elements, &state));
+  LoopState start;
+  Vec initial_positions = nullptr;  // a restart: the original run's, to prime the solver
+  if (restart) {
+    PetscCall(VecDuplicate(state.positions, &initial_positions));
+    PetscCall(VecCopy(state.positions, initial_positions));
+    PetscCall(ReadCheckpoint(comm, checkpoints.restart_path, scene, layout, deformations.size(),
+                             integration.steps, state.positions, state.velocities, &start));
+  }
 
-  // 5. A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once);
+  // 6. The output file, before the costly set-up: new, or continuing the
+  //    restart file's frames up to its checkpoint.
+  ResultWriter file;
+  ResultWriter *writer = output.path.empty() ? nullptr : &file;
+  const Continuation continuation{checkpoints.restart_path, start.frames};
+  if (writer) PetscCall(writer->Open(comm, output, scene, layout, state.positions, restart ? &continuation : nullptr));
+
+  // 7. A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once);
   //    collision structures and constraints, only as far as the scene needs them.
   ImplicitEuler integrator;
-  integration.dt = TimeStepAt(integration, 0.0);
+  const PetscReal dt_first = TimeStepAt(integration, 0.0);
+  integration.dt = TimeStepAt(integration, start.time);
   if (has_unknowns) {
     PetscCall(integrator.Setup(comm, layout, elements, state.rest_positions, state.lumped_mass,
                                integration));
@@ -140,23 +206,32 @@ PetscErrorCode Run(MPI_Comm comm) {
   contact_options.gravity = integration.gravity.norm();
   PetscCall(contact.Setup(comm, scene, layout, state.lumped_mass, contact_options));
 
-  // 6. Deformations due at t = 0, the output file with the mesh, frame 0.
-  PetscCall(ApplyDeformations(scene, layout, 0.0, integration.dt, state, &integrator, &deformations));
-  ResultWriter file;
-  ResultWriter *writer = output.path.empty() ? nullptr : &file;
-  if (writer) PetscCall(writer->Open(comm, output.path, scene, layout, state.positions));
+  // 8. A fresh start applies the deformations due at t = 0 and writes frame 0;
+  //    a restart takes over the checkpoint's loop state.
+  if (restart) {
+    PetscCall(Resume(start, scene, layout, state, initial_positions, dt_first, &integrator, &contact,
+                     &deformations));
+    PetscCall(VecDestroy(&initial_positions));
+  } else {
+    PetscCall(ApplyDeformations(scene, layout, 0.0, integration.dt, state, &integrator, &deformations));
+  }
   if (has_unknowns) PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
   setup_timer.reset();
-  if (writer) {
+  if (writer && !restart) {
     Timed timer(output_stage, &report.times.output);
     PetscCall(writer->WriteFrame(0.0, state.positions, state.velocities, report.energy));
   }
 
-  // 7. Time loop: solve, then collisions and constraints; a frame every
-  //    -output_every steps.
-  PetscReal time = 0;
-  for (PetscInt step = 1; step <= integration.steps; ++step) {
-    const bool frame = writer && step % output.every == 0;
+  // 9. Time loop: solve, then collisions and constraints; a frame every
+  //    -output_every steps, a checkpoint every -checkpoint_every steps. After
+  //    SIGINT/SIGTERM the ranks stop together after the step, with its frame.
+  ProgressLine progress;
+  PetscCall(progress.Start(comm, control, start.step, integration.steps));
+  report.first_step = report.steps = start.step;
+  PetscReal time = report.final_time = start.time;
+  int stop_signal;
+  PetscCall(AgreeOnStop(comm, &stop_signal));
+  for (PetscInt step = start.step + 1; step <= integration.steps && !stop_signal; ++step) {
     {
       Timed timer(step_stage, &report.times.loop);
       const PetscReal dt = TimeStepAt(integration, time);
@@ -165,9 +240,14 @@ PetscErrorCode Run(MPI_Comm comm) {
       time += dt;
       // Deformations due by the new time: the frame at that time shows them.
       PetscCall(ApplyDeformations(scene, layout, time, dt, state, &integrator, &deformations));
+    }
+    PetscCall(AgreeOnStop(comm, &stop_signal));
+    const bool last = step == integration.steps || stop_signal;
+    const bool frame = writer && (step % output.every == 0 || stop_signal);
+    if (has_unknowns && (frame || last)) {
       // The corotational element pass behind the energies is reused by the next step.
-      if (has_unknowns && (frame || step == integration.steps))
-        PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
+      Timed timer(step_stage, &report.times.loop);
+      PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
     }
     report.steps = step;
     report.final_time = time;
@@ -175,13 +255,21 @@ PetscErrorCode Run(MPI_Comm comm) {
       Timed timer(output_stage, &report.times.output);
       PetscCall(writer->WriteFrame(time, state.positions, state.velocities, report.energy));
     }
+    if (checkpoints.every > 0 && (step % checkpoints.every == 0 || last)) {
+      Timed timer(output_stage, &report.times.output);
+      PetscCall(Checkpoint(writer, step, time, deformations, contact, state));
+      report.checkpoint_step = step;
+    }
+    progress.Update(step, time, integrator.statistics().last_iterations);
   }
+  progress.Finish();
   if (writer) {
     const SolverStatistics &solver = integrator.statistics();
     PetscCall(writer->Close({{"setup_seconds", report.times.setup},
                              {"loop_seconds", report.times.loop},
                              {"output_seconds", report.times.output},
                              {"steps", double(report.steps)},
+                             {"first_step", double(report.first_step)},
                              {"final_time", report.final_time},
                              {"ranks", double(layout.size)},
                              {"dofs", 3.0 * layout.num_free()},
@@ -191,13 +279,21 @@ PetscErrorCode Run(MPI_Comm comm) {
                              {"newton_iterations", double(solver.newton_iterations)},
                              {"max_newton_iterations", double(solver.max_newton_iterations)},
                              {"newton_stopped_short", double(solver.newton_stopped_short)},
-                             {"contact_seconds", contact.statistics().seconds}}));
+                             {"contact_seconds", contact.statistics().seconds}},
+                            stop_signal));
     report.frames = writer->frames();
   }
 
-  // 8. Summary on rank 0.
-  PetscCall(PrintRunSummary(comm, scene, layout, integration, output, integrator.statistics(),
-                            has_unknowns ? integrator.solver() : nullptr, contact, report));
+  // 10. Summary on rank 0 (not with -quiet); an interrupted run says so and
+  //     exits with 128 + the signal.
+  report.restarted_from = checkpoints.restart_path;
+  if (!control.quiet)
+    PetscCall(PrintRunSummary(comm, scene, layout, integration, output, integrator.statistics(),
+                              has_unknowns ? integrator.solver() : nullptr, contact, report));
+  if (stop_signal) {
+    PetscCall(PrintInterruption(comm, stop_signal, integration, output, report));
+    *exit_code = 128 + stop_signal;
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -231,8 +327,10 @@ int main(int argc, char **argv) {
   }
   PetscCall(PetscInitialize(&argc, &argv, nullptr, help));
   PetscCall(InstallErrorHandler());
-  const PetscErrorCode status = Run(PETSC_COMM_WORLD);
+  PetscCall(InstallStopHandlers());
+  int exit_code = 0;
+  const PetscErrorCode status = Run(PETSC_COMM_WORLD, &exit_code);
   PetscCall(PetscFinalize());
   MPI_Finalize();
-  return status == PETSC_SUCCESS ? 0 : 1;
+  return status == PETSC_SUCCESS ? exit_code : 1;
 }

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "run_control.hpp"
+
 namespace softbody {
 
 PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
@@ -35,6 +37,9 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
                         "b = %g s; dt = %g s, %" PetscInt_FMT " steps",
                         kElasticityModes[o.mode], (double)o.shear_scale, (double)o.alpha, (double)o.beta, (double)o.dt,
                         r.steps));
+  if (!r.restarted_from.empty())
+    PetscCall(PetscPrintf(comm, " (restarted at step %" PetscInt_FMT " from %s)", r.first_step,
+                          r.restarted_from.c_str()));
   if (o.gravity.squaredNorm() > 0)
     PetscCall(PetscPrintf(comm, "; gravity (%g, %g, %g) m/s^2", o.gravity[0], o.gravity[1], o.gravity[2]));
   if (solver.time_step_changes)
@@ -74,12 +79,23 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscCall(KSPGetType(ksp, &ksp_type));
     PetscCall(KSPGetPC(ksp, &pc));
     PetscCall(PCGetType(pc, &pc_type));
+    // The direct preset factorises on every rank (PCREDUNDANT): name the inner solver.
+    PetscBool redundant;
+    PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCREDUNDANT, &redundant));
+    PC factor_pc = pc;
+    if (redundant) {
+      KSP inner;
+      PetscCall(PCRedundantGetKSP(pc, &inner));
+      PetscCall(KSPGetPC(inner, &factor_pc));
+      PetscCall(PCGetType(factor_pc, &pc_type));
+    }
     MatSolverType factor_package = nullptr;
     PetscBool factored;
-    PetscCall(PetscObjectTypeCompareAny((PetscObject)pc, &factored, PCCHOLESKY, PCLU, ""));
-    if (factored) PetscCall(PCFactorGetMatSolverType(pc, &factor_package));
-    PetscCall(PetscPrintf(comm, "  solver       %s + %s%s%s", ksp_type, pc_type,
-                          factor_package ? " " : "", factor_package ? factor_package : ""));
+    PetscCall(PetscObjectTypeCompareAny((PetscObject)factor_pc, &factored, PCCHOLESKY, PCLU, ""));
+    if (factored) PetscCall(PCFactorGetMatSolverType(factor_pc, &factor_package));
+    PetscCall(PetscPrintf(comm, "  solver       %s + %s%s%s%s", ksp_type, pc_type,
+                          factor_package ? " " : "", factor_package ? factor_package : "",
+                          redundant ? " (whole A on every rank)" : ""));
     if (o.mode == MODE_LINEAR)
       PetscCall(PetscPrintf(comm, ", %s once in %.3g s", factored ? "factorised" : "set up",
                             solver.factor_seconds));
@@ -101,7 +117,8 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
   } else {
     PetscCall(PetscPrintf(comm, "  solver       none: the scene has no unknowns\n"));
   }
-  const double per_step = r.steps > 0 ? r.times.loop / r.steps : 0;
+  const PetscInt taken = r.steps - r.first_step;
+  const double per_step = taken > 0 ? r.times.loop / taken : 0;
   PetscCall(PetscPrintf(comm, "  time         set-up %.3f s, time loop %.3f s (%.3g ms/step", r.times.setup,
                         r.times.loop, 1e3 * per_step));
   if (contact.active()) PetscCall(PetscPrintf(comm, ", of which contact %.3f s", contact.statistics().seconds));
@@ -111,9 +128,29 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
   if (o.gravity.squaredNorm() > 0)
     PetscCall(PetscPrintf(comm, ", gravitational %.6e J", (double)r.energy.gravitational));
   PetscCall(PetscPrintf(comm, "\n"));
-  if (!output.path.empty())
-    PetscCall(PetscPrintf(comm, "  output       %s (%" PetscInt_FMT " frames) and its .xdmf\n",
-                          output.path.c_str(), r.frames));
+  if (!output.path.empty()) {
+    PetscCall(PetscPrintf(comm, "  output       %s (%" PetscInt_FMT " frames) and its .xdmf", output.path.c_str(),
+                          r.frames));
+    if (r.checkpoint_step >= 0)
+      PetscCall(PetscPrintf(comm, "; checkpoint at step %" PetscInt_FMT, r.checkpoint_step));
+    PetscCall(PetscPrintf(comm, "\n"));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PrintInterruption(MPI_Comm comm, int signal, const IntegratorOptions &integration,
+                                 const OutputOptions &output, const RunReport &r) {
+  PetscFunctionBeginUser;
+  PetscCall(PetscFPrintf(comm, PETSC_STDERR, "softbody: stopped by %s after step %" PetscInt_FMT " of %" PetscInt_FMT
+                         " (t = %g s)", SignalName(signal), r.steps, integration.steps, (double)r.final_time));
+  if (!output.path.empty()) {
+    PetscCall(PetscFPrintf(comm, PETSC_STDERR, "; %s holds %" PetscInt_FMT " frames, marked incomplete",
+                           output.path.c_str(), r.frames));
+    if (r.checkpoint_step >= 0)
+      PetscCall(PetscFPrintf(comm, PETSC_STDERR, "; continue with -restart %s (checkpoint at step %" PetscInt_FMT ")",
+                             output.path.c_str(), r.checkpoint_step));
+  }
+  PetscCall(PetscFPrintf(comm, PETSC_STDERR, "\n"));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

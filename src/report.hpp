@@ -20,7 +20,10 @@ struct RunTimes {
 };
 
 struct RunReport {
-  PetscInt steps = 0;
+  PetscInt first_step = 0;        // step the run started from (a restart's checkpoint)
+  PetscInt steps = 0;             // steps taken since the original start
+  PetscInt checkpoint_step = -1;  // the last checkpoint written (-1: none)
+  std::string restarted_from;     // -restart file ("": a fresh start)
   PetscReal final_time = 0;
   EnergySample energy;  // at the end
   PetscInt frames = 0;
@@ -33,5 +36,10 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
                                const IntegratorOptions &integration, const OutputOptions &output,
                                const SolverStatistics &solver, KSP ksp, const ContactSolver &contact,
                                const RunReport &report);
+
+// Rank 0 prints, on stderr, the one line that says a signal stopped the run and
+// what the result file holds.
+PetscErrorCode PrintInterruption(MPI_Comm comm, int signal, const IntegratorOptions &integration,
+                                 const OutputOptions &output, const RunReport &report);
 
 }  // namespace softbody

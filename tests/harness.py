@@ -131,3 +131,77 @@ class Checks:
     def exit(self):
         print(f"{self.passed} passed, {self.failed} failed")
         sys.exit(1 if self.failed or not self.passed else 0)
+
+
+def mpi_env():
+    """The environment `run` gives mpirun (root allowed, oversubscription), for
+    scripts that start softbody themselves (signals, pseudo-terminals)."""
+    env = dict(os.environ)
+    env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
+    if os.geteuid() == 0:
+        env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
+        env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
+    return env
+
+
+def read_all_datasets(path):
+    """Every dataset of an HDF5 file as {name: numpy array}."""
+    import h5py
+    found = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, item: found.__setitem__(name, item[()]) if isinstance(item, h5py.Dataset)
+                     else None)
+    return found
+
+
+def xdmf_frames(xdmf_path):
+    """Reads an .xdmf written by softbody without ParaView: per listed frame, its
+    time and the positions and velocities its HDF hyperslabs select (resolved
+    with h5py against the .h5 beside it). Returns (times, positions, velocities)."""
+    import xml.etree.ElementTree as ET
+    import h5py
+    import numpy as np
+    root = ET.parse(xdmf_path).getroot()
+    folder = os.path.dirname(os.path.abspath(xdmf_path))
+    collection = root.find("Domain/Grid")
+    assert collection.get("CollectionType") == "Temporal"
+    times, positions, velocities = [], [], []
+
+    def resolve(item):
+        file_name, rest = item.text.strip().split(":", 1)
+        dataset, slab = rest.split("|")
+        start, stride, count, _ = [[int(v) for v in part.split()] for part in slab.split(":")]
+        with h5py.File(os.path.join(folder, file_name), "r") as f:
+            data = f[dataset]
+            index = tuple(slice(s, s + c * t, t) for s, t, c in zip(start, stride, count))
+            values = data[index]
+        return values.reshape([int(d) for d in item.get("Dimensions").split()])
+
+    for grid in collection.findall("Grid"):
+        times.append(float(grid.find("Time").get("Value")))
+        positions.append(resolve(grid.find("Geometry/DataItem")))
+        velocity = [a for a in grid.findall("Attribute") if a.get("Name") == "velocity"][0]
+        velocities.append(resolve(velocity.find("DataItem")))
+    return np.array(times), np.array(positions), np.array(velocities)
+
+
+def paraview_frames(args, xdmf_path, timeout=120):
+    """Reads an .xdmf with ParaView's own Xdmf3 reader (pvpython, Debian's
+    python3-paraview): (times, positions, velocities, cells per frame), or None
+    when pvpython is not installed."""
+    import shutil
+    import numpy as np
+    pvpython = shutil.which("pvpython")
+    if not pvpython:
+        return None
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "paraview_read.py")
+    out = os.path.join(args.work, os.path.basename(xdmf_path) + ".paraview.npz")
+    if os.path.exists(out):
+        os.remove(out)
+    result = subprocess.run([pvpython, "--force-offscreen-rendering", script, os.path.abspath(xdmf_path), out],
+                            capture_output=True, text=True, timeout=timeout)
+    if result.returncode != 0 or not os.path.exists(out):
+        raise RuntimeError("pvpython could not read " + xdmf_path + ":\n" + result.stdout[-2000:] +
+                           result.stderr[-2000:])
+    data = np.load(out)
+    return data["times"], data["positions"], data["velocities"], data["cells"]
