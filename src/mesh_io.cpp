@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cmath>
@@ -68,6 +69,17 @@ long ExpectCount(TextReader &in, const char *section) {
   return ParseCount(in, in.ExpectToken((std::string("number of ") + section).c_str()), section);
 }
 
+// How many rows to allocate for `count` rows of at least `tokens_per_row` tokens:
+// no more than the bytes left can hold (every token takes a character and a
+// separator). A count that the file cannot hold then costs no more memory than
+// the file itself, and the short section is still reported where the file ends.
+// Readers store a row only after reading all its tokens, so row r is stored only
+// when the bytes held r + 1 rows: within the rows allocated.
+Eigen::Index RowsToAllocate(const TextReader &in, long count, size_t tokens_per_row) {
+  const size_t fit = (in.remaining_bytes() + 1) / (2 * tokens_per_row);
+  return static_cast<Eigen::Index>(std::min(static_cast<size_t>(count), fit));
+}
+
 // True when the tet on these four rows of `vertices` has |V| <= kDegenerateVolume L^3
 // (the one degeneracy test of every reader).
 bool IsDegenerate(const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> &vertices,
@@ -107,27 +119,31 @@ TetMesh ReadMedit(const std::string &path) {
     } else if (keyword == "Vertices") {
       if (have_vertices) in.Fail("second Vertices section");
       const long n = ExpectCount(in, "vertices");
-      mesh.vertices.resize(n, 3);
+      mesh.vertices.resize(RowsToAllocate(in, n, 4), 3);  // rows "x y z ref"
       for (long v = 0; v < n; ++v) {
-        for (int c = 0; c < 3; ++c) mesh.vertices(v, c) = in.ExpectReal("vertex coordinate");
+        Eigen::RowVector3d x;
+        for (int c = 0; c < 3; ++c) x[c] = in.ExpectReal("vertex coordinate");
         in.ExpectInteger("vertex reference");
+        mesh.vertices.row(v) = x;
       }
       have_vertices = true;
     } else if (keyword == "Tetrahedra") {
       if (!have_vertices) in.Fail("Tetrahedra before Vertices");
       if (have_tets) in.Fail("second Tetrahedra section");
       const long n = ExpectCount(in, "tetrahedra");
-      mesh.tets.resize(n, 4);
+      mesh.tets.resize(RowsToAllocate(in, n, 5), 4);  // rows "a b c d ref"
       for (long t = 0; t < n; ++t) {
+        std::array<int32_t, 4> corners;
         for (int a = 0; a < 4; ++a) {
           const long index = in.ExpectInteger("tetrahedron vertex index");
           if (index < 1 || index > mesh.num_vertices())
             in.Fail("tetrahedron " + std::to_string(t + 1) + ": vertex index " +
                     std::to_string(index) + " out of range 1.." +
                     std::to_string(mesh.num_vertices()));
-          mesh.tets(t, a) = static_cast<int32_t>(index - 1);
+          corners[a] = static_cast<int32_t>(index - 1);
         }
         in.ExpectInteger("tetrahedron reference");
+        for (int a = 0; a < 4; ++a) mesh.tets(t, a) = corners[a];
         CheckTet(mesh, static_cast<int32_t>(t), in);
       }
       have_tets = true;
@@ -145,16 +161,7 @@ TetMesh ReadMedit(const std::string &path) {
 
 // --------------------------------------------------------------------- OFF
 
-namespace {
-
-// A polygon surface as read from an OFF file.
-struct OffSurface {
-  std::vector<Eigen::RowVector3d> vertices;
-  std::vector<long> vertex_lines;  // line of each vertex row
-  std::vector<std::vector<int32_t>> faces;
-};
-
-OffSurface ParseOff(const std::string &path) {
+OffSurface ReadOffSurface(const std::string &path) {
   TextReader in(path);
   OffSurface surface;
   std::vector<std::string_view> fields;
@@ -174,7 +181,8 @@ OffSurface ParseOff(const std::string &path) {
             " and " + std::to_string(nf) + ")");
 
   std::map<std::array<double, 3>, long> first_at;  // exact coordinates -> vertex
-  surface.vertices.reserve(nv);
+  surface.vertices.reserve(RowsToAllocate(in, nv, 3));  // rows "x y z"
+  surface.vertex_lines.reserve(surface.vertices.capacity());
   for (long v = 0; v < nv; ++v) {
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(nv) + " vertex rows, found " + std::to_string(v));
@@ -191,7 +199,7 @@ OffSurface ParseOff(const std::string &path) {
     surface.vertices.push_back(x);
     surface.vertex_lines.push_back(in.line());
   }
-  surface.faces.reserve(nf);
+  surface.faces.reserve(RowsToAllocate(in, nf, 4));  // rows "k i1 ... ik", k >= 3
   for (long f = 0; f < nf; ++f) {
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(nf) + " face rows, found " + std::to_string(f));
@@ -208,17 +216,21 @@ OffSurface ParseOff(const std::string &path) {
       if (index < 0 || index >= nv)
         in.Fail("face " + std::to_string(f) + ": vertex index " + std::to_string(index) +
                 " out of range 0.." + std::to_string(nv - 1));
-      for (long j = 0; j < i; ++j)
-        if (face[j] == index)
-          in.Fail("face " + std::to_string(f) + " repeats vertex " + std::to_string(index));
       face[i] = static_cast<int32_t>(index);
     }
+    std::vector<int32_t> sorted = face;  // O(k log k): a face may have many vertices
+    std::sort(sorted.begin(), sorted.end());
+    const auto repeated = std::adjacent_find(sorted.begin(), sorted.end());
+    if (repeated != sorted.end())
+      in.Fail("face " + std::to_string(f) + " repeats vertex " + std::to_string(*repeated));
     surface.faces.push_back(std::move(face));
   }
   if (in.NextLine(&fields))
     in.Fail("unexpected content after the " + std::to_string(nf) + " faces");
   return surface;
 }
+
+namespace {
 
 // A folder of our own under the system's temporary folder, removed with everything
 // in it when this object goes.
@@ -360,7 +372,8 @@ std::vector<Eigen::RowVector3d> ReadTetgenNodes(const fs::path &node_file, long 
   const long attributes = in.ExpectInteger("number of point attributes");
   const long markers = in.ExpectInteger("number of boundary markers");
   if (attributes < 0 || markers < 0 || markers > 1) in.Fail("bad .node header");
-  std::vector<Eigen::RowVector3d> points(n);
+  std::vector<Eigen::RowVector3d> points;
+  points.reserve(RowsToAllocate(in, n, 4));  // rows "index x y z"
   for (long v = 0; v < n; ++v) {
     const long index = in.ExpectInteger("point index");
     if (v == 0) {
@@ -368,7 +381,9 @@ std::vector<Eigen::RowVector3d> ReadTetgenNodes(const fs::path &node_file, long 
       *base = index;
     }
     if (index != *base + v) in.Fail("point index " + std::to_string(index) + " out of sequence");
-    for (int c = 0; c < 3; ++c) points[v][c] = in.ExpectReal("point coordinate");
+    Eigen::RowVector3d x;
+    for (int c = 0; c < 3; ++c) x[c] = in.ExpectReal("point coordinate");
+    points.push_back(x);
     for (long k = 0; k < attributes + markers; ++k) in.ExpectReal("point attribute or marker");
   }
   return points;
@@ -384,14 +399,17 @@ std::vector<std::array<int32_t, 4>> ReadTetgenElements(const fs::path &ele_file,
     in.Fail(std::to_string(corners) + "-node tetrahedra: only 4-node ones are supported");
   const long attributes = in.ExpectInteger("number of tetrahedron attributes");
   if (attributes < 0) in.Fail("negative number of tetrahedron attributes");
-  std::vector<std::array<int32_t, 4>> tets(n);
+  std::vector<std::array<int32_t, 4>> tets;
+  tets.reserve(RowsToAllocate(in, n, 5));  // rows "index a b c d"
   for (long t = 0; t < n; ++t) {
     in.ExpectInteger("tetrahedron index");
+    std::array<int32_t, 4> corners;
     for (int a = 0; a < 4; ++a) {
       const long index = in.ExpectInteger("tetrahedron corner") - base;
       if (index < 0 || index >= num_points) in.Fail("tetrahedron corner out of range");
-      tets[t][a] = static_cast<int32_t>(index);
+      corners[a] = static_cast<int32_t>(index);
     }
+    tets.push_back(corners);
     for (long k = 0; k < attributes; ++k) in.ExpectReal("tetrahedron attribute");
   }
   return tets;
@@ -439,7 +457,7 @@ std::string CheckTetgenSwitches(const std::string &switches) {
 }
 
 TetMesh ReadOff(const std::string &path, const MeshingOptions &meshing) {
-  const OffSurface surface = ParseOff(path);
+  const OffSurface surface = ReadOffSurface(path);
   const std::string bad_switches = CheckTetgenSwitches(meshing.tetgen_switches);
   if (!bad_switches.empty()) throw InputError(Where(path, 0, "TetGen switches " + bad_switches));
   if (!(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume)))
@@ -562,8 +580,11 @@ int32_t AddNode(TextReader &in, GmshMesh *gmsh) {
   return gmsh->num_nodes++;
 }
 
+// Reads "x y z" into `row` (stored once all three are read; see RowsToAllocate).
 void ReadPoint(TextReader &in, int32_t row, TetMesh *mesh) {
-  for (int c = 0; c < 3; ++c) mesh->vertices(row, c) = in.ExpectReal("node coordinate");
+  Eigen::RowVector3d x;
+  for (int c = 0; c < 3; ++c) x[c] = in.ExpectReal("node coordinate");
+  mesh->vertices.row(row) = x;
 }
 
 // The node tags of one element of `type` whose tag has been read; kept when it
@@ -590,7 +611,7 @@ void ReadElementNodes(TextReader &in, long tag, long type, GmshMesh *gmsh) {
 // MSH 2: "n", then n rows "tag x y z".
 void ReadNodes2(TextReader &in, GmshMesh *gmsh) {
   const long n = ExpectCount(in, "nodes");
-  gmsh->mesh.vertices.resize(n, 3);
+  gmsh->mesh.vertices.resize(RowsToAllocate(in, n, 4), 3);  // rows "tag x y z"
   for (long v = 0; v < n; ++v) ReadPoint(in, AddNode(in, gmsh), &gmsh->mesh);
 }
 
@@ -613,7 +634,7 @@ void ReadNodes4(TextReader &in, GmshMesh *gmsh) {
   const long n = ExpectCount(in, "nodes");
   in.ExpectInteger("smallest node tag");
   in.ExpectInteger("largest node tag");
-  gmsh->mesh.vertices.resize(n, 3);
+  gmsh->mesh.vertices.resize(RowsToAllocate(in, n, 4), 3);  // a tag and "x y z" per node
   for (long b = 0; b < blocks; ++b) {
     const long dim = in.ExpectInteger("entity dimension");
     if (dim < 0 || dim > 3) in.Fail("entity dimension " + std::to_string(dim) + " not in 0..3");

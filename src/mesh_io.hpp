@@ -2,6 +2,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "mesh.hpp"
 
@@ -60,6 +61,17 @@ TetMesh ReadMedit(const std::string &path);
 // the intersecting faces found by `tetgen -d`; for an open one, that it encloses no
 // volume), or when its output breaks the vertex-order promise above.
 TetMesh ReadOff(const std::string &path, const MeshingOptions &meshing = MeshingOptions());
+
+// The OFF surface as ReadOff reads and checks it, before TetGen runs.
+struct OffSurface {
+  std::vector<Eigen::RowVector3d> vertices;
+  std::vector<long> vertex_lines;  // line of each vertex row
+  std::vector<std::vector<int32_t>> faces;  // 0-based vertex indices, >= 3 each
+};
+
+// The first half of ReadOff: reads the OFF file and checks it as ReadOff does
+// (throws the same InputErrors for a malformed file) without running TetGen.
+OffSurface ReadOffSurface(const std::string &path);
 
 // gmsh .msh, ASCII, format 2.2 (also 2.0, 2.1) or 4.1: `$MeshFormat`, `$Nodes`
 // and `$Elements` sections; other sections ($PhysicalNames, $Entities, $Periodic,

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "element.hpp"
 #include "errors.hpp"
 #include "mesh_io.hpp"
 #include "options.hpp"
@@ -24,9 +25,12 @@ int64_t Scene::num_tets() const {
 void PlaceMesh(const Eigen::Vector3d &position, const Eigen::Vector4d &quaternion_wxyz,
                TetMesh *mesh) {
   const Eigen::Vector3d centroid = VolumeWeightedCentroid(*mesh);
-  const Eigen::Quaterniond q(quaternion_wxyz[0], quaternion_wxyz[1], quaternion_wxyz[2],
-                             quaternion_wxyz[3]);
-  const Eigen::Matrix3d rotation = q.normalized().toRotationMatrix();
+  // Scaled by its largest component first: normalising (1e200, 1e200, 0, 0) or
+  // (1e-160, 1e-160, 0, 0) directly overflows or underflows the squared norm.
+  const Eigen::Vector4d wxyz =
+      (quaternion_wxyz / quaternion_wxyz.cwiseAbs().maxCoeff()).normalized();
+  const Eigen::Quaterniond q(wxyz[0], wxyz[1], wxyz[2], wxyz[3]);
+  const Eigen::Matrix3d rotation = q.toRotationMatrix();
   for (int32_t v = 0; v < mesh->num_vertices(); ++v) {
     const Eigen::Vector3d rest = mesh->vertices.row(v).transpose() - centroid;
     mesh->vertices.row(v) = (rotation * rest + position).transpose();
@@ -59,13 +63,25 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
   Eigen::Vector4d quaternion;
   for (int c = 0; c < 3; ++c) position[c] = in.ParseReal(fields[5 + c], "position");
   for (int c = 0; c < 4; ++c) quaternion[c] = in.ParseReal(fields[8 + c], "quaternion");
-  if (!(quaternion.norm() > 0)) in.Fail("quaternion must be non-zero");
+  if (!(quaternion.cwiseAbs().maxCoeff() > 0)) in.Fail("quaternion must be non-zero");
   try {
     body.mesh = ReadTetMesh(body.mesh_path, meshing);
   } catch (const InputError &error) {  // say which scene line named the mesh
     in.Fail(std::string("mesh: ") + error.what());
   }
   PlaceMesh(position, quaternion, &body.mesh);
+  // Far from the origin (or with huge coordinates) a mesh loses its shape to
+  // rounding, or its centroid overflows.
+  if (!body.mesh.vertices.allFinite())
+    in.Fail("mesh " + body.mesh_path + ": placing it overflows (position or coordinates too large)");
+  for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
+    TetPositions X;
+    for (int a = 0; a < 4; ++a) X.row(a) = body.mesh.vertices.row(body.mesh.tets(t, a));
+    const double length = LongestEdge(X);
+    if (!(std::abs(SignedVolume(X)) > kDegenerateVolume * length * length * length))
+      in.Fail("mesh " + body.mesh_path + ": tetrahedron " + std::to_string(t + 1) +
+              " is degenerate once placed (position too far from the origin for the mesh's size)");
+  }
   return body;
 }
 
