@@ -124,8 +124,8 @@ class ImplicitEuler {
   // Collective. For a restart: sets the solver up once for the original run's
   // first step (positions x_first, time step dt_first), so that a solver that
   // keeps state from its first set-up holds what it held in the uninterrupted
-  // run (GAMG keeps its first near-null space and eigenvalue estimate through
-  // every later set-up). Nothing to do in linear mode.
+  // run (GAMG copies the near-null space at its first set-up and reuses the copy
+  // at every later one, until PCReset). Nothing to do in linear mode.
   PetscErrorCode PrimeSolver(Vec x_first, PetscReal dt_first);
   // Not collective. To be called after positions were changed outside Step.
   void PositionsChanged() { elastic_state_current_ = false; }
