@@ -115,7 +115,9 @@ void ProgressLine::Update(PetscInt step, PetscReal time, PetscInt iterations) {
   iterations_ = iterations;
   PetscLogDouble now;
   PetscCallVoid(PetscTime(&now));
-  if (now - printed_ < 0.25) return;
+  // The first step prints at once (the user sees the line and an ETA straight
+  // away), later ones at most four times a second; Finish prints the last.
+  if (step == last_ || (step != first_ + 1 && now - printed_ < 0.25)) return;
   printed_ = now;
   Print(false);
 }
