@@ -3,9 +3,12 @@
 // Collisions are part of the implicit step (see projected_solve.hpp): a free
 // vertex that the step would take inside an obstacle gets a velocity constraint
 // n . v = n . (s - x0) / dt, so that it ends the step on the obstacle's surface
-// (s its closest surface point, n the surface's outward normal; a vertex that is
-// already inside at the start of the step leaves at most a tenth of its body's
-// mean edge length per step faster than the obstacle); the step is then
+// (s its closest surface point, n the surface's outward normal; against a fixed
+// body s is where the vertex's path enters it and n that face's normal: near an
+// edge the closest surface point of the end point can lie on the neighbouring
+// face; a vertex already inside at the start of the step leaves at most a tenth
+// of its body's mean edge length per step faster than the obstacle, but more
+// than that deep inside another free body it only stops sinking); the step is then
 // solved again with the constraint, so the whole body feels the contact in the
 // same step. Obstacles: the ground half-space y < y0 (-ground; every free vertex
 // is checked), fixed bodies and the other free bodies (their tets tell inside,
@@ -172,6 +175,11 @@ class ContactSolver {
   // The first obstacle other than `body` and those in `skip` that contains p.
   bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip, SurfaceHit *hit) const;
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
+  // Whether p lies in one of the obstacle body's tets.
+  bool InsideBody(const Point &p, int32_t obstacle) const;
+  // Where the segment start -> end first enters the obstacle body through its
+  // surface (a boundary triangle crossed against its outward normal).
+  bool EntryOnBody(const Point &start, const Point &end, int32_t obstacle, SurfaceHit *hit) const;
   // Constrains owned vertex `local` (at x0, heading for `predicted`) against the
   // hit: it ends the step on the plane where the two sides meet, the overlap
   // split by inverse mass (all of it for a fixed obstacle or the ground), and

@@ -49,6 +49,26 @@ Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, con
   return *w = {1 - v - u, v, u}, a + v * ab + u * ac;
 }
 
+bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b, const Point &c,
+                            double *t, Eigen::Vector3d *w) {
+  // p + t (q - p) = a + u (b - a) + v (c - a), solved by Cramer's rule.
+  const Point d = q - p, ab = b - a, ac = c - a;
+  const Point h = d.cross(ac);
+  const double det = ab.dot(h);
+  const double scale = ab.norm() * ac.norm() * d.norm();
+  if (!(std::abs(det) > 1e-12 * scale)) return false;
+  const Point s = p - a;
+  const double u = s.dot(h) / det;
+  if (u < 0 || u > 1) return false;
+  const Point k = s.cross(ab);
+  const double v = d.dot(k) / det;
+  if (v < 0 || u + v > 1) return false;
+  *t = ac.dot(k) / det;
+  if (*t < 0 || *t > 1) return false;
+  *w = {1 - u - v, u, v};
+  return true;
+}
+
 void UniformGrid::Build(const std::vector<Box> &boxes) {
   bounds_ = Box();
   double edge_sum = 0;

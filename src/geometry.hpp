@@ -36,6 +36,12 @@ Eigen::Vector4d Barycentric(const Point &p, const Point &a, const Point &b, cons
 Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, const Point &c,
                              Eigen::Vector3d *weights);
 
+// Where the segment p -> q crosses the triangle (a, b, c) (Moeller & Trumbore
+// 1997): *t in [0, 1] the fraction of the segment and *weights the barycentric
+// coordinates of the crossing. False when it misses or runs parallel to the plane.
+bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b, const Point &c,
+                            double *t, Eigen::Vector3d *weights);
+
 // Uniform grid over the boxes of a set of items (tets or triangles): each item is
 // listed in every cell its box overlaps. Cell size h: the mean box edge, so an
 // item overlaps a few cells.

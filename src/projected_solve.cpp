@@ -1,6 +1,7 @@
 #include "projected_solve.hpp"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <map>
 
 namespace softbody {
@@ -20,24 +21,54 @@ void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &const
   for (const VelocityConstraint &c : constraints) by_vertex[c.vertex].push_back(&c);
   vertices_.clear();
   for (const auto &[vertex, list] : by_vertex) {
-    // Directions and targets: N^T v = c. Gram-Schmidt on N (dropping dependent
-    // directions); the prescribed part is the least-norm v in span(N) with N^T v = c.
-    const int k = static_cast<int>(list.size());
-    Eigen::MatrixXd N(3, k);
-    Eigen::VectorXd c(k);
-    for (int j = 0; j < k; ++j) {
-      N.col(j) = list[j]->normal;
-      c[j] = list[j]->velocity;
-    }
-    ConstrainedVertex entry{vertex, Eigen::Matrix3d::Zero(), 0, Eigen::Vector3d::Zero()};
-    for (int j = 0; j < k && entry.rank < 3; ++j) {
-      Eigen::Vector3d q = N.col(j);
-      for (int i = 0; i < entry.rank; ++i) q -= entry.basis.col(i).dot(q) * entry.basis.col(i);
-      if (q.norm() > 1e-6) entry.basis.col(entry.rank++) = q.normalized();
-    }
-    entry.prescribed = N.transpose().completeOrthogonalDecomposition().solve(c);
-    vertices_.push_back(entry);
+    std::vector<VelocityConstraint> own;
+    for (const VelocityConstraint *c : list) own.push_back(*c);
+    vertices_.push_back(CombineConstraints(vertex, own));
   }
+}
+
+ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<VelocityConstraint> &constraints) {
+  const int k = static_cast<int>(std::min<size_t>(constraints.size(), 3));
+  // Candidate active sets S (bit masks), each solved exactly: p = least-norm
+  // solution of N_S^T p = c_S, in span(N_S).
+  ConstrainedVertex best{vertex, Eigen::Matrix3d::Zero(), 0, Eigen::Vector3d::Zero()};
+  double best_violation = 1e300, best_norm = 1e300;
+  int best_size = 0, best_immobile = 0;
+  for (int mask = 1; mask < (1 << k); ++mask) {
+    Eigen::Matrix3d N = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    int size = 0, immobile = 0;
+    for (int j = 0; j < k; ++j)
+      if (mask & (1 << j)) {
+        N.col(size) = constraints[j].normal;
+        c[size++] = constraints[j].velocity;
+        immobile += constraints[j].immobile;
+      }
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(N.leftCols(size), Eigen::ComputeThinU | Eigen::ComputeThinV);
+    if (svd.singularValues()[size - 1] < kMinSeparation) continue;  // near-parallel directions
+    const Eigen::Vector3d p = N.leftCols(size).transpose().completeOrthogonalDecomposition().solve(c.head(size));
+    double violation = 0, scale = 0;
+    for (int j = 0; j < k; ++j) {
+      violation = std::max(violation, constraints[j].velocity - constraints[j].normal.dot(p));
+      scale = std::max(scale, std::abs(constraints[j].velocity));
+    }
+    violation = std::max(violation, 1e-12 * scale);  // round-off counts as kept
+    const double norm = p.norm();
+    const bool better =
+        violation < best_violation ||
+        (violation == best_violation &&
+         (size > best_size || (size == best_size && (immobile > best_immobile ||
+                                                     (immobile == best_immobile && norm < best_norm)))));
+    if (!better) continue;
+    best_violation = violation;
+    best_norm = norm;
+    best_size = size;
+    best_immobile = immobile;
+    best.rank = size;
+    best.basis.leftCols(size) = svd.matrixU();
+    best.prescribed = p;
+  }
+  return best;
 }
 
 void ProjectedSolver::Project(const PetscScalar *w, PetscScalar *y, bool project) const {

@@ -27,6 +27,7 @@ struct VelocityConstraint {
   PetscInt vertex;          // local vertex index (owned)
   Eigen::Vector3d normal;   // unit direction n
   PetscReal velocity;       // prescribed n . v (m/s)
+  bool immobile = false;    // from an obstacle that cannot yield (ground, fixed body)
 };
 // The constraints of one vertex: an orthonormal basis of their directions and
 // the velocity component in its span that satisfies them all.
@@ -36,6 +37,19 @@ struct ConstrainedVertex {
   int rank;
   Eigen::Vector3d prescribed;
 };
+
+// The constraints n_k . v = c_k of one vertex combined (directions unit). Two
+// directions less than ~6 degrees apart (smallest singular value of [n_1 n_2]
+// below kMinSeparation) cannot both hold exactly without a huge velocity
+// ((c_1 - c_2) / sin of their angle): of such a group only one is imposed. The
+// imposed set S is the largest one whose directions are well apart and whose
+// exact solution p (least norm) satisfies the others as n_k . p >= c_k (it takes
+// the vertex out of every obstacle at least as fast as asked); among equals the
+// one with more constraints from immobile obstacles (a left-out direction holds
+// only up to the free velocity's component along it), then the smallest |p|.
+// Pure; at most three constraints are considered.
+constexpr double kMinSeparation = 0.1;
+ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<VelocityConstraint> &constraints);
 
 class ProjectedSolver {
  public:
@@ -54,8 +68,7 @@ class ProjectedSolver {
   static PetscErrorCode ApplyPreconditioner(PC shell, Vec w, Vec y);
   // y = P w (project == true) or y = (I - P) w.
   void Project(const PetscScalar *w, PetscScalar *y, bool project) const;
-  // Groups the constraints by vertex (they must come vertex by vertex or not:
-  // any order).
+  // Groups the constraints by vertex (any order) and combines each vertex's.
   void GroupByVertex(const std::vector<VelocityConstraint> &constraints);
   PetscErrorCode ProjectVec(Vec w, Vec y, bool project) const;
 
