@@ -443,6 +443,11 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   PetscFunctionBeginUser;
   Timing timing(this);
   velocity_constraints_.clear();
+  tangent_constraints_.clear();
+  sticking_contact_.clear();
+  friction_in_solve_.clear();
+  slips_.clear();
+  solve_constraints_.clear();
   contacts_.clear();
   constrained_.assign(owned_natural_.size(), VertexObstacles());
   global_constraints_ = 0;
@@ -457,8 +462,10 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   for (const auto &[local, contact] : resting_) {
     const Point position(&x[3 * local]), velocity(&v[3 * local]);
     SurfaceHit hit;
-    if (ClosestOnBody(position + dt * velocity, contact.body, &hit))
+    if (ClosestOnBody(position + dt * velocity, contact.body, &hit)) {
       Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt, hit, false);
+      if (options_.friction > 0) Stick(local, velocity, hit);
+    }
   }
   PetscCall(VecRestoreArrayRead(x0, &x));
   PetscCall(VecRestoreArrayRead(v0, &v));
@@ -466,9 +473,68 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+void ContactSolver::Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit) {
+  const Point &n = hit.normal;
+  const Point relative = velocity - hit.velocity;
+  // The friction response of a sticking step leaves exactly no tangential
+  // relative velocity (up to round-off).
+  if ((relative - n.dot(relative) * n).norm() > 1e-9 * (velocity.norm() + hit.velocity.norm())) return;
+  const Point t1 = n.unitOrthogonal(), t2 = n.cross(t1);
+  tangent_constraints_.push_back({local, t1, t1.dot(hit.velocity), hit.inverse_mass == 0});
+  tangent_constraints_.push_back({local, t2, t2.dot(hit.velocity), hit.inverse_mass == 0});
+  sticking_contact_.push_back(contacts_.size() - 1);
+}
+
+PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released) {
+  PetscFunctionBeginUser;
+  Timing timing(this);
+  friction_in_solve_.resize(contacts_.size(), 0);
+  PetscInt local_released = 0;
+  std::vector<VelocityConstraint> kept_tangents;
+  std::vector<size_t> kept_contacts;
+  PetscScalar *b;
+  PetscCall(VecGetArray(rhs, &b));
+  // Contacts released in earlier rounds: their impulse follows the normal
+  // reaction of the latest solve (a fixed point over the rounds).
+  for (Slip &slip : slips_) {
+    const double limit = options_.friction * std::max(reactions[slip.contact], 0.0);
+    if (std::abs(limit - slip.magnitude) <= 1e-6 * std::max(limit, slip.magnitude)) continue;
+    for (int c = 0; c < 3; ++c) b[3 * slip.vertex + c] += (limit - slip.magnitude) * slip.direction[c];
+    slip.magnitude = limit;
+    ++local_released;
+  }
+  for (size_t k = 0; k < sticking_contact_.size(); ++k) {
+    const size_t contact = sticking_contact_[k], first = velocity_constraints_.size() + 2 * k;
+    const VelocityConstraint &t1 = solve_constraints_[first], &t2 = solve_constraints_[first + 1];
+    const Point impulse = reactions[first] * t1.normal + reactions[first + 1] * t2.normal;
+    const double limit = options_.friction * std::max(reactions[contact], 0.0);
+    if (impulse.norm() <= limit * (1 + 1e-9)) {
+      kept_tangents.insert(kept_tangents.end(), {t1, t2});
+      kept_contacts.push_back(contact);
+      continue;
+    }
+    // Kinetic friction for this step: mu lambda_n along the sticking reaction.
+    const Point direction = impulse / impulse.norm();
+    for (int c = 0; c < 3; ++c) b[3 * t1.vertex + c] += limit * direction[c];
+    slips_.push_back({contact, t1.vertex, direction, limit});
+    friction_in_solve_[contact] = 1;
+    ++local_released;
+  }
+  PetscCall(VecRestoreArray(rhs, &b));
+  tangent_constraints_.swap(kept_tangents);
+  sticking_contact_.swap(kept_contacts);
+  PetscInt all_released;
+  PetscCallMPI(MPIU_Allreduce(&local_released, &all_released, 1, MPIU_INT, MPI_SUM, comm_));
+  *released = all_released > 0;
+  if (*released) PetscCall(CountConstraints());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ContactSolver::CountConstraints() {
   PetscFunctionBeginUser;
-  const PetscInt local = static_cast<PetscInt>(velocity_constraints_.size());
+  solve_constraints_ = velocity_constraints_;
+  solve_constraints_.insert(solve_constraints_.end(), tangent_constraints_.begin(), tangent_constraints_.end());
+  const PetscInt local = static_cast<PetscInt>(solve_constraints_.size());
   PetscCallMPI(MPIU_Allreduce(&local, &global_constraints_, 1, MPIU_INT, MPI_SUM, comm_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -516,7 +582,7 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
   PetscCallMPI(MPIU_Allreduce(&found, &all_found, 1, MPIU_INT, MPI_SUM, comm_));
   stats_.collisions += all_found;
   *added = all_found > 0;
-  global_constraints_ += all_found;
+  if (*added) PetscCall(CountConstraints());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -564,20 +630,26 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
     // Velocity response of the constrained vertices: relative normal velocity
     // -e times the approach for a new contact, 0 for a resting one.
     resting_.clear();
+    // Sticking contacts: where their tangent pair's reactions sit.
+    std::vector<ptrdiff_t> tangent_reaction(contacts_.size(), -1);
+    for (size_t k = 0; k < sticking_contact_.size(); ++k)
+      tangent_reaction[sticking_contact_[k]] = static_cast<ptrdiff_t>(velocity_constraints_.size() + 2 * k);
     for (size_t i = 0; i < contacts_.size(); ++i) {
       const Contact &contact = contacts_[i];
       const VelocityConstraint &constraint = velocity_constraints_[i];
       const Point &n = constraint.normal;
       const Point velocity(&lv[3 * constraint.vertex]);
       Point dv = (contact.normal_velocity - n.dot(velocity)) * n;
-      // Coulomb friction: at most mu lambda / m off the tangential velocity
-      // relative to the obstacle's surface.
+      // Coulomb friction. A sticking contact was held in the solve, or slipped
+      // with mu lambda in it (ReleaseSlipping). A sliding one loses at most
+      // mu lambda / m of its tangential velocity relative to the obstacle here.
       SurfaceHit hit;
-      if (options_.friction > 0 && ClosestOnBody(Point(&lx[3 * constraint.vertex]), contact.body, &hit)) {
+      const double limit = options_.friction * std::max(reactions[i], 0.0);
+      const bool in_solve = tangent_reaction[i] >= 0 || (i < friction_in_solve_.size() && friction_in_solve_[i]);
+      if (!in_solve && options_.friction > 0 && ClosestOnBody(Point(&lx[3 * constraint.vertex]), contact.body, &hit)) {
         const Point relative = velocity - hit.velocity;
         const Point tangential = relative - n.dot(relative) * n;
-        const double slip = tangential.norm(), grip = options_.friction * std::max(reactions[i], 0.0) *
-                                                       inverse_mass_[contact.natural];
+        const double slip = tangential.norm(), grip = limit * inverse_mass_[contact.natural];
         if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
       }
       collisions.push_back({contact.natural, body_of_[contact.natural], Point(&lx[3 * constraint.vertex]), dv});

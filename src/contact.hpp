@@ -15,13 +15,17 @@
 // their boundary triangles give the closest surface point; every vertex of the
 // free bodies is checked). Detection uses uniform grids over tets and
 // triangles, never all pairs. After the step a contact vertex leaves with the
-// two sides' momentum-weighted normal velocity, and Coulomb friction (-friction
-// mu) takes from its tangential relative velocity at most mu lambda / m (lambda
-// the contact's normal impulse, m the vertex mass); it stays constrained while
-// the obstacle pushes it (lambda >= 0) and is released when it would pull.
-// (Friction acts on the contact vertices after the solve: a sliding body
-// decelerates at about mu g, but the last of its motion dies out over a few
-// steps instead of stopping at once.)
+// two sides' momentum-weighted normal velocity; it stays constrained while the
+// obstacle pushes it (lambda >= 0, lambda the contact's normal impulse) and is
+// released when it would pull. Coulomb friction (-friction mu): a sliding
+// contact loses at most mu lambda / m of its tangential velocity relative to the
+// obstacle after the step (m the vertex mass), and one that this leaves at rest
+// sticks: in the next step's solve two tangent constraints hold it to the
+// obstacle, so the whole body feels the friction. If their reaction exceeds
+// mu lambda, the contact slips: the tangents are dropped, the impulse mu lambda
+// along their reaction enters the right-hand side (following lambda over the
+// solve rounds), and the step is solved again. (Friction only after the solve
+// stopped a sliding block 47 % late: the stuck contact face let the body slide on.)
 // Restitution (-restitution e): new contacts closing faster than 2 |g| dt (what
 // gravity adds in a step; slower ones are resting contact) give the body back e
 // times the normal impulse J they received, as the uniform velocity change
@@ -119,11 +123,17 @@ class ContactSolver {
   // 2. After a solve giving v: constrains every unconstrained vertex that
   //    x0 + dt v puts inside an obstacle; *added tells any rank added one.
   PetscErrorCode AddPenetrations(Vec x0, Vec v, PetscReal dt, bool *added);
-  // The constraints for the solve (owned vertices, local numbering), and how
-  // many there are on all ranks (the same on every rank: decides collectively
-  // whether the step needs the constrained solve).
-  const std::vector<VelocityConstraint> &velocity_constraints() const { return velocity_constraints_; }
+  // The constraints for the solve (owned vertices, local numbering): one normal
+  // per contact, in contact order, then two tangents per sticking contact; and
+  // how many there are on all ranks (the same on every rank: decides
+  // collectively whether the step needs the constrained solve).
+  const std::vector<VelocityConstraint> &velocity_constraints() const { return solve_constraints_; }
   PetscInt global_constraint_count() const { return global_constraints_; }
+  // 2b. After a solve that added no contact: a sticking contact whose tangential
+  //    reaction exceeds mu times its normal one slips instead: its tangent pair
+  //    is dropped and the Coulomb impulse mu lambda_n along the reaction goes
+  //    into rhs (owned entries) for the next solve; *released tells any rank did.
+  PetscErrorCode ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released);
   // 3. After x1 = x0 + dt v1 with the constraints' reactions: velocity response,
   //    impulse spreading, resting contacts for the next step, last-resort
   //    projection, distance constraints. *changed: x or v modified here.
@@ -223,9 +233,25 @@ class ContactSolver {
   std::vector<double> body_mass_;          // total lumped mass per body (kg)
   double bounce_speed_ = 0;                // slower impacts do not bounce (m/s)
   PetscErrorCode Bounce(const std::vector<PetscReal> &reactions, Vec v);
-  std::vector<VelocityConstraint> velocity_constraints_;
+  std::vector<VelocityConstraint> velocity_constraints_;  // normals, parallel to contacts_
+  // Static friction: tangent pairs (t1, t2) of sticking contacts, and the contact of each pair.
+  std::vector<VelocityConstraint> tangent_constraints_;
+  std::vector<size_t> sticking_contact_;
+  std::vector<char> friction_in_solve_;  // per contact: its friction acted in the solve
+  struct Slip {  // a released sticking contact: impulse magnitude along direction in rhs
+    size_t contact;
+    PetscInt vertex;
+    Point direction;
+    double magnitude;
+  };
+  std::vector<Slip> slips_;
+  std::vector<VelocityConstraint> solve_constraints_;  // normals, then tangents
   PetscInt global_constraints_ = 0;
   PetscErrorCode CountConstraints();
+  // Adds the tangent pair of the contact just constrained when it sticks: its
+  // velocity relative to the obstacle has no tangential part (it stuck in the
+  // last step).
+  void Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit);
   std::vector<Contact> contacts_;
   std::vector<VertexObstacles> constrained_;  // per local vertex
   std::vector<std::pair<PetscInt, Contact>> resting_;  // kept for the next step

@@ -405,13 +405,18 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
   PetscCall(VecCopy(x, x_start_));
   PetscCall(contact->BeginStep(x_start_, v, dt_));
+  // Sticking contacts that would need more than Coulomb's friction slip (their
+  // friction impulse goes into rhs_) and the step is solved again.
   constexpr int kMaxRounds = 20;
-  bool added = true;
-  for (int round = 0; added && round < kMaxRounds; ++round) {
+  bool again = true;
+  for (int round = 0; again && round < kMaxRounds; ++round) {
     PetscCall(Solve(v, contact));
+    bool added, released = false;
     PetscCall(contact->AddPenetrations(x_start_, v, dt_, &added));
+    if (!added) PetscCall(contact->ReleaseSlipping(reactions_, rhs_, &released));
+    again = added || released;
   }
-  if (added) PetscCall(Solve(v, contact));
+  if (again) PetscCall(Solve(v, contact));
   PetscCall(VecWAXPY(x, dt_, v, x_start_));  // x1 = x0 + dt v1
   bool changed;
   PetscCall(contact->EndStep(x, v, reactions_, &changed));

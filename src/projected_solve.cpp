@@ -28,7 +28,7 @@ void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &const
 }
 
 ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<VelocityConstraint> &constraints) {
-  const int k = static_cast<int>(std::min<size_t>(constraints.size(), 3));
+  const int k = static_cast<int>(std::min<size_t>(constraints.size(), 6));
   // Candidate active sets S (bit masks), each solved exactly: p = least-norm
   // solution of N_S^T p = c_S, in span(N_S).
   ConstrainedVertex best{vertex, Eigen::Matrix3d::Zero(), 0, Eigen::Vector3d::Zero()};
@@ -37,6 +37,9 @@ ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<Velocity
   for (int mask = 1; mask < (1 << k); ++mask) {
     Eigen::Matrix3d N = Eigen::Matrix3d::Zero();
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    int members = 0;
+    for (int j = 0; j < k; ++j) members += (mask >> j) & 1;
+    if (members > 3) continue;  // at most three independent directions
     int size = 0, immobile = 0;
     for (int j = 0; j < k; ++j)
       if (mask & (1 << j)) {

@@ -47,7 +47,8 @@ struct ConstrainedVertex {
 // the vertex out of every obstacle at least as fast as asked); among equals the
 // one with more constraints from immobile obstacles (a left-out direction holds
 // only up to the free velocity's component along it), then the smallest |p|.
-// Pure; at most three constraints are considered.
+// Pure; the first six constraints are considered (a contact with its two
+// friction tangents and the normals of up to three obstacles).
 constexpr double kMinSeparation = 0.1;
 ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<VelocityConstraint> &constraints);
 

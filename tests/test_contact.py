@@ -31,9 +31,12 @@ at 0.75 m, a 0.75 m fall to the ground).
 (e) Sliding with Coulomb friction 0.5: decelerates at mu g (+ mass damping,
     10 %) while sliding and stops (centroid speed < 1 % of the start) within
     1 s, never sooner than Coulomb's law allows (0.9 x the rigid stopping time
-    with mass damping). Friction acts on the contact vertices after the solve
-    (contact.hpp), so the last of the motion dies out over a few steps: the stop
-    comes later than the rigid v / (mu g), which is printed for reference.
+    with mass damping). Against the rigid block's backward-Euler history
+    v_{n+1} = (v_n - mu g dt) / (1 + a dt): stopping distance within 10 %
+    (measured +7.5 %) and the time to fall below 1 % of the start speed within
+    20 % (measured +12.5 %). With friction applied only after the solve the stop
+    came 47 % late (0.59 s): a stuck contact face let the rest of the body
+    slide on; sticking contacts are now held in the solve (contact.hpp).
     Frictionless sliding decays only by the mass damping, v0 / (1 + a dt)^n (1e-6).
 (f) -impulse_spreading changes the top face's velocity at the impact frame.
 (g) -dt_schedule 0.5:0.005: the /time increments, the summary's count, and the
@@ -318,6 +321,26 @@ else:
                  f"(e) stopping time {t_stop:.2f} s, not sooner than Coulomb allows: rigid v / (mu g) = "
                  f"{analytic:.3f} s, with the mass damping ln(1 + a v / (mu g)) / a = {with_damping:.3f} s "
                  f"({100 * (t_stop / analytic - 1):+.1f} % of the rigid time)")
+    # The rigid block's discrete history: speed and distance until it stops,
+    # and the time it first falls below 1 % of the start speed.
+    v, distance, below = V0, 0.0, None
+    for step in range(1, 1000):
+        v = (v - mu * G * 0.01) / (1 + ALPHA * 0.01)
+        if v <= 0:
+            break
+        distance += v * 0.01
+        if below is None and v < 0.01 * V0:
+            below = step * 0.01
+    below = below if below is not None else step * 0.01
+    cx = e1["positions"][:, :, 0] @ masses / masses.sum()
+    slid = cx[-1] - cx[0]
+    checks.check(abs(slid / distance - 1) < 0.10,
+                 f"(e) stopping distance {slid:.4f} m vs the rigid block's backward-Euler {distance:.4f} m "
+                 f"({100 * (slid / distance - 1):+.1f} %, within 10 %; continuous v^2 / (2 mu g) = "
+                 f"{V0 ** 2 / (2 * mu * G):.4f} m)")
+    checks.check(abs(t_stop / below - 1) < 0.20,
+                 f"(e) below 1 % of the start speed at t = {t_stop:.2f} s vs the rigid block's backward-Euler "
+                 f"{below:.2f} s ({100 * (t_stop / below - 1):+.1f} %, within 20 %)")
     # Diagnosis: once the contact face sticks, the speed decays by a constant
     # factor per step instead of stopping; compare it with the contact layer's mass.
     Xr = e1["mesh/rest_positions"]
