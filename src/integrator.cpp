@@ -2,9 +2,11 @@
 
 #include <cmath>
 
+#include "log_stages.hpp"
 #include "options.hpp"
 #include "text_reader.hpp"
 #include "solver.hpp"
+#include "warp_preconditioner.hpp"
 
 namespace softbody {
 
@@ -95,16 +97,16 @@ ImplicitEuler::~ImplicitEuler() {
   KSPDestroy(&ksp_);
   MatDestroy(&A_);
   MatDestroy(&K_);
+  MatDestroy(&A_linear_);
   VecDestroy(&elastic_force_);
   VecDestroy(&rhs_);
   VecDestroy(&displacement_);
   VecScatterDestroy(&touched_scatter_);
   VecDestroy(&x_touched_);
   VecDestroy(&X_touched_);
-  VecDestroy(&force_touched_);
 }
 
-PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
+PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                     const LocalElements &elements, Vec rest_positions,
                                     Vec lumped_mass, const IntegratorOptions &options) {
   PetscFunctionBeginUser;
@@ -124,13 +126,12 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
     for (PetscInt i = 0; i < n; ++i) f[i] *= options.gravity[i % 3];
     PetscCall(VecRestoreArray(gravity_force_, &f));
   }
-  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_TRUE, &A_));
-  PetscInt local_dofs;
-  PetscCall(VecGetLocalSize(rest_, &local_dofs));
-  values_.resize(144 * elements.size() + local_dofs);
-
+  PetscCall(assembler_.Setup(comm, scene, layout, options.shear_scale, rest_));
+  PetscCall(assembler_.CreateMatrix(&A_));
   if (options.mode == MODE_LINEAR) {
-    PetscCall(CreateStiffnessMatrix(comm, layout, elements, options.shear_scale, &K_));
+    StageScope stage(Stages().assembly);
+    PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &K_));
+    PetscCall(assembler_.Fill(K_, false, nullptr, 1.0, nullptr, 0.0, nullptr, nullptr));
     PetscCall(VecDuplicate(rest_, &displacement_));
   }
   {
@@ -142,7 +143,6 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
                             PETSC_COPY_VALUES, &from));
     PetscCall(VecCreateSeq(PETSC_COMM_SELF, 3 * touched, &x_touched_));
     PetscCall(VecDuplicate(x_touched_, &X_touched_));
-    PetscCall(VecDuplicate(x_touched_, &force_touched_));
     PetscCall(VecScatterCreate(rest_, from, x_touched_, nullptr, &touched_scatter_));
     PetscCall(ISDestroy(&from));
     PetscCall(VecScatterBegin(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
@@ -156,6 +156,14 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
   PetscBool gamg;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCGAMG, &gamg));
   gamg_ = gamg;
+  PetscBool warp;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
+  if (warp) {
+    // The warp preconditioner: A0 = the linear system, factorised per time step size.
+    PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &A_linear_));
+    PetscCall(PCWarpSetLinearOperator(pc, A_linear_));
+    assembler_.ComputeVertexRotations(true);
+  }
   PetscCall(SetTimeStep(options.dt));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -166,12 +174,24 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   dt_ = dt;
   if (options_.mode == MODE_COROTATIONAL) {
     elastic_state_current_ = false;  // A depends on dt: refilled at the next step
+    if (A_linear_) {
+      StageScope stage(Stages().assembly);
+      PetscCall(assembler_.Fill(A_linear_, false, nullptr, options_.beta * dt + dt * dt, mass_,
+                                1.0 + options_.alpha * dt, nullptr, nullptr));
+    }
     PetscFunctionReturn(PETSC_SUCCESS);
   }
   const PetscReal a = options_.alpha, b = options_.beta;
-  LinearStiffnessValues(*elements_, options_.shear_scale, b * dt + dt * dt, &values_);
-  PetscCall(SetElasticMatrixValues(mass_, 1.0 + a * dt, &values_, A_));
   PetscLogDouble start, end;
+  {
+    StageScope stage(Stages().assembly);
+    PetscCall(PetscTime(&start));
+    PetscCall(assembler_.Fill(A_, false, nullptr, b * dt + dt * dt, mass_, 1.0 + a * dt, nullptr, nullptr));
+    PetscCall(PetscTime(&end));
+    stats_.assemble_seconds = end - start;
+    ++stats_.assemblies;
+  }
+  StageScope stage(Stages().factorisation);
   PetscCall(PetscTime(&start));
   PetscCall(KSPSetOperators(ksp_, A_, A_));
   PetscCall(KSPSetUp(ksp_));
@@ -197,27 +217,23 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     PetscCall(VecWAXPY(displacement_, -1.0, rest_, x));
     PetscCall(MatMult(K_, displacement_, elastic_force_));
   } else {
-    PetscCall(VecScatterBegin(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
-    const PetscScalar *x_touched, *X_touched;
-    PetscScalar *force_touched;
-    PetscCall(VecGetArrayRead(x_touched_, &x_touched));
-    PetscCall(VecGetArrayRead(X_touched_, &X_touched));
-    PetscCall(VecGetArrayWrite(force_touched_, &force_touched));
+    // A = (1 + a dt) M + (b dt + dt^2) sum_e R K_e R^T, f_el and the energy in one pass.
+    StageScope stage(Stages().assembly);
     const PetscReal a = options_.alpha, b = options_.beta;
-    const double local_energy = CorotatedStiffnessValues(
-        *elements_, options_.shear_scale, x_touched, X_touched, b * dt_ + dt_ * dt_, &values_,
-        force_touched);
-    PetscCall(VecRestoreArrayRead(x_touched_, &x_touched));
-    PetscCall(VecRestoreArrayRead(X_touched_, &X_touched));
-    PetscCall(VecRestoreArrayWrite(force_touched_, &force_touched));
-    PetscCall(SetElasticMatrixValues(mass_, 1.0 + a * dt_, &values_, A_));
-    PetscCall(VecZeroEntries(elastic_force_));
-    PetscCall(VecScatterBegin(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
-    PetscCall(VecScatterEnd(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
-    PetscCall(MPIU_Allreduce(&local_energy, &elastic_energy_, 1, MPIU_REAL, MPIU_SUM,
-                             PetscObjectComm((PetscObject)x)));
+    PetscLogDouble start, end;
+    PetscCall(PetscTime(&start));
+    PetscCall(assembler_.Fill(A_, true, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_, elastic_force_,
+                              &elastic_energy_));
+    PetscCall(PetscTime(&end));
+    stats_.assemble_seconds = end - start;
+    ++stats_.assemblies;
     if (gamg_) PetscCall(UpdateNearNullSpace(x));
+    if (A_linear_) {
+      PC pc;
+      PetscCall(KSPGetPC(ksp_, &pc));
+      const std::vector<double> &rotations = assembler_.vertex_rotations();
+      PetscCall(PCWarpSetRotations(pc, static_cast<PetscInt>(rotations.size() / 9), rotations.data()));
+    }
   }
   elastic_state_current_ = true;
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -227,12 +243,24 @@ PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
   PetscFunctionBeginUser;
   KSPConvergedReason reason = KSP_CONVERGED_ITS;
   PetscInt iterations = 0;
+  if (options_.mode == MODE_COROTATIONAL) {
+    // The preconditioner's set-up for the refilled A, timed on its own stage.
+    StageScope stage(Stages().factorisation);
+    PC pc;
+    PetscLogDouble start, end;
+    PetscCall(PetscTime(&start));
+    PetscCall(KSPGetPC(ksp_, &pc));
+    PetscCall(PCSetUp(pc));
+    PetscCall(PetscTime(&end));
+    stats_.last_setup_seconds = end - start;
+  }
   if (!contact || contact->global_constraint_count() == 0) {
     PetscCall(KSPSolve(ksp_, rhs_, v));
     PetscCall(KSPGetConvergedReason(ksp_, &reason));
     PetscCall(KSPGetIterationNumber(ksp_, &iterations));
     reactions_.clear();
   } else {
+    StageScope stage(Stages().contact);
     PetscCall(projected_.Solve(ksp_, rhs_, contact->velocity_constraints(), v, &reactions_, &iterations));
     ++stats_.contact_solves;
     stats_.contact_iterations += iterations;
@@ -267,17 +295,24 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   // until the step takes no further vertex inside an obstacle.
   if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
   PetscCall(VecCopy(x, x_start_));
-  PetscCall(contact->BeginStep(x_start_, v, dt_));
+  {
+    StageScope stage(Stages().contact);
+    PetscCall(contact->BeginStep(x_start_, v, dt_));
+  }
   constexpr int kMaxRounds = 20;
   bool added = true;
   for (int round = 0; added && round < kMaxRounds; ++round) {
     PetscCall(Solve(v, contact));
+    StageScope stage(Stages().contact);
     PetscCall(contact->AddPenetrations(x_start_, v, dt_, &added));
   }
   if (added) PetscCall(Solve(v, contact));
   PetscCall(VecWAXPY(x, dt_, v, x_start_));  // x1 = x0 + dt v1
   bool changed;
-  PetscCall(contact->EndStep(x, v, reactions_, &changed));
+  {
+    StageScope stage(Stages().contact);
+    PetscCall(contact->EndStep(x, v, reactions_, &changed));
+  }
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }

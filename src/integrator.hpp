@@ -31,6 +31,7 @@
 #include "assembly.hpp"
 #include "contact.hpp"
 #include "projected_solve.hpp"
+#include "row_assembly.hpp"
 
 namespace softbody {
 
@@ -63,6 +64,9 @@ struct SolverStatistics {
   PetscInt min_iterations = PETSC_MAX_INT;
   PetscInt max_iterations = 0;
   PetscLogDouble factor_seconds = 0;  // wall time of the last (re)factorisation/set-up
+  PetscLogDouble assemble_seconds = 0;  // wall time of the last fill of A (linear: with K)
+  PetscLogDouble last_setup_seconds = 0;  // preconditioner set-up inside the last step
+  PetscInt assemblies = 0;            // fills of A
   PetscInt time_step_changes = 0;     // SetTimeStep calls after the first
   PetscInt contact_solves = 0;        // solves with contact constraints
   PetscInt contact_iterations = 0;    // their CG iterations
@@ -77,8 +81,9 @@ class ImplicitEuler {
 
   // Collective. Creates the matrices and the solver for options.dt (linear mode:
   // assembles and factorises A). rest_positions and lumped_mass are referenced.
-  PetscErrorCode Setup(MPI_Comm comm, const DofLayout &layout, const LocalElements &elements,
-                       Vec rest_positions, Vec lumped_mass, const IntegratorOptions &options);
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                       const LocalElements &elements, Vec rest_positions, Vec lumped_mass,
+                       const IntegratorOptions &options);
   // Collective. New time step size (s); linear mode refills A and refactorises.
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step; the external
@@ -94,6 +99,11 @@ class ImplicitEuler {
   PetscErrorCode Energies(Vec x, Vec v, EnergySample *energy);
 
   KSP solver() const { return ksp_; }
+  // The system matrix A and (linear mode) the rest stiffness K (null in corotational mode).
+  Mat system_matrix() const { return A_; }
+  Mat stiffness_matrix() const { return K_; }
+  // Elements this rank's assembly computes (its own and those shared with a neighbour).
+  size_t assembled_elements() const { return assembler_.num_elements(); }
   PetscReal time_step() const { return dt_; }
   const SolverStatistics &statistics() const { return stats_; }
 
@@ -121,14 +131,16 @@ class ImplicitEuler {
   PetscReal elastic_energy_ = 0;           // corotational mode (linear: in Energies)
   bool elastic_state_current_ = false;
   bool gamg_ = false;                     // the PC uses the near-null space
-  CooValues values_;                      // A's COO values
+  RowAssembler assembler_;                // fills A (and K) straight into their CSR values
   // Linear mode: the rest stiffness and a work vector for x - X.
   Mat K_ = nullptr;
+  // Corotational mode with the warp preconditioner: A0, the linear system.
+  Mat A_linear_ = nullptr;
   Vec displacement_ = nullptr;
   // Positions of the vertices the local elements touch (corotational steps,
   // element-wise energies).
   VecScatter touched_scatter_ = nullptr;
-  Vec x_touched_ = nullptr, X_touched_ = nullptr, force_touched_ = nullptr;
+  Vec x_touched_ = nullptr, X_touched_ = nullptr;
   SolverStatistics stats_;
 };
 

@@ -22,6 +22,7 @@
 #include "deformation.hpp"
 #include "errors.hpp"
 #include "integrator.hpp"
+#include "log_stages.hpp"
 #include "output.hpp"
 #include "partition.hpp"
 #include "report.hpp"
@@ -82,10 +83,8 @@ class Timed {
 
 PetscErrorCode Run(MPI_Comm comm) {
   PetscFunctionBeginUser;
-  PetscLogStage setup_stage, step_stage, output_stage;
-  PetscCall(PetscLogStageRegister("Set-up", &setup_stage));
-  PetscCall(PetscLogStageRegister("Time steps", &step_stage));
-  PetscCall(PetscLogStageRegister("Output", &output_stage));
+  PetscCall(RegisterLogStages());
+  const PetscLogStage setup_stage = Stages().setup, step_stage = Stages().step, output_stage = Stages().output;
   RunReport report;
   std::optional<Timed> setup_timer(std::in_place, setup_stage, &report.times.setup);
 
@@ -129,7 +128,7 @@ PetscErrorCode Run(MPI_Comm comm) {
   ImplicitEuler integrator;
   integration.dt = TimeStepAt(integration, 0.0);
   if (has_unknowns)
-    PetscCall(integrator.Setup(comm, layout, elements, state.rest_positions, state.lumped_mass,
+    PetscCall(integrator.Setup(comm, scene, layout, elements, state.rest_positions, state.lumped_mass,
                                integration));
   if (!output.matrix_dir.empty() && has_unknowns)
     PetscCall(ExportMatrices(output.matrix_dir, layout, elements, integration.shear_scale,

@@ -3,10 +3,21 @@
 #include <sstream>
 #include <string>
 
+#include "supernodal.hpp"
+#include "warp_preconditioner.hpp"
+
 namespace softbody {
+
+PetscErrorCode RegisterPreconditioners() {
+  PetscFunctionBeginUser;
+  PetscCall(RegisterSupernodalPC());
+  PetscCall(RegisterWarpPC());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
 PetscErrorCode ApplyPresetDefaults(const char *preset) {
   PetscFunctionBeginUser;
+  PetscCall(RegisterPreconditioners());
   // PetscOptionsInsertString knows no comments: drop them line by line.
   std::istringstream lines(preset);
   std::string line, options;
@@ -22,6 +33,7 @@ PetscErrorCode ApplyPresetDefaults(const char *preset) {
 
 PetscErrorCode CreateSolver(Mat A, Vec coordinates, KSP *ksp) {
   PetscFunctionBeginUser;
+  PetscCall(RegisterPreconditioners());
   PetscCall(MatSetOption(A, MAT_SPD, PETSC_TRUE));
   PetscCall(MatSetOption(A, MAT_SPD_ETERNAL, PETSC_TRUE));
   MatNullSpace rigid_body_modes;

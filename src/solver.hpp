@@ -14,6 +14,10 @@ namespace softbody {
 extern const char *const kDirectPreset;  // config/direct.opts
 extern const char *const kCgGamgPreset;  // config/cg-gamg.opts
 
+// Not collective. Makes softbody's own PC types known to PETSc (once):
+// "supernodal" (supernodal.hpp) and "warp" (warp_preconditioner.hpp).
+PetscErrorCode RegisterPreconditioners();
+
 // Collective. Inserts the preset's options where the command line sets none.
 PetscErrorCode ApplyPresetDefaults(const char *preset);
 
