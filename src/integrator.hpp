@@ -98,7 +98,13 @@ class ImplicitEuler {
   // the gravitational energy is -sum_i m_i g . x_i (zero at the origin).
   PetscErrorCode Energies(Vec x, Vec v, EnergySample *energy);
 
+  // Collective. Fills A `repeats` more times as a step would (linear: the rest
+  // stiffness; corotational: at positions x, with forces and energy) and
+  // returns each fill's wall time (s); A's values stay the same. For -bench.
+  PetscErrorCode TimeAssembly(Vec x, PetscInt repeats, std::vector<double> *seconds);
+
   KSP solver() const { return ksp_; }
+  ElasticityMode mode() const { return options_.mode; }
   // The system matrix A and (linear mode) the rest stiffness K (null in corotational mode).
   Mat system_matrix() const { return A_; }
   Mat stiffness_matrix() const { return K_; }

@@ -18,6 +18,7 @@
 #include <optional>
 
 #include "assembly.hpp"
+#include "benchmark.hpp"
 #include "contact.hpp"
 #include "deformation.hpp"
 #include "errors.hpp"
@@ -32,7 +33,8 @@
 static const char help[] =
     "softbody: implicit finite-element soft-body simulation (PETSc + MPI).\n"
     "Usage: mpirun -n 2 softbody -scene SCENE.txt [-output OUT.h5] [options] [PETSc options]\n"
-    "Solver presets: -options_file config/direct.opts (default), config/cg-gamg.opts, ...\n";
+    "Solver presets: -options_file config/direct.opts (linear default), config/cg-warp.opts (corotational\n"
+    "default), config/cg-gamg.opts, config/direct-mumps.opts, ...\n";
 
 using namespace softbody;
 
@@ -94,11 +96,13 @@ PetscErrorCode Run(MPI_Comm comm) {
   IntegratorOptions integration;
   ContactOptions contact_options;
   OutputOptions output;
+  BenchmarkOptions bench_options;
   PetscCall(ProcessSceneOptions(comm, &scene_options));
   PetscCall(ProcessIntegratorOptions(comm, &integration));
   PetscCall(ProcessContactOptions(comm, &contact_options));
   PetscCall(ProcessDeformationOptions(comm, &deform_text));
   PetscCall(ProcessOutputOptions(comm, &output));
+  PetscCall(ProcessBenchmarkOptions(comm, &bench_options));
   PetscBool help;
   PetscCall(PetscOptionsHasHelp(nullptr, &help));
   if (help) {
@@ -112,6 +116,13 @@ PetscErrorCode Run(MPI_Comm comm) {
   PetscCall(LoadScene(comm, scene_options, &scene));
   std::vector<Deformation> deformations;
   PetscCall(ParseDeformations(comm, deform_text, scene, &deformations));
+  {  // Bodies that nothing can set in motion add no unknowns (partition.hpp).
+    MotionSources sources{integration.gravity.squaredNorm() > 0, bool(contact_options.ground),
+                          !contact_options.constraints_path.empty() || contact_options.edge_bounds,
+                          std::vector<bool>(scene.bodies.size(), false)};
+    for (const Deformation &d : deformations) sources.deformed[d.body] = true;
+    MarkBodiesAtRest(sources, &scene);
+  }
 
   // 3. Free vertices, METIS partition, contiguous block per rank.
   DofLayout layout;
@@ -152,8 +163,10 @@ PetscErrorCode Run(MPI_Comm comm) {
   // 7. Time loop: solve, then collisions and constraints; a frame every
   //    -output_every steps.
   PetscReal time = 0;
+  Benchmark benchmark(bench_options);
   for (PetscInt step = 1; step <= integration.steps; ++step) {
     const bool frame = writer && step % output.every == 0;
+    const PetscLogDouble loop_before = report.times.loop;
     {
       Timed timer(step_stage, &report.times.loop);
       const PetscReal dt = TimeStepAt(integration, time);
@@ -166,6 +179,7 @@ PetscErrorCode Run(MPI_Comm comm) {
       if (has_unknowns && (frame || step == integration.steps))
         PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
     }
+    benchmark.RecordStep(report.times.loop - loop_before, integrator.statistics());
     report.steps = step;
     report.final_time = time;
     if (frame) {
@@ -173,19 +187,23 @@ PetscErrorCode Run(MPI_Comm comm) {
       PetscCall(writer->WriteFrame(time, state.positions, state.velocities, report.energy));
     }
   }
+  if (has_unknowns) PetscCall(benchmark.Finish(comm, scene, &integrator, state.positions));
   if (writer) {
     const SolverStatistics &solver = integrator.statistics();
-    PetscCall(writer->Close({{"setup_seconds", report.times.setup},
-                             {"loop_seconds", report.times.loop},
-                             {"output_seconds", report.times.output},
-                             {"steps", double(report.steps)},
-                             {"final_time", report.final_time},
-                             {"ranks", double(layout.size)},
-                             {"dofs", 3.0 * layout.num_free()},
-                             {"solves", double(solver.solves)},
-                             {"solver_iterations", double(solver.total_iterations)},
-                             {"contact_solves", double(solver.contact_solves)},
-                             {"contact_seconds", contact.statistics().seconds}}));
+    std::vector<std::pair<std::string, double>> statistics = {
+        {"setup_seconds", report.times.setup},
+        {"loop_seconds", report.times.loop},
+        {"output_seconds", report.times.output},
+        {"steps", double(report.steps)},
+        {"final_time", report.final_time},
+        {"ranks", double(layout.size)},
+        {"dofs", 3.0 * layout.num_free()},
+        {"solves", double(solver.solves)},
+        {"solver_iterations", double(solver.total_iterations)},
+        {"contact_solves", double(solver.contact_solves)},
+        {"contact_seconds", contact.statistics().seconds}};
+    statistics.insert(statistics.end(), benchmark.attributes().begin(), benchmark.attributes().end());
+    PetscCall(writer->Close(statistics));
     report.frames = writer->frames();
   }
 

@@ -47,7 +47,9 @@ PetscErrorCode CreateSolver(Mat A, Vec coordinates, KSP *ksp) {
   // content); a direct solve ignores any guess.
   PetscBool preonly;
   PetscCall(PetscObjectTypeCompare((PetscObject)*ksp, KSPPREONLY, &preonly));
-  if (!preonly) PetscCall(KSPSetInitialGuessNonzero(*ksp, PETSC_TRUE));
+  PetscBool guess_set;
+  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-ksp_initial_guess_nonzero", &guess_set));
+  if (!preonly && !guess_set) PetscCall(KSPSetInitialGuessNonzero(*ksp, PETSC_TRUE));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
