@@ -160,6 +160,73 @@ bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
   return false;
 }
 
+void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
+  // The unscaled Newton iteration of RotationOfDeformationNewton on four
+  // matrices at once, lane l of every array being matrix l (the loops over
+  // lanes vectorise). Lanes that are not nearly orthogonal (|F|_F^2 / 3 or
+  // det F off 1 by more than 10 %), or not converged after 30 iterations, take
+  // RotationOfDeformation.
+  double x[9][4], c[9][4], det[4], change2[4];
+  bool eligible[4], converged[4];
+  for (int l = 0; l < 4; ++l)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) x[3 * j + i][l] = F[l](i, j);
+  const auto cofactor_and_det = [&]() {
+    for (int j = 0; j < 3; ++j) {
+      const int u = 3 * ((j + 1) % 3), v = 3 * ((j + 2) % 3);
+      for (int l = 0; l < 4; ++l) {
+        c[3 * j + 0][l] = x[u + 1][l] * x[v + 2][l] - x[u + 2][l] * x[v + 1][l];
+        c[3 * j + 1][l] = x[u + 2][l] * x[v + 0][l] - x[u + 0][l] * x[v + 2][l];
+        c[3 * j + 2][l] = x[u + 0][l] * x[v + 1][l] - x[u + 1][l] * x[v + 0][l];
+      }
+    }
+    for (int l = 0; l < 4; ++l) det[l] = x[0][l] * c[0][l] + x[1][l] * c[1][l] + x[2][l] * c[2][l];
+  };
+  cofactor_and_det();
+  bool any = false;
+  for (int l = 0; l < 4; ++l) {
+    double x2 = 0;
+    for (int k = 0; k < 9; ++k) x2 += x[k][l] * x[k][l];
+    eligible[l] = std::abs(x2 / 3.0 - 1.0) <= 0.1 && std::abs(det[l] - 1.0) <= 0.1;
+    converged[l] = false;
+    any = any || eligible[l];
+    if (!eligible[l]) {  // iterate the identity instead (no division by a small det)
+      for (int k = 0; k < 9; ++k) x[k][l] = c[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
+      det[l] = 1.0;
+    }
+  }
+  bool final_round = false;
+  for (int iteration = 0; any && iteration < 30; ++iteration) {
+    double b[4];
+    for (int l = 0; l < 4; ++l) {
+      b[l] = 0.5 / det[l];
+      change2[l] = 0;
+    }
+    for (int k = 0; k < 9; ++k)
+      for (int l = 0; l < 4; ++l) {
+        const double next = 0.5 * x[k][l] + b[l] * c[k][l];
+        change2[l] += (next - x[k][l]) * (next - x[k][l]);
+        x[k][l] = next;
+      }
+    if (final_round) break;  // one iteration after the last lane's update fell below 1e-4
+    bool all = true;
+    for (int l = 0; l < 4; ++l) {
+      converged[l] = converged[l] || change2[l] < 1e-8;
+      all = all && (converged[l] || !eligible[l]);
+    }
+    final_round = all;
+    cofactor_and_det();
+  }
+  for (int l = 0; l < 4; ++l) {
+    if (eligible[l] && converged[l]) {
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) R[l](i, j) = x[3 * j + i][l];
+    } else {
+      R[l] = RotationOfDeformation(F[l]);
+    }
+  }
+}
+
 Mat3 RotationOfDeformation(const Mat3 &F) {
   Mat3 R;
   if (RotationOfDeformationNewton(F, &R)) return R;

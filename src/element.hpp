@@ -79,6 +79,10 @@ Mat3 DeformationGradient(const TetPositions &x, const ShapeGradients &grad);
 // iteration below (about 0.05 us); the rest the SVD (about 1.7 us).
 Mat3 RotationOfDeformation(const Mat3 &F);
 
+// RotationOfDeformation of F[0..3] into R[0..3], the common case (nearly
+// orthogonal F) four at a time in the lanes of vector registers.
+void RotationOfDeformation4(const Mat3 *F, Mat3 *R);
+
 // The same rotation from Eigen's JacobiSVD: when det U or det V is negative, the
 // column belonging to the smallest singular value is negated, so R = U V^T.
 // The reference for RotationOfDeformation (tests) and its fallback.

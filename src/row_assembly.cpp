@@ -248,8 +248,30 @@ template <bool kRotated, bool kStandardShear, typename Element, typename Lame_>
 static double FillElements(const std::vector<Element> &elements, const std::vector<Lame_> &lame,
                            const FillContext &c) {
   double energy = 0;
+  // Rotated: the deformation gradients of four elements at a time, their
+  // rotations together (RotationOfDeformation4), then each element.
+  Mat3 batch_F[4], batch_R[4];
   for (size_t e = 0; e < elements.size(); ++e) {
     const Element &el = elements[e];
+    if constexpr (kRotated) {
+      if (e % 4 == 0) {
+        const size_t count = std::min<size_t>(4, elements.size() - e);
+        for (size_t k = 0; k < count; ++k) {
+          const Element &other = elements[e + k];
+          const double *x0 = c.x_halo + 3 * other.vertex[0];
+          double d[3][3];  // edge vectors x_a - x_0, a = 1..3
+          for (int a = 1; a < 4; ++a) {
+            const double *xa = c.x_halo + 3 * other.vertex[a];
+            for (int i = 0; i < 3; ++i) d[a - 1][i] = xa[i] - x0[i];
+          }
+          const double *g = other.gradient.data();  // rows grad N_1..3
+          for (int i = 0; i < 3; ++i)  // F = sum_a d_a g_a^T
+            for (int j = 0; j < 3; ++j) batch_F[k](i, j) = d[0][i] * g[j] + d[1][i] * g[3 + j] + d[2][i] * g[6 + j];
+        }
+        for (size_t k = count; k < 4; ++k) batch_F[k] = Mat3::Identity();
+        RotationOfDeformation4(batch_F, batch_R);
+      }
+    }
     double g[4][3];  // shape gradients
     for (int k = 0; k < 3; ++k) {
       g[1][k] = el.gradient[k];
@@ -263,16 +285,7 @@ static double FillElements(const std::vector<Element> &elements, const std::vect
     double R[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
     double h[4][3];  // rotated gradients R g_a
     if constexpr (kRotated) {
-      const double *x0 = c.x_halo + 3 * el.vertex[0];
-      double d[3][3];  // edge vectors x_a - x_0, a = 1..3
-      for (int a = 1; a < 4; ++a) {
-        const double *xa = c.x_halo + 3 * el.vertex[a];
-        for (int k = 0; k < 3; ++k) d[a - 1][k] = xa[k] - x0[k];
-      }
-      Mat3 F;  // F = sum_a d_a g_a^T
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) F(i, j) = d[0][i] * g[1][j] + d[1][i] * g[2][j] + d[2][i] * g[3][j];
-      const Mat3 rotation = RotationOfDeformation(F);
+      const Mat3 &F = batch_F[e % 4], &rotation = batch_R[e % 4];
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) R[i][j] = rotation(i, j);
       if (c.vertex_deformation) {

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <vector>
 
+#include "large_array.hpp"
 
 namespace softbody {
 
@@ -22,13 +23,16 @@ enum SupernodalOrdering { kOrderingBest, kOrderingAmd, kOrderingMetis };
 const char *const kPrecisions[] = {"double", "single", "SupernodalPrecision", "", nullptr};
 enum SupernodalPrecision { kDouble, kSingle };
 
-// The supernodal factor in single precision and the two triangular solves with
-// it: half the bytes of a solve, about 1e-7 relative accuracy (a preconditioner).
-struct SingleFactor {
+// CHOLMOD's supernodal factor copied into softbody's own storage (huge pages,
+// large_array.hpp) in the precision Real, and the two triangular solves with it.
+// Real = float: half the bytes of a solve, about 1e-7 relative accuracy (for a
+// preconditioner). In double precision CHOLMOD's own solve was faster.
+template <typename Real>
+struct PackedFactor {
   int n = 0, supernodes = 0;
   std::vector<int> permutation, first_column, row_start, value_start, rows;  // CHOLMOD's Perm, super, pi, px, s
-  std::vector<float> values;
-  std::vector<float> y, work;
+  LargeArray<Real> values;
+  std::vector<Real> y, work;
 
   void From(const cholmod_factor *L) {
     n = static_cast<int>(L->n);
@@ -42,7 +46,8 @@ struct SingleFactor {
     value_start.assign(px, px + supernodes + 1);
     rows.assign(s, s + pi[supernodes]);
     const double *x = static_cast<const double *>(L->x);
-    values.assign(x, x + L->xsize);
+    values.resize(L->xsize);
+    for (size_t i = 0; i < L->xsize; ++i) values[i] = static_cast<Real>(x[i]);
     y.resize(n);
     size_t largest = 0;
     for (int k = 0; k < supernodes; ++k) largest = std::max<size_t>(largest, pi[k + 1] - pi[k]);
@@ -55,23 +60,23 @@ struct SingleFactor {
   // by omp simd): at this size they stream the factor at the memory's speed,
   // where single-precision BLAS-2 calls reached about two thirds of it.
   void Solve(const double *b, double *x) {
-    for (int i = 0; i < n; ++i) y[i] = static_cast<float>(b[permutation[i]]);
+    for (int i = 0; i < n; ++i) y[i] = static_cast<Real>(b[permutation[i]]);
     for (int k = 0; k < supernodes; ++k) {  // L y = P b
       const int first = first_column[k], columns = first_column[k + 1] - first;
       const int height = row_start[k + 1] - row_start[k], below = height - columns;
-      const float *block = values.data() + value_start[k];
-      float *yk = y.data() + first, *w = work.data();
+      const Real *block = values.data() + value_start[k];
+      Real *yk = y.data() + first, *w = work.data();
       for (int j = 0; j < columns; ++j) {
-        const float *column = block + static_cast<size_t>(j) * height;
-        const float v = yk[j] / column[j];
+        const Real *column = block + static_cast<size_t>(j) * height;
+        const Real v = yk[j] / column[j];
         yk[j] = v;
         for (int i = j + 1; i < columns; ++i) yk[i] -= column[i] * v;
       }
       if (below > 0) {
-        for (int i = 0; i < below; ++i) w[i] = 0.0f;
+        for (int i = 0; i < below; ++i) w[i] = 0;
         for (int j = 0; j < columns; ++j) {
-          const float *column = block + static_cast<size_t>(j) * height + columns;
-          const float v = yk[j];
+          const Real *column = block + static_cast<size_t>(j) * height + columns;
+          const Real v = yk[j];
 #pragma omp simd
           for (int i = 0; i < below; ++i) w[i] += column[i] * v;
         }
@@ -82,22 +87,22 @@ struct SingleFactor {
     for (int k = supernodes - 1; k >= 0; --k) {  // L^T z = y
       const int first = first_column[k], columns = first_column[k + 1] - first;
       const int height = row_start[k + 1] - row_start[k], below = height - columns;
-      const float *block = values.data() + value_start[k];
-      float *yk = y.data() + first, *w = work.data();
+      const Real *block = values.data() + value_start[k];
+      Real *yk = y.data() + first, *w = work.data();
       if (below > 0) {
         const int *r = rows.data() + row_start[k] + columns;
         for (int i = 0; i < below; ++i) w[i] = y[r[i]];
         for (int j = 0; j < columns; ++j) {
-          const float *column = block + static_cast<size_t>(j) * height + columns;
-          float sum = 0.0f;
+          const Real *column = block + static_cast<size_t>(j) * height + columns;
+          Real sum = 0;
 #pragma omp simd reduction(+ : sum)
           for (int i = 0; i < below; ++i) sum += column[i] * w[i];
           yk[j] -= sum;
         }
       }
       for (int j = columns - 1; j >= 0; --j) {
-        const float *column = block + static_cast<size_t>(j) * height;
-        float sum = 0.0f;
+        const Real *column = block + static_cast<size_t>(j) * height;
+        Real sum = 0;
 #pragma omp simd reduction(+ : sum)
         for (int i = j + 1; i < columns; ++i) sum += column[i] * yk[i];
         yk[j] = (yk[j] - sum) / column[j];
@@ -111,11 +116,11 @@ struct Supernodal {
   cholmod_common common;
   bool started = false;
   cholmod_factor *factor = nullptr;
-  cholmod_dense *solution = nullptr, *work_y = nullptr, *work_e = nullptr;  // cholmod_solve2's
   PetscObjectState pattern_state = -1;   // nonzero state of the factorised pattern
   SupernodalOrdering ordering = kOrderingBest;
   SupernodalPrecision precision = kDouble;
-  SingleFactor single;
+  PackedFactor<float> single;
+  cholmod_dense *solution = nullptr, *work_y = nullptr, *work_e = nullptr;  // cholmod_solve2's
   // More than one rank: A and the right-hand side gathered on rank 0.
   Mat *gathered = nullptr;
   VecScatter to_zero = nullptr;
@@ -230,11 +235,13 @@ PetscErrorCode FactorOnThisRank(Supernodal *s, Mat A, bool new_pattern) {
   s->stored = static_cast<double>(s->factor->xsize);
   s->nonzeros = s->common.lnz;
   s->flops = s->common.fl;
+  PetscCheck(s->factor->is_super && s->factor->xtype == CHOLMOD_REAL, PETSC_COMM_SELF, PETSC_ERR_LIB,
+             "supernodal: CHOLMOD did not return a real supernodal factor");
   if (s->precision == kSingle) {
-    PetscCheck(s->factor->is_super && s->factor->xtype == CHOLMOD_REAL, PETSC_COMM_SELF, PETSC_ERR_LIB,
-               "supernodal: single precision needs a real supernodal factor");
     s->single.From(s->factor);
-    cholmod_free_factor(&s->factor, &s->common);  // the single copy is all the solves need
+    // Keep the symbolic factor (for refactorisations), free CHOLMOD's values.
+    PetscCheck(cholmod_change_factor(CHOLMOD_PATTERN, 0, 1, 1, 1, s->factor, &s->common), PETSC_COMM_SELF,
+               PETSC_ERR_LIB, "supernodal: CHOLMOD could not drop the factor's values");
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -282,34 +289,29 @@ PetscErrorCode PCSetUp_Supernodal(PC pc) {
 // x = A^-1 b on this rank (rank 0, or the only rank).
 PetscErrorCode SolveOnThisRank(Supernodal *s, Vec b, Vec x) {
   PetscFunctionBeginUser;
-  PetscInt n;
-  PetscCall(VecGetLocalSize(b, &n));
   const PetscScalar *rhs;
-  PetscCall(VecGetArrayRead(b, &rhs));
-  if (s->precision == kSingle) {
-    PetscScalar *out;
-    PetscCall(VecGetArrayWrite(x, &out));
-    s->single.Solve(rhs, out);
-    PetscCall(VecRestoreArrayWrite(x, &out));
-    PetscCall(VecRestoreArrayRead(b, &rhs));
-    PetscCall(PetscLogFlops(4.0 * s->nonzeros));
-    PetscFunctionReturn(PETSC_SUCCESS);
-  }
-  cholmod_dense dense;
-  std::memset(&dense, 0, sizeof(dense));
-  dense.nrow = dense.d = dense.nzmax = n;
-  dense.ncol = 1;
-  dense.x = const_cast<PetscScalar *>(rhs);
-  dense.xtype = CHOLMOD_REAL;
-  dense.dtype = CHOLMOD_DOUBLE;
-  const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr, &s->work_y,
-                                &s->work_e, &s->common);
-  PetscCall(VecRestoreArrayRead(b, &rhs));
-  PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)", s->common.status);
   PetscScalar *out;
+  PetscCall(VecGetArrayRead(b, &rhs));
   PetscCall(VecGetArrayWrite(x, &out));
-  std::memcpy(out, s->solution->x, sizeof(PetscScalar) * n);
+  if (s->precision == kSingle) {
+    s->single.Solve(rhs, out);
+  } else {  // CHOLMOD's own solve (BLAS-2 per supernode) streams the double factor fastest
+    PetscInt n;
+    PetscCall(VecGetLocalSize(b, &n));
+    cholmod_dense dense;
+    std::memset(&dense, 0, sizeof(dense));
+    dense.nrow = dense.d = dense.nzmax = n;
+    dense.ncol = 1;
+    dense.x = const_cast<PetscScalar *>(rhs);
+    dense.xtype = CHOLMOD_REAL;
+    dense.dtype = CHOLMOD_DOUBLE;
+    const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr, &s->work_y,
+                                  &s->work_e, &s->common);
+    PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)", s->common.status);
+    std::memcpy(out, s->solution->x, sizeof(PetscScalar) * n);
+  }
   PetscCall(VecRestoreArrayWrite(x, &out));
+  PetscCall(VecRestoreArrayRead(b, &rhs));
   PetscCall(PetscLogFlops(4.0 * s->nonzeros));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
