@@ -85,10 +85,12 @@ double Median(std::vector<double> values) {
   return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
 }
 
-// Nonzeros of the Cholesky factor behind pc (0 when there is none).
-PetscErrorCode FactorNonzeros(PC pc, double *nonzeros) {
+// Nonzeros of the Cholesky factor behind pc (0 when there is none) and the
+// bytes per entry its solves read.
+PetscErrorCode FactorNonzeros(PC pc, double *nonzeros, int *bytes_per_entry) {
   PetscFunctionBeginUser;
   *nonzeros = 0;
+  *bytes_per_entry = 8;
   PetscBool warp, supernodal, cholesky;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
   if (warp) PetscCall(PCWarpGetInnerPC(pc, &pc));
@@ -97,7 +99,7 @@ PetscErrorCode FactorNonzeros(PC pc, double *nonzeros) {
   PetscCall(PetscObjectTypeCompareAny((PetscObject)pc, &cholesky, PCCHOLESKY, PCLU, ""));
   if (supernodal) {
     double stored, flops;
-    PetscCall(PCSupernodalGetFactorSize(pc, &stored, nonzeros, &flops));
+    PetscCall(PCSupernodalGetFactorSize(pc, &stored, nonzeros, &flops, bytes_per_entry));
   } else if (cholesky) {
     MatSolverType package;
     PetscCall(PCFactorGetMatSolverType(pc, &package));
@@ -143,7 +145,8 @@ PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEule
   PC pc;
   PetscCall(KSPGetPC(integrator->solver(), &pc));
   double factor_nonzeros;
-  PetscCall(FactorNonzeros(pc, &factor_nonzeros));
+  int factor_bytes;
+  PetscCall(FactorNonzeros(pc, &factor_nonzeros, &factor_bytes));
   PetscBool preonly;
   PetscCall(PetscObjectTypeCompare((PetscObject)integrator->solver(), KSPPREONLY, &preonly));
 
@@ -159,7 +162,7 @@ PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEule
   const double solves_per_step = steps > 0 ? stats.solves / steps : 1;
   const double products = preonly ? (corotational ? 0.0 : 1.0) : iterations * solves_per_step;
   const double factor_solves = preonly ? solves_per_step : (factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
-  const double bytes = 12.0 * matrix_nonzeros * products + 16.0 * factor_nonzeros * factor_solves +
+  const double bytes = 12.0 * matrix_nonzeros * products + 2.0 * factor_bytes * factor_nonzeros * factor_solves +
                        (corotational ? 8.0 * matrix_nonzeros : 0.0);
   const double bound_s = bytes / (bandwidth * 1e9);
   const double tets = static_cast<double>(scene.num_tets());

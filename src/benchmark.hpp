@@ -19,9 +19,10 @@
 //   bound_s         lower bound of a step's memory traffic over bandwidth_gbs:
 //                   12 bytes per nonzero of A or K per product with it (value
 //                   and column index: one product per step in linear mode, per
-//                   CG iteration otherwise), 16 bytes per nonzero of L per
-//                   solve with it (a forward and a backward sweep), 8 bytes per
-//                   nonzero of A per refill (corotational); vectors not counted
+//                   CG iteration otherwise), 2 x 8 bytes per nonzero of L per
+//                   solve with it (a forward and a backward sweep; 2 x 4 for a
+//                   single-precision factor), 8 bytes per nonzero of A per
+//                   refill (corotational); vectors not counted
 //   bound_fraction  bound_s / step_s
 // Rank 0 prints them as one line, "softbody bench: name=value ...", and they go
 // into the result file as root attributes.

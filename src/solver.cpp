@@ -47,9 +47,14 @@ PetscErrorCode CreateSolver(Mat A, Vec coordinates, KSP *ksp) {
   // content); a direct solve ignores any guess.
   PetscBool preonly;
   PetscCall(PetscObjectTypeCompare((PetscObject)*ksp, KSPPREONLY, &preonly));
-  PetscBool guess_set;
+  // The warp preconditioner starts from zero (warp_preconditioner.hpp);
+  // -ksp_initial_guess_nonzero decides where given.
+  PetscBool guess_set, warp;
+  PC pc;
+  PetscCall(KSPGetPC(*ksp, &pc));
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-ksp_initial_guess_nonzero", &guess_set));
-  if (!preonly && !guess_set) PetscCall(KSPSetInitialGuessNonzero(*ksp, PETSC_TRUE));
+  if (!preonly && !guess_set) PetscCall(KSPSetInitialGuessNonzero(*ksp, warp ? PETSC_FALSE : PETSC_TRUE));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -51,6 +51,10 @@ PetscErrorCode PCSetUp_Warp(PC pc) {
     PetscCall(PCGetOptionsPrefix(pc, &prefix));
     if (prefix) PetscCall(PCAppendOptionsPrefix(w->inner, prefix));
     PetscCall(PCSetType(w->inner, kPCSupernodal));
+    // A preconditioner needs no more than single precision, and its triangular
+    // solves then stream half the bytes (-warp_pc_supernodal_precision double
+    // to compare).
+    PetscCall(PCSupernodalSetSinglePrecision(w->inner, true));
     PetscCall(PCSetOperators(w->inner, w->linear, w->linear));
     PetscCall(PCSetFromOptions(w->inner));
   }
