@@ -127,10 +127,12 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const Dof
     PetscCall(VecRestoreArray(gravity_force_, &f));
   }
   PetscCall(assembler_.Setup(comm, scene, layout, options.shear_scale, rest_));
-  PetscCall(assembler_.CreateMatrix(&A_));
+  // A: the plain product for CG's many products with it; K (one product per
+  // linear step) keeps PETSc's default, as the stability matrix was set against it.
+  PetscCall(assembler_.CreateMatrix(&A_, options.mode == MODE_COROTATIONAL));
   if (options.mode == MODE_LINEAR) {
     StageScope stage(Stages().assembly);
-    PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &K_));
+    PetscCall(assembler_.CreateMatrix(&K_));
     PetscCall(assembler_.Fill(K_, false, nullptr, 1.0, nullptr, 0.0, nullptr, nullptr));
     PetscCall(VecDuplicate(rest_, &displacement_));
   }

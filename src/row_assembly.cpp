@@ -93,7 +93,7 @@ PetscErrorCode RowAssembler::Setup(MPI_Comm comm, const Scene &scene, const DofL
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode RowAssembler::CreateMatrix(Mat *matrix) {
+PetscErrorCode RowAssembler::CreateMatrix(Mat *matrix, bool plain_products) {
   PetscFunctionBeginUser;
   // Neighbours (halo indices, increasing) of every owned vertex: CSR by vertex.
   std::vector<PetscInt> start(count_ + 1, 0);
@@ -134,12 +134,11 @@ PetscErrorCode RowAssembler::CreateMatrix(Mat *matrix) {
     PetscCall(MatSetType(*matrix, MATAIJ));
     PetscCall(MatSeqAIJSetPreallocationCSR(*matrix, row_start.data(), columns.data(), zeros.data()));
     PetscCall(MatMPIAIJSetPreallocationCSR(*matrix, row_start.data(), columns.data(), zeros.data()));
-    // PETSc's plain CSR product ran a third faster on these 3 x 3-block rows
-    // than its "inode" variant (3.0 ms against 4.1 ms at 1e5 tets); the option
-    // takes effect at the next assembly.
-    PetscCall(MatSetOption(*matrix, MAT_USE_INODES, PETSC_FALSE));
-    PetscCall(MatAssemblyBegin(*matrix, MAT_FINAL_ASSEMBLY));
-    PetscCall(MatAssemblyEnd(*matrix, MAT_FINAL_ASSEMBLY));
+    if (plain_products) {  // the option takes effect at the next assembly
+      PetscCall(MatSetOption(*matrix, MAT_USE_INODES, PETSC_FALSE));
+      PetscCall(MatAssemblyBegin(*matrix, MAT_FINAL_ASSEMBLY));
+      PetscCall(MatAssemblyEnd(*matrix, MAT_FINAL_ASSEMBLY));
+    }
     PetscCall(MatSetOption(*matrix, MAT_NEW_NONZERO_LOCATION_ERR, PETSC_TRUE));
   }
   std::vector<PetscInt>().swap(columns);

@@ -44,8 +44,10 @@ class RowAssembler {
   // Collective. A new MATAIJ matrix (block size 3) with one 3 x 3 block per pair
   // of vertices sharing a tet (the diagonal included), all values zero, and the
   // offsets of this rank's element blocks in it. Every matrix passed to Fill
-  // must come from here (or be a MatDuplicate of one).
-  PetscErrorCode CreateMatrix(Mat *matrix);
+  // must come from here (or be a MatDuplicate of one). plain_products: PETSc's
+  // plain CSR product instead of its "inode" variant, a third faster on these
+  // rows (3.0 against 4.1 ms at 1e5 tets) but summing in another order.
+  PetscErrorCode CreateMatrix(Mat *matrix, bool plain_products = false);
 
   // Collective. matrix = stiffness_scale K + mass_scale diag(lumped_mass), K the
   // rest stiffness (rotated = false) or the corotated sum_e R K_e R^T at
