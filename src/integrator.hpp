@@ -16,7 +16,9 @@
 //   step extracts every tet's rotation R from F = Ds Dm^-1 (see element.hpp),
 //   K = K(R) = sum_e R K_e R^T and f_el = sum_e R K_e (R^T x_e - X_e); A's values
 //   are refilled into the same pattern (no symbolic work) and solved again,
-//   by default with CG + GAMG warm-started from the previous velocity.
+//   by default with CG preconditioned by the linear system's factor rotated per
+//   vertex (warp_preconditioner.hpp); A is filled straight into its CSR rows
+//   (row_assembly.hpp).
 // Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode
 // (summed element by element, each term non-negative),
 // sum_e y_e^T K_e y_e / 2 with y_e = R^T x_e - X_e in corotational mode (J).

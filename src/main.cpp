@@ -190,18 +190,17 @@ PetscErrorCode Run(MPI_Comm comm) {
   if (has_unknowns) PetscCall(benchmark.Finish(comm, scene, &integrator, state.positions));
   if (writer) {
     const SolverStatistics &solver = integrator.statistics();
-    std::vector<std::pair<std::string, double>> statistics = {
-        {"setup_seconds", report.times.setup},
-        {"loop_seconds", report.times.loop},
-        {"output_seconds", report.times.output},
-        {"steps", double(report.steps)},
-        {"final_time", report.final_time},
-        {"ranks", double(layout.size)},
-        {"dofs", 3.0 * layout.num_free()},
-        {"solves", double(solver.solves)},
-        {"solver_iterations", double(solver.total_iterations)},
-        {"contact_solves", double(solver.contact_solves)},
-        {"contact_seconds", contact.statistics().seconds}};
+    std::vector<std::pair<std::string, double>> statistics{{"setup_seconds", report.times.setup},
+                             {"loop_seconds", report.times.loop},
+                             {"output_seconds", report.times.output},
+                             {"steps", double(report.steps)},
+                             {"final_time", report.final_time},
+                             {"ranks", double(layout.size)},
+                             {"dofs", 3.0 * layout.num_free()},
+                             {"solves", double(solver.solves)},
+                             {"solver_iterations", double(solver.total_iterations)},
+                             {"contact_solves", double(solver.contact_solves)},
+                             {"contact_seconds", contact.statistics().seconds}};
     statistics.insert(statistics.end(), benchmark.attributes().begin(), benchmark.attributes().end());
     PetscCall(writer->Close(statistics));
     report.frames = writer->frames();
