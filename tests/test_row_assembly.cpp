@@ -89,6 +89,20 @@ PetscErrorCode DeformedPositions(Vec rest, Vec x, double stretch = 0.1, double n
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// |reference - v| (2-norm) and |reference| in *scale; reference holds v's local
+// entries in order (one rank), work is a vector like v.
+PetscReal DifferenceFrom(const std::vector<PetscScalar> &reference, Vec v, Vec work, PetscReal *scale) {
+  PetscScalar *w;
+  VecGetArray(work, &w);
+  std::copy(reference.begin(), reference.end(), w);
+  VecRestoreArray(work, &w);
+  PetscReal difference;
+  VecNorm(work, NORM_2, scale);
+  VecAXPY(work, -1.0, v);
+  VecNorm(work, NORM_2, &difference);
+  return difference;
+}
+
 double RelativeMatrixDifference(Mat A, Mat B) {
   Mat D;
   MatConvert(A, MATSAME, MAT_INITIAL_MATRIX, &D);
@@ -166,14 +180,8 @@ TEST(RowAssembler, EqualsCooAssembly) {
       VecRestoreArrayRead(f.state.rest_positions, &Xa);
       ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
       EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-13) << "shear scale " << shear_scale;
-      PetscScalar *rf;
-      VecGetArray(reference_force, &rf);
-      std::copy(force_touched.begin(), force_touched.end(), rf);
-      VecRestoreArray(reference_force, &rf);
-      PetscReal scale, difference;
-      VecNorm(reference_force, NORM_2, &scale);
-      VecAXPY(reference_force, -1.0, force);
-      VecNorm(reference_force, NORM_2, &difference);
+      PetscReal scale;
+      const PetscReal difference = DifferenceFrom(force_touched, force, reference_force, &scale);
       EXPECT_LT(difference, 1e-12 * scale);
       EXPECT_NEAR(energy, reference_energy, 1e-12 * reference_energy);
       // Vertex rotations are proper rotations.
@@ -233,14 +241,8 @@ TEST(RowAssembler, IncrementDampingEqualsReference) {
     VecRestoreArrayRead(f.state.rest_positions, &Xa);
     EXPECT_GT(second.energy, 0.0);
     EXPECT_NEAR(damping.energy, second.energy, 1e-12 * second.energy) << "shear scale " << shear_scale;
-    PetscScalar *rf;
-    VecGetArray(reference_force, &rf);
-    std::copy(increment_touched.begin(), increment_touched.end(), rf);
-    VecRestoreArray(reference_force, &rf);
-    PetscReal scale, difference;
-    VecNorm(reference_force, NORM_2, &scale);
-    VecAXPY(reference_force, -1.0, force);
-    VecNorm(reference_force, NORM_2, &difference);
+    PetscReal scale;
+    const PetscReal difference = DifferenceFrom(increment_touched, force, reference_force, &scale);
     EXPECT_LT(difference, 1e-12 * scale) << "shear scale " << shear_scale;
 
     // x1 = x0 turned by 40 degrees and shifted: no increment, no force, no energy.

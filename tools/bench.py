@@ -46,6 +46,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG_DIR = os.path.join(ROOT, "config")
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 import box_mesh  # noqa: E402
+from study import _environment, _flatten, _list, _one_line_error  # noqa: E402  (shared helpers)
 
 MODES = ("linear", "corotational")
 BEAM_SIZE = (4.0, 1.0, 1.0)
@@ -68,24 +69,6 @@ DOLFINX_ASSEMBLY_RATE = 0.55e6  # P1 elasticity tets/s per core
 
 
 # ----------------------------------------------------------------------------- arguments
-
-def _list(kind):
-    def parse(text):
-        try:
-            return [kind(item) for item in text.split(",") if item.strip()]
-        except ValueError as error:
-            raise argparse.ArgumentTypeError(str(error))
-    return parse
-
-
-def _flatten(lists):
-    out = []
-    for item in lists:
-        for value in item:
-            if value not in out:
-                out.append(value)
-    return out
-
 
 def _count(text):
     value = float(text)
@@ -195,26 +178,6 @@ def write_beam(folder, target_tets):
 
 
 # ----------------------------------------------------------------------------- runs
-
-def _environment():
-    env = dict(os.environ)
-    env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
-    if os.geteuid() == 0:
-        env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
-        env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
-    return env
-
-
-def _one_line_error(text, returncode):
-    lines = [line.strip() for line in text.splitlines() if line.strip()]
-    for line in lines:
-        if line.startswith("softbody: error"):
-            return line
-    for line in lines:
-        if "error" in line.lower() or "signal" in line.lower():
-            return line
-    return lines[-1] if lines else f"exit status {returncode}"
-
 
 def parse_bench_line(text):
     """The name=value pairs of softbody's 'softbody bench:' line (None when absent)."""
