@@ -458,7 +458,7 @@ PetscErrorCode RowAssembler::Fill(Mat matrix, bool rotated, Vec x, double stiffn
   PetscScalar *diagonal_values, *off_values = nullptr;
   PetscCall(MatSeqAIJGetArray(diagonal_part, &diagonal_values));
   if (off_part) PetscCall(MatSeqAIJGetArray(off_part, &off_values));
-  std::memset(diagonal_values, 0, sizeof(PetscScalar) * pattern_nonzeros_diagonal_);
+  if (diagonal_values) std::memset(diagonal_values, 0, sizeof(PetscScalar) * pattern_nonzeros_diagonal_);
   if (off_values) std::memset(off_values, 0, sizeof(PetscScalar) * pattern_nonzeros_off_);
 
   FillContext context;
