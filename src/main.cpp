@@ -165,8 +165,10 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   PetscCall(LoadScene(comm, scene_options, &scene));
   std::vector<Deformation> deformations;
   PetscCall(ParseDeformations(comm, deform_text, scene, &deformations));
-  if (!restart) {  // Bodies that nothing can set in motion add no unknowns (partition.hpp);
-                   // a restart's bodies move as its checkpoint says.
+  // Bodies that nothing can set in motion add no unknowns (partition.hpp); not on
+  // a restart (its bodies move as the checkpoint says) or when -export_matrices
+  // asks for the matrices of every free body.
+  if (!restart && output.matrix_dir.empty()) {
     MotionSources sources{integration.gravity.squaredNorm() > 0, bool(contact_options.ground),
                           !contact_options.constraints_path.empty() || contact_options.edge_bounds,
                           std::vector<bool>(scene.bodies.size(), false)};
