@@ -80,13 +80,157 @@ Mat3 DeformationGradient(const TetPositions &x, const ShapeGradients &grad) {
   return x.transpose() * grad;
 }
 
-Mat3 RotationOfDeformation(const Mat3 &F) {
+Mat3 RotationOfDeformationSvd(const Mat3 &F) {
   const Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Mat3 U = svd.matrixU(), V = svd.matrixV();
   // Eigen orders singular values decreasingly: column 2 is the smallest.
   if (U.determinant() < 0) U.col(2) *= -1.0;
   if (V.determinant() < 0) V.col(2) *= -1.0;
   return U * V.transpose();
+}
+
+bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
+  // Newton iteration for the polar factor (Higham 1986, "Computing the polar
+  // decomposition with applications"): X <- (z X + X^-T / z) / 2, X^-T = C / det X
+  // with C the cofactor matrix (columns: cross products of the columns of X).
+  // Far from orthogonal (|X|_F^2 / 3 or det X off 1 by more than 10 %), the
+  // Frobenius-norm scaling z = (|X^-1|_F / |X|_F)^(1/2), until it is within 1 %
+  // of 1; unscaled (z = 1) after that. A singular value 1 + e becomes
+  // 1 + e^2 / (2 (1 + e)): once an update d is below 1e-4, the iterate after
+  // next is off by at most d^4 / 8 < 2e-17, so that one is returned unchecked.
+  double x[3][3], c[3][3];  // x[j]: column j of X; c[j]: column j of C
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) x[j][i] = F(i, j);
+  const auto cofactor = [](const double (*m)[3], double (*out)[3]) {
+    for (int j = 0; j < 3; ++j) {
+      const double *u = m[(j + 1) % 3], *v = m[(j + 2) % 3];
+      out[j][0] = u[1] * v[2] - u[2] * v[1];
+      out[j][1] = u[2] * v[0] - u[0] * v[2];
+      out[j][2] = u[0] * v[1] - u[1] * v[0];
+    }
+  };
+  cofactor(x, c);
+  double det = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
+  double x2 = 0;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
+  // Only clearly non-inverted, well-conditioned F: det F > 1e-3 (|F|_F^2 / 3)^(3/2)
+  // bounds the ratio of the smallest to the largest singular value from below.
+  if (!(det > 1e-3 * (x2 / 3.0) * std::sqrt(x2 / 3.0))) return false;
+  bool scaled = std::abs(x2 / 3.0 - 1.0) > 0.1 || std::abs(det - 1.0) > 0.1;
+  bool last = false;
+  for (int iteration = 0; iteration < 40; ++iteration) {
+    const double inverse_det = 1.0 / det;
+    double z = 1.0;
+    if (scaled) {
+      double c2 = 0;
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) c2 += c[j][i] * c[j][i];
+      const double z2 = std::sqrt(c2 / x2) * inverse_det;  // |X^-1|_F / |X|_F
+      if (std::abs(z2 - 1.0) > 1e-2) z = std::sqrt(z2);
+      else scaled = false;
+    }
+    const double a = 0.5 * z, b = 0.5 * inverse_det / z;
+    if (last) {
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) (*R)(i, j) = a * x[j][i] + b * c[j][i];
+      return true;
+    }
+    double change2 = 0;
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) {
+        const double next = a * x[j][i] + b * c[j][i];
+        change2 += (next - x[j][i]) * (next - x[j][i]);
+        x[j][i] = next;
+      }
+    if (scaled) {
+      x2 = 0;
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
+    }
+    if (change2 < 1e-34) {  // converged outright (F was a rotation)
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) (*R)(i, j) = x[j][i];
+      return true;
+    }
+    last = !scaled && change2 < 1e-8;
+    cofactor(x, c);
+    det = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
+  }
+  return false;
+}
+
+void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
+  // The unscaled Newton iteration of RotationOfDeformationNewton on four
+  // matrices at once, lane l of every array being matrix l (the loops over
+  // lanes vectorise). Lanes that are not nearly orthogonal (|F|_F^2 / 3 or
+  // det F off 1 by more than 10 %), or not converged after 30 iterations, take
+  // RotationOfDeformation.
+  double x[9][4], c[9][4], det[4], change2[4];
+  bool eligible[4], converged[4];
+  for (int l = 0; l < 4; ++l)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) x[3 * j + i][l] = F[l](i, j);
+  const auto cofactor_and_det = [&]() {
+    for (int j = 0; j < 3; ++j) {
+      const int u = 3 * ((j + 1) % 3), v = 3 * ((j + 2) % 3);
+      for (int l = 0; l < 4; ++l) {
+        c[3 * j + 0][l] = x[u + 1][l] * x[v + 2][l] - x[u + 2][l] * x[v + 1][l];
+        c[3 * j + 1][l] = x[u + 2][l] * x[v + 0][l] - x[u + 0][l] * x[v + 2][l];
+        c[3 * j + 2][l] = x[u + 0][l] * x[v + 1][l] - x[u + 1][l] * x[v + 0][l];
+      }
+    }
+    for (int l = 0; l < 4; ++l) det[l] = x[0][l] * c[0][l] + x[1][l] * c[1][l] + x[2][l] * c[2][l];
+  };
+  cofactor_and_det();
+  bool any = false;
+  for (int l = 0; l < 4; ++l) {
+    double x2 = 0;
+    for (int k = 0; k < 9; ++k) x2 += x[k][l] * x[k][l];
+    eligible[l] = std::abs(x2 / 3.0 - 1.0) <= 0.1 && std::abs(det[l] - 1.0) <= 0.1;
+    converged[l] = false;
+    any = any || eligible[l];
+    if (!eligible[l]) {  // iterate the identity instead (no division by a small det)
+      for (int k = 0; k < 9; ++k) x[k][l] = c[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
+      det[l] = 1.0;
+    }
+  }
+  bool final_round = false;
+  for (int iteration = 0; any && iteration < 30; ++iteration) {
+    double b[4];
+    for (int l = 0; l < 4; ++l) {
+      b[l] = 0.5 / det[l];
+      change2[l] = 0;
+    }
+    for (int k = 0; k < 9; ++k)
+      for (int l = 0; l < 4; ++l) {
+        const double next = 0.5 * x[k][l] + b[l] * c[k][l];
+        change2[l] += (next - x[k][l]) * (next - x[k][l]);
+        x[k][l] = next;
+      }
+    if (final_round) break;  // one iteration after the last lane's update fell below 1e-4
+    bool all = true;
+    for (int l = 0; l < 4; ++l) {
+      converged[l] = converged[l] || change2[l] < 1e-8;
+      all = all && (converged[l] || !eligible[l]);
+    }
+    final_round = all;
+    cofactor_and_det();
+  }
+  for (int l = 0; l < 4; ++l) {
+    if (eligible[l] && converged[l]) {
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) R[l](i, j) = x[3 * j + i][l];
+    } else {
+      R[l] = RotationOfDeformation(F[l]);
+    }
+  }
+}
+
+Mat3 RotationOfDeformation(const Mat3 &F) {
+  Mat3 R;
+  if (RotationOfDeformationNewton(F, &R)) return R;
+  return RotationOfDeformationSvd(F);
 }
 
 Mat3 CorotatedElement(const ShapeGradients &grad, double volume, const Lame &lame,

@@ -2,9 +2,11 @@
 
 #include <cmath>
 
+#include "log_stages.hpp"
 #include "options.hpp"
 #include "text_reader.hpp"
 #include "solver.hpp"
+#include "warp_preconditioner.hpp"
 
 namespace softbody {
 
@@ -21,7 +23,8 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                                      {OptionSyntax::kReal, "-shear_scale"},
                                      {OptionSyntax::kReal, "-newton_rtol"},
                                      {OptionSyntax::kInteger, "-newton_max_it"},
-                                     {OptionSyntax::kBool, "-newton_always"}}));
+                                     {OptionSyntax::kBool, "-newton_always"},
+                                     {OptionSyntax::kBool, "-fallback_direct"}}));
   char schedule[PETSC_MAX_PATH_LEN] = "";
   PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
   PetscInt gravity_count = 3;
@@ -61,6 +64,11 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                             "Corotational mode: most linearised solves per step (1: the single "
                             "linearised step, no check)",
                             nullptr, o->newton_max_it, &o->newton_max_it, nullptr));
+  PetscCall(PetscOptionsBool("-fallback_direct",
+                             "Repeat a solve that breaks down (factor or preconditioner not positive "
+                             "definite, NaN) by a direct factorisation, MUMPS Cholesky (its options take "
+                             "the prefix -fallback_)",
+                             nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
   PetscOptionsEnd();
   if (gravity_set) {
     PetscCheck(gravity_count == 3, comm, PETSC_ERR_USER_INPUT, "option -gravity: expected gx,gy,gz");
@@ -117,20 +125,20 @@ ImplicitEuler::~ImplicitEuler() {
   VecDestroy(&work_);
   VecDestroy(&v_trial_base_);
   VecDestroy(&damping_force_);
-  VecDestroy(&damping_touched_);
   KSPDestroy(&ksp_);
+  KSPDestroy(&fallback_ksp_);
   MatDestroy(&A_);
   MatDestroy(&K_);
+  MatDestroy(&A_linear_);
   VecDestroy(&elastic_force_);
   VecDestroy(&rhs_);
   VecDestroy(&displacement_);
   VecScatterDestroy(&touched_scatter_);
   VecDestroy(&x_touched_);
   VecDestroy(&X_touched_);
-  VecDestroy(&force_touched_);
 }
 
-PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
+PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                     const LocalElements &elements, Vec rest_positions,
                                     Vec lumped_mass, const IntegratorOptions &options) {
   PetscFunctionBeginUser;
@@ -150,13 +158,14 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
     for (PetscInt i = 0; i < n; ++i) f[i] *= options.gravity[i % 3];
     PetscCall(VecRestoreArray(gravity_force_, &f));
   }
-  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_TRUE, &A_));
-  PetscInt local_dofs;
-  PetscCall(VecGetLocalSize(rest_, &local_dofs));
-  values_.resize(144 * elements.size() + local_dofs);
-
+  PetscCall(assembler_.Setup(comm, scene, layout, options.shear_scale, rest_));
+  // A: the plain product for CG's many products with it; K (one product per
+  // linear step) keeps PETSc's default, as the stability matrix was set against it.
+  PetscCall(assembler_.CreateMatrix(&A_, options.mode == MODE_COROTATIONAL));
   if (options.mode == MODE_LINEAR) {
-    PetscCall(CreateStiffnessMatrix(comm, layout, elements, options.shear_scale, &K_));
+    StageScope stage(Stages().assembly);
+    PetscCall(assembler_.CreateMatrix(&K_));
+    PetscCall(assembler_.Fill(K_, false, nullptr, 1.0, nullptr, 0.0, nullptr, nullptr));
     PetscCall(VecDuplicate(rest_, &displacement_));
   }
   {
@@ -168,20 +177,32 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const DofLayout &layout,
                             PETSC_COPY_VALUES, &from));
     PetscCall(VecCreateSeq(PETSC_COMM_SELF, 3 * touched, &x_touched_));
     PetscCall(VecDuplicate(x_touched_, &X_touched_));
-    PetscCall(VecDuplicate(x_touched_, &force_touched_));
     PetscCall(VecScatterCreate(rest_, from, x_touched_, nullptr, &touched_scatter_));
     PetscCall(ISDestroy(&from));
     PetscCall(VecScatterBegin(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
     PetscCall(VecScatterEnd(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
   }
 
-  PetscCall(ApplyPresetDefaults(options.mode == MODE_LINEAR ? kDirectPreset : kCgGamgPreset));
+  PetscCall(ApplyPresetDefaults(options.mode == MODE_LINEAR ? kDirectPreset : kCorotationalPreset));
   PetscCall(CreateSolver(A_, rest_positions, &ksp_));
   PC pc;
   PetscCall(KSPGetPC(ksp_, &pc));
   PetscBool gamg;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCGAMG, &gamg));
   gamg_ = gamg;
+  PetscBool warp;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
+  if (warp && options.mode == MODE_COROTATIONAL) {
+    // The warp preconditioner: A0 = the linear system, factorised per time step size.
+    PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &A_linear_));
+    PetscCall(PCWarpSetLinearOperator(pc, A_linear_));
+    assembler_.ComputeVertexRotations(true);
+  } else if (warp) {  // linear mode: A itself, no rotations (a direct solve in one iteration)
+    PetscCall(PCWarpSetLinearOperator(pc, A_));
+    std::vector<double> identity(9 * layout.local_count(), 0.0);
+    for (PetscInt v = 0; v < layout.local_count(); ++v) identity[9 * v] = identity[9 * v + 4] = identity[9 * v + 8] = 1.0;
+    PetscCall(PCWarpSetRotations(pc, layout.local_count(), identity.data()));
+  }
   PetscCall(SetTimeStep(options.dt));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -251,12 +272,24 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   dt_ = dt;
   if (options_.mode == MODE_COROTATIONAL) {
     elastic_state_current_ = false;  // A depends on dt: refilled at the next step
+    if (A_linear_) {
+      StageScope stage(Stages().assembly);
+      PetscCall(assembler_.Fill(A_linear_, false, nullptr, options_.beta * dt + dt * dt, mass_,
+                                1.0 + options_.alpha * dt, nullptr, nullptr));
+    }
     PetscFunctionReturn(PETSC_SUCCESS);
   }
   const PetscReal a = options_.alpha, b = options_.beta;
-  LinearStiffnessValues(*elements_, options_.shear_scale, b * dt + dt * dt, &values_);
-  PetscCall(SetElasticMatrixValues(mass_, 1.0 + a * dt, &values_, A_));
   PetscLogDouble start, end;
+  {
+    StageScope stage(Stages().assembly);
+    PetscCall(PetscTime(&start));
+    PetscCall(assembler_.Fill(A_, false, nullptr, b * dt + dt * dt, mass_, 1.0 + a * dt, nullptr, nullptr));
+    PetscCall(PetscTime(&end));
+    stats_.assemble_seconds = end - start;
+    ++stats_.assemblies;
+  }
+  StageScope stage(Stages().factorisation);
   PetscCall(PetscTime(&start));
   PetscCall(KSPSetOperators(ksp_, A_, A_));
   PetscCall(KSPSetUp(ksp_));
@@ -282,45 +315,29 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     PetscCall(VecWAXPY(displacement_, -1.0, rest_, x));
     PetscCall(MatMult(K_, displacement_, elastic_force_));
   } else {
-    PetscCall(VecScatterBegin(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(touched_scatter_, x, x_touched_, INSERT_VALUES, SCATTER_FORWARD));
-    const PetscScalar *x_touched, *X_touched;
-    PetscScalar *force_touched;
-    PetscCall(VecGetArrayRead(x_touched_, &x_touched));
-    PetscCall(VecGetArrayRead(X_touched_, &X_touched));
-    PetscCall(VecGetArrayWrite(force_touched_, &force_touched));
+    // A = (1 + a dt) M + (b dt + dt^2) sum_e R K_e R^T, f_el and the energy in one pass.
+    StageScope stage(Stages().assembly);
     const PetscReal a = options_.alpha, b = options_.beta;
-    // Stiffness damping: the corotated displacements y_e, and within a step their
-    // increments since its start.
-    PetscScalar *damping_touched = nullptr;
-    if (b > 0 && !damping_touched_) {
-      PetscCall(VecDuplicate(force_touched_, &damping_touched_));
-      PetscCall(VecDuplicate(elastic_force_, &damping_force_));
-    }
-    if (step_started_) PetscCall(VecGetArrayWrite(damping_touched_, &damping_touched));
-    CorotatedDamping damping{&corotated_, step_started_ ? corotated_start_.data() : nullptr, damping_touched};
-    const double local_energy = CorotatedStiffnessValues(
-        *elements_, options_.shear_scale, x_touched, X_touched, b * dt_ + dt_ * dt_, &values_,
-        force_touched, b > 0 ? &damping : nullptr);
-    PetscCall(VecRestoreArrayRead(x_touched_, &x_touched));
-    PetscCall(VecRestoreArrayRead(X_touched_, &X_touched));
-    PetscCall(VecRestoreArrayWrite(force_touched_, &force_touched));
-    PetscCall(SetElasticMatrixValues(mass_, 1.0 + a * dt_, &values_, A_));
-    PetscCall(VecZeroEntries(elastic_force_));
-    PetscCall(VecScatterBegin(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
-    PetscCall(VecScatterEnd(touched_scatter_, force_touched_, elastic_force_, ADD_VALUES, SCATTER_REVERSE));
-    const double local[2] = {local_energy, damping.energy};
-    double global[2];
-    PetscCall(MPIU_Allreduce(local, global, 2, MPIU_REAL, MPIU_SUM, PetscObjectComm((PetscObject)x)));
-    elastic_energy_ = global[0];
-    if (step_started_) {
-      damping_energy_ = global[1];
-      PetscCall(VecRestoreArrayWrite(damping_touched_, &damping_touched));
-      PetscCall(VecZeroEntries(damping_force_));
-      PetscCall(VecScatterBegin(touched_scatter_, damping_touched_, damping_force_, ADD_VALUES, SCATTER_REVERSE));
-      PetscCall(VecScatterEnd(touched_scatter_, damping_touched_, damping_force_, ADD_VALUES, SCATTER_REVERSE));
-    }
+    PetscLogDouble start, end;
+    PetscCall(PetscTime(&start));
+    // Stiffness damping (b > 0): the corotated displacement gradients, and within
+    // a step the force and energy of their increments since its start.
+    if (b > 0 && !damping_force_) PetscCall(VecDuplicate(elastic_force_, &damping_force_));
+    RowAssembler::IncrementDamping damping{&corotated_, step_started_ ? &corotated_start_ : nullptr,
+                                           damping_force_};
+    PetscCall(assembler_.Fill(A_, true, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_, elastic_force_,
+                              &elastic_energy_, b > 0 ? &damping : nullptr));
+    if (step_started_) damping_energy_ = damping.energy;
+    PetscCall(PetscTime(&end));
+    stats_.assemble_seconds = end - start;
+    ++stats_.assemblies;
     if (gamg_) PetscCall(UpdateNearNullSpace(x));
+    if (A_linear_) {
+      PC pc;
+      PetscCall(KSPGetPC(ksp_, &pc));
+      const std::vector<double> &rotations = assembler_.vertex_rotations();
+      PetscCall(PCWarpSetRotations(pc, static_cast<PetscInt>(rotations.size() / 9), rotations.data()));
+    }
   }
   elastic_state_current_ = true;
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -339,16 +356,60 @@ PetscErrorCode ImplicitEuler::PrimeSolver(Vec x_first, PetscReal dt_first) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// A breakdown, as opposed to a solve that ran out of iterations: the factor or
+// preconditioner is not positive definite, or NaN appeared (A numerically
+// singular: a stiff, nearly incompressible sliver has a mass part below K's
+// round-off).
+static bool IsBreakdown(KSPConvergedReason reason) {
+  return reason == KSP_DIVERGED_PC_FAILED || reason == KSP_DIVERGED_INDEFINITE_PC ||
+         reason == KSP_DIVERGED_INDEFINITE_MAT || reason == KSP_DIVERGED_NANORINF ||
+         reason == KSP_DIVERGED_BREAKDOWN || reason == KSP_DIVERGED_BREAKDOWN_BICG || reason == KSP_DIVERGED_DTOL;
+}
+
+PetscErrorCode ImplicitEuler::SolveDirectly(Vec v, KSPConvergedReason failed, KSPConvergedReason *reason) {
+  PetscFunctionBeginUser;
+  if (!fallback_ksp_) {
+    PetscCall(KSPCreate(PetscObjectComm((PetscObject)A_), &fallback_ksp_));
+    PetscCall(KSPSetOptionsPrefix(fallback_ksp_, "fallback_"));
+    PetscCall(KSPSetType(fallback_ksp_, KSPPREONLY));
+    PC pc;
+    PetscCall(KSPGetPC(fallback_ksp_, &pc));
+    PetscCall(PCSetType(pc, PCCHOLESKY));
+    PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+    PetscCall(KSPSetFromOptions(fallback_ksp_));
+  }
+  PetscCall(PetscInfo(ksp_, "solve %" PetscInt_FMT " broke down (%s): repeated by the direct fallback\n",
+                      stats_.solves + 1, KSPConvergedReasons[failed]));
+  PetscCall(KSPSetOperators(fallback_ksp_, A_, A_));  // refactorises only when A changed
+  PetscCall(KSPSolve(fallback_ksp_, rhs_, v));
+  PetscCall(KSPGetConvergedReason(fallback_ksp_, reason));
+  ++stats_.fallback_solves;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
   PetscFunctionBeginUser;
   KSPConvergedReason reason = KSP_CONVERGED_ITS;
   PetscInt iterations = 0;
+  if (options_.mode == MODE_COROTATIONAL) {
+    // The preconditioner's set-up for the refilled A, timed on its own stage.
+    StageScope stage(Stages().factorisation);
+    PC pc;
+    PetscLogDouble start, end;
+    PetscCall(PetscTime(&start));
+    PetscCall(KSPGetPC(ksp_, &pc));
+    PetscCall(PCSetUp(pc));
+    PetscCall(PetscTime(&end));
+    stats_.last_setup_seconds = end - start;
+  }
   if (!contact || contact->global_constraint_count() == 0) {
     PetscCall(KSPSolve(ksp_, rhs_, v));
     PetscCall(KSPGetConvergedReason(ksp_, &reason));
     PetscCall(KSPGetIterationNumber(ksp_, &iterations));
     reactions_.clear();
+    if (IsBreakdown(reason) && options_.fallback_direct) PetscCall(SolveDirectly(v, reason, &reason));
   } else {
+    StageScope stage(Stages().contact);
     PetscCall(projected_.Solve(ksp_, rhs_, contact->velocity_constraints(), v, &reactions_, &iterations));
     ++stats_.contact_solves;
     stats_.contact_iterations += iterations;
@@ -404,13 +465,17 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   // until the step takes no further vertex inside an obstacle.
   if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
   PetscCall(VecCopy(x, x_start_));
-  PetscCall(contact->BeginStep(x_start_, v, dt_));
+  {
+    StageScope stage(Stages().contact);
+    PetscCall(contact->BeginStep(x_start_, v, dt_));
+  }
   // Sticking contacts that would need more than Coulomb's friction slip (their
   // friction impulse goes into rhs_) and the step is solved again.
   constexpr int kMaxRounds = 20;
   bool again = true;
   for (int round = 0; again && round < kMaxRounds; ++round) {
     PetscCall(Solve(v, contact));
+    StageScope stage(Stages().contact);
     bool added, released = false;
     PetscCall(contact->AddPenetrations(x_start_, v, dt_, &added));
     if (!added) PetscCall(contact->ReleaseSlipping(reactions_, rhs_, &released));
@@ -419,7 +484,10 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   if (again) PetscCall(Solve(v, contact));
   PetscCall(VecWAXPY(x, dt_, v, x_start_));  // x1 = x0 + dt v1
   bool changed;
-  PetscCall(contact->EndStep(x, v, reactions_, &changed));
+  {
+    StageScope stage(Stages().contact);
+    PetscCall(contact->EndStep(x, v, reactions_, &changed));
+  }
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -551,6 +619,24 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
   }
   // x = x0 + dt v_k and the elastic state of x are current: the next step starts from them.
   PetscCall(VecCopy(iterate_, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::TimeAssembly(Vec x, PetscInt repeats, std::vector<double> *seconds) {
+  PetscFunctionBeginUser;
+  StageScope stage(Stages().assembly);
+  const PetscReal a = options_.alpha, b = options_.beta;
+  const bool rotated = options_.mode == MODE_COROTATIONAL;
+  seconds->clear();
+  for (PetscInt repeat = 0; repeat < repeats; ++repeat) {
+    PetscLogDouble start, end;
+    PetscCallMPI(MPI_Barrier(PetscObjectComm((PetscObject)x)));
+    PetscCall(PetscTime(&start));
+    PetscCall(assembler_.Fill(A_, rotated, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_,
+                              rotated ? elastic_force_ : nullptr, rotated ? &elastic_energy_ : nullptr));
+    PetscCall(PetscTime(&end));
+    seconds->push_back(end - start);
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -16,7 +16,9 @@
 //   step extracts every tet's rotation R from F = Ds Dm^-1 (see element.hpp),
 //   K = K(R) = sum_e R K_e R^T and f_el = sum_e R K_e (R^T x_e - X_e); A's values
 //   are refilled into the same pattern (no symbolic work) and solved again,
-//   by default with CG + GAMG warm-started from the previous velocity.
+//   by default with CG preconditioned by the linear system's factor rotated per
+//   vertex (warp_preconditioner.hpp), warm-started from the previous velocity; A
+//   is filled straight into its CSR rows (row_assembly.hpp).
 //   The step is the root of
 //       g(v) = M (v - v0) + a dt M v + dt f_el(x) + b h(x) - dt f_ext,  x = x0 + dt v,
 //   h = sum_e R K_e (y_e - y_e0), y_e = R^T x_e - X_e: the stiffness damping acts on
@@ -49,6 +51,7 @@
 #include "assembly.hpp"
 #include "contact.hpp"
 #include "projected_solve.hpp"
+#include "row_assembly.hpp"
 
 namespace softbody {
 
@@ -70,6 +73,9 @@ struct IntegratorOptions {
   PetscReal newton_rtol = 1e-4;
   PetscInt newton_max_it = 50;
   PetscBool newton_always = PETSC_FALSE;
+  // A solve that breaks down (a factor or preconditioner that is not positive
+  // definite, NaN) is repeated by a direct factorisation (MUMPS Cholesky).
+  PetscBool fallback_direct = PETSC_TRUE;
 };
 
 // The time step at time t (s): -dt until the first -dt_schedule entry applies.
@@ -86,6 +92,9 @@ struct SolverStatistics {
   PetscInt min_iterations = PETSC_MAX_INT;
   PetscInt max_iterations = 0;
   PetscLogDouble factor_seconds = 0;  // wall time of the last (re)factorisation/set-up
+  PetscLogDouble assemble_seconds = 0;  // wall time of the last fill of A (linear: with K)
+  PetscLogDouble last_setup_seconds = 0;  // preconditioner set-up inside the last step
+  PetscInt assemblies = 0;            // fills of A
   PetscInt time_step_changes = 0;     // SetTimeStep calls after the first
   PetscInt contact_solves = 0;        // solves with contact constraints
   PetscInt contact_iterations = 0;    // their CG iterations
@@ -93,6 +102,7 @@ struct SolverStatistics {
   PetscInt max_newton_iterations = 0; // corotational: most in one step
   PetscInt backtracks = 0;            // corotational: line-search step halvings
   PetscInt newton_stopped_short = 0;  // corotational: dissipative steps that stalled above -newton_rtol
+  PetscInt fallback_solves = 0;       // solves repeated by the direct fallback after a breakdown
 };
 
 class ImplicitEuler {
@@ -104,8 +114,9 @@ class ImplicitEuler {
 
   // Collective. Creates the matrices and the solver for options.dt (linear mode:
   // assembles and factorises A). rest_positions and lumped_mass are referenced.
-  PetscErrorCode Setup(MPI_Comm comm, const DofLayout &layout, const LocalElements &elements,
-                       Vec rest_positions, Vec lumped_mass, const IntegratorOptions &options);
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                       const LocalElements &elements, Vec rest_positions, Vec lumped_mass,
+                       const IntegratorOptions &options);
   // Collective. Linear mode: owned_body[i] is the body of owned vertex i; each
   // step then takes every body's rigid-body velocity (translation and
   // infinitesimal rotation about its rest centre of mass) from its momentum:
@@ -133,7 +144,18 @@ class ImplicitEuler {
   // the gravitational energy is -sum_i m_i g . x_i (zero at the origin).
   PetscErrorCode Energies(Vec x, Vec v, EnergySample *energy);
 
+  // Collective. Fills A `repeats` more times as a step would (linear: the rest
+  // stiffness; corotational: at positions x, with forces and energy) and
+  // returns each fill's wall time (s); A's values stay the same. For -bench.
+  PetscErrorCode TimeAssembly(Vec x, PetscInt repeats, std::vector<double> *seconds);
+
   KSP solver() const { return ksp_; }
+  ElasticityMode mode() const { return options_.mode; }
+  // The system matrix A and (linear mode) the rest stiffness K (null in corotational mode).
+  Mat system_matrix() const { return A_; }
+  Mat stiffness_matrix() const { return K_; }
+  // Elements this rank's assembly computes (its own and those shared with a neighbour).
+  size_t assembled_elements() const { return assembler_.num_elements(); }
   PetscReal time_step() const { return dt_; }
   const SolverStatistics &statistics() const { return stats_; }
 
@@ -146,6 +168,9 @@ class ImplicitEuler {
   // v = A^-1 rhs_ (v: initial guess), with the contact's velocity constraints
   // when any rank has one.
   PetscErrorCode Solve(Vec v, const ContactSolver *contact);
+  // Collective. A v = rhs again by the direct fallback (-fallback_direct) after
+  // the solver broke down with `failed`; its reason in *reason.
+  PetscErrorCode SolveDirectly(Vec v, KSPConvergedReason failed, KSPConvergedReason *reason);
   // Linear mode: per body, the momentum and angular momentum about the rest
   // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
   PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
@@ -160,6 +185,7 @@ class ImplicitEuler {
   Vec rest_ = nullptr, mass_ = nullptr;  // not owned
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
+  KSP fallback_ksp_ = nullptr;  // created at the first breakdown
   Vec elastic_force_ = nullptr, rhs_ = nullptr;
   Vec gravity_force_ = nullptr;           // M g, only when g != 0
   Vec x_start_ = nullptr;                 // x0 during a step with contact
@@ -167,18 +193,19 @@ class ImplicitEuler {
   // the direction d, a work vector.
   Vec v_start_ = nullptr, iterate_ = nullptr, v_trial_base_ = nullptr, direction_ = nullptr,
       work_ = nullptr;
-  // Corotational stiffness damping (b > 0): y_e of the last element pass and at the
-  // start of the step, h = sum_e R K_e (y_e - y_e,start) and Psi (during a step).
+  // Corotational stiffness damping (b > 0): the displacement gradients of y_e of
+  // the last element pass and at the start of the step (9 doubles per element
+  // each), h = sum_e R K_e (y_e - y_e,start) and Psi (during a step).
   std::vector<double> corotated_, corotated_start_;
   bool step_started_ = false;
-  Vec damping_force_ = nullptr, damping_touched_ = nullptr;
+  Vec damping_force_ = nullptr;
   PetscReal damping_energy_ = 0;
   ProjectedSolver projected_;
   std::vector<PetscReal> reactions_;
   PetscReal elastic_energy_ = 0;           // corotational mode (linear: in Energies)
   bool elastic_state_current_ = false;
   bool gamg_ = false;                     // the PC uses the near-null space
-  CooValues values_;                      // A's COO values
+  RowAssembler assembler_;                // fills A (and K) straight into their CSR values
   // Linear mode, rigid-body velocities (SetBodies): per body mass (kg), rest centre
   // of mass (m) and inverse rotational inertia about it (1/(kg m^2)).
   struct RigidBody {
@@ -190,11 +217,13 @@ class ImplicitEuler {
   std::vector<RigidBody> rigid_;
   // Linear mode: the rest stiffness and a work vector for x - X.
   Mat K_ = nullptr;
+  // Corotational mode with the warp preconditioner: A0, the linear system.
+  Mat A_linear_ = nullptr;
   Vec displacement_ = nullptr;
   // Positions of the vertices the local elements touch (corotational steps,
   // element-wise energies).
   VecScatter touched_scatter_ = nullptr;
-  Vec x_touched_ = nullptr, X_touched_ = nullptr, force_touched_ = nullptr;
+  Vec x_touched_ = nullptr, X_touched_ = nullptr;
   SolverStatistics stats_;
 };
 

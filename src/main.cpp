@@ -21,11 +21,13 @@
 #include <optional>
 
 #include "assembly.hpp"
+#include "benchmark.hpp"
 #include "checkpoint.hpp"
 #include "contact.hpp"
 #include "deformation.hpp"
 #include "errors.hpp"
 #include "integrator.hpp"
+#include "log_stages.hpp"
 #include "output.hpp"
 #include "partition.hpp"
 #include "report.hpp"
@@ -36,7 +38,8 @@
 static const char help[] =
     "softbody: implicit finite-element soft-body simulation (PETSc + MPI).\n"
     "Usage: mpirun -n 2 softbody -scene SCENE.txt [-output OUT.h5] [options] [PETSc options]\n"
-    "Solver presets: -options_file config/direct.opts (default), config/cg-gamg.opts, ...\n";
+    "Solver presets: -options_file config/direct.opts (linear default), config/cg-warp.opts (corotational\n"
+    "default), config/cg-gamg.opts, config/direct-mumps.opts, ...\n";
 
 using namespace softbody;
 
@@ -120,10 +123,8 @@ PetscErrorCode Resume(const LoopState &loop, const Scene &scene, const DofLayout
 
 PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   PetscFunctionBeginUser;
-  PetscLogStage setup_stage, step_stage, output_stage;
-  PetscCall(PetscLogStageRegister("Set-up", &setup_stage));
-  PetscCall(PetscLogStageRegister("Time steps", &step_stage));
-  PetscCall(PetscLogStageRegister("Output", &output_stage));
+  PetscCall(RegisterLogStages());
+  const PetscLogStage setup_stage = Stages().setup, step_stage = Stages().step, output_stage = Stages().output;
   RunReport report;
   std::optional<Timed> setup_timer(std::in_place, setup_stage, &report.times.setup);
 
@@ -135,6 +136,7 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   OutputOptions output;
   CheckpointOptions checkpoints;
   RunControlOptions control;
+  BenchmarkOptions bench_options;
   PetscCall(ProcessSceneOptions(comm, &scene_options));
   PetscCall(ProcessIntegratorOptions(comm, &integration));
   PetscCall(ProcessContactOptions(comm, &contact_options));
@@ -142,6 +144,7 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   PetscCall(ProcessOutputOptions(comm, &output));
   PetscCall(ProcessCheckpointOptions(comm, output, &checkpoints));
   PetscCall(ProcessRunControlOptions(comm, &control));
+  PetscCall(ProcessBenchmarkOptions(comm, &bench_options));
   PetscBool help;
   PetscCall(PetscOptionsHasHelp(nullptr, &help));
   if (help) {
@@ -162,6 +165,16 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   PetscCall(LoadScene(comm, scene_options, &scene));
   std::vector<Deformation> deformations;
   PetscCall(ParseDeformations(comm, deform_text, scene, &deformations));
+  // Bodies that nothing can set in motion add no unknowns (partition.hpp); not on
+  // a restart (its bodies move as the checkpoint says) or when -export_matrices
+  // asks for the matrices of every free body.
+  if (!restart && output.matrix_dir.empty()) {
+    MotionSources sources{integration.gravity.squaredNorm() > 0, bool(contact_options.ground),
+                          !contact_options.constraints_path.empty() || contact_options.edge_bounds,
+                          std::vector<bool>(scene.bodies.size(), false)};
+    for (const Deformation &d : deformations) sources.deformed[d.body] = true;
+    MarkBodiesAtRest(sources, &scene);
+  }
 
   // 4. Free vertices, METIS partition, contiguous block per rank.
   DofLayout layout;
@@ -195,7 +208,7 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   const PetscReal dt_first = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start.time);
   if (has_unknowns) {
-    PetscCall(integrator.Setup(comm, layout, elements, state.rest_positions, state.lumped_mass,
+    PetscCall(integrator.Setup(comm, scene, layout, elements, state.rest_positions, state.lumped_mass,
                                integration));
     PetscCall(integrator.SetBodies(OwnedVertexBodies(scene, layout), static_cast<int>(scene.bodies.size())));
   }
@@ -226,12 +239,14 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   //    -output_every steps, a checkpoint every -checkpoint_every steps. After
   //    SIGINT/SIGTERM the ranks stop together after the step, with its frame.
   ProgressLine progress;
+  Benchmark benchmark(bench_options);
   PetscCall(progress.Start(comm, control, start.step, integration.steps));
   report.first_step = report.steps = start.step;
   PetscReal time = report.final_time = start.time;
   int stop_signal;
   PetscCall(AgreeOnStop(comm, &stop_signal));
   for (PetscInt step = start.step + 1; step <= integration.steps && !stop_signal; ++step) {
+    const PetscLogDouble loop_before = report.times.loop;
     {
       Timed timer(step_stage, &report.times.loop);
       const PetscReal dt = TimeStepAt(integration, time);
@@ -249,6 +264,7 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
       Timed timer(step_stage, &report.times.loop);
       PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
     }
+    benchmark.RecordStep(report.times.loop - loop_before, integrator.statistics());
     report.steps = step;
     report.final_time = time;
     if (frame) {
@@ -263,9 +279,10 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
     progress.Update(step, time, integrator.statistics().last_iterations);
   }
   progress.Finish();
+  if (has_unknowns) PetscCall(benchmark.Finish(comm, scene, &integrator, state.positions));
   if (writer) {
     const SolverStatistics &solver = integrator.statistics();
-    PetscCall(writer->Close({{"setup_seconds", report.times.setup},
+    std::vector<std::pair<std::string, double>> statistics{{"setup_seconds", report.times.setup},
                              {"loop_seconds", report.times.loop},
                              {"output_seconds", report.times.output},
                              {"steps", double(report.steps)},
@@ -279,8 +296,10 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
                              {"newton_iterations", double(solver.newton_iterations)},
                              {"max_newton_iterations", double(solver.max_newton_iterations)},
                              {"newton_stopped_short", double(solver.newton_stopped_short)},
-                             {"contact_seconds", contact.statistics().seconds}},
-                            stop_signal));
+                             {"fallback_solves", double(solver.fallback_solves)},
+                             {"contact_seconds", contact.statistics().seconds}};
+    statistics.insert(statistics.end(), benchmark.attributes().begin(), benchmark.attributes().end());
+    PetscCall(writer->Close(statistics, stop_signal));
     report.frames = writer->frames();
   }
 

@@ -161,7 +161,7 @@ bool WriteMesh(hid_t file, const Scene &scene) {
   std::vector<double> rest, materials;
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
-    body_fixed.push_back(body.fixed ? 1 : 0);
+    body_fixed.push_back(body.fixed && !body.at_rest ? 1 : 0);
     materials.insert(materials.end(), {body.material.density, body.material.young, body.material.poisson});
     for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
       for (int a = 0; a < 4; ++a) tets.push_back(body.first_vertex + body.mesh.tets(t, a));

@@ -49,6 +49,39 @@ PetscErrorCode PartitionFreeVertices(const Scene &scene, const DofLayout &layout
 
 }  // namespace
 
+int MarkBodiesAtRest(const MotionSources &sources, Scene *scene) {
+  if (sources.gravity || sources.ground || sources.constraints) return 0;
+  const size_t n = scene->bodies.size();
+  std::vector<Eigen::Vector3d> lo(n), hi(n);
+  for (size_t b = 0; b < n; ++b) {
+    const Body &body = scene->bodies[b];
+    if (body.fixed) {
+      if (body.mesh.num_vertices() == 0) continue;
+    } else {
+      if (b < sources.deformed.size() && sources.deformed[b]) return 0;
+      for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
+        if (scene->initial_velocities.row(body.first_vertex + v).squaredNorm() != 0) return 0;  // it moves
+    }
+    lo[b] = body.mesh.vertices.colwise().minCoeff().transpose();
+    hi[b] = body.mesh.vertices.colwise().maxCoeff().transpose();
+  }
+  // Everything is still: a free body at rest unless its box meets another's.
+  std::vector<bool> alone(n, true);
+  for (size_t a = 0; a < n; ++a)
+    for (size_t b = a + 1; b < n; ++b) {
+      if (scene->bodies[a].mesh.num_vertices() == 0 || scene->bodies[b].mesh.num_vertices() == 0) continue;
+      if ((lo[a].array() <= hi[b].array()).all() && (lo[b].array() <= hi[a].array()).all()) alone[a] = alone[b] = false;
+    }
+  int marked = 0;
+  for (size_t b = 0; b < n; ++b) {
+    Body &body = scene->bodies[b];
+    if (body.fixed || !alone[b]) continue;
+    body.fixed = body.at_rest = true;
+    ++marked;
+  }
+  return marked;
+}
+
 PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layout) {
   PetscFunctionBeginUser;
   PetscCallMPI(MPI_Comm_rank(comm, &layout->rank));

@@ -38,4 +38,21 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layo
 // Not collective. The body of each vertex this rank owns, in PETSc order.
 std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout);
 
+// What could set a body in motion besides its initial velocities.
+struct MotionSources {
+  bool gravity = false;               // g != 0
+  bool ground = false;                // a ground plane (a body inside it is pushed out)
+  bool constraints = false;           // distance constraints or edge bounds
+  std::vector<bool> deformed;         // per body: named by a -deform
+};
+
+// Not collective. Bodies that nothing can set in motion become immobile like
+// fixed ones (body.fixed = body.at_rest = true), so they add no unknowns: a body
+// that is not fixed, all of whose initial velocities are zero, that no -deform
+// names, in a scene without gravity, ground or constraints in which every other
+// free body is just as still (a moving body could hit it), and whose bounding
+// box meets no other body's (contact would push overlapping bodies apart).
+// Returns how many bodies were marked.
+int MarkBodiesAtRest(const MotionSources &sources, Scene *scene);
+
 }  // namespace softbody

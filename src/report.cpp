@@ -1,6 +1,7 @@
 #include "report.hpp"
 
 #include <algorithm>
+#include <string>
 
 #include "run_control.hpp"
 
@@ -11,14 +12,17 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
                                const SolverStatistics &solver, KSP ksp, const ContactSolver &contact,
                                const RunReport &r) {
   PetscFunctionBeginUser;
-  int fixed_bodies = 0;
-  PetscInt fixed_vertices = 0;
+  int fixed_bodies = 0, resting_bodies = 0;
+  PetscInt fixed_vertices = 0, resting_vertices = 0;
   for (const Body &body : scene.bodies)
-    if (body.fixed) {
+    if (body.at_rest) {
+      ++resting_bodies;
+      resting_vertices += body.mesh.num_vertices();
+    } else if (body.fixed) {
       ++fixed_bodies;
       fixed_vertices += body.mesh.num_vertices();
     }
-  const PetscInt stray = scene.num_vertices() - fixed_vertices - layout.num_free();
+  const PetscInt stray = scene.num_vertices() - fixed_vertices - resting_vertices - layout.num_free();
   PetscInt min_dofs = PETSC_MAX_INT, max_dofs = 0;
   for (PetscMPIInt q = 0; q < layout.size; ++q) {
     const PetscInt dofs = 3 * (layout.vertex_start[q + 1] - layout.vertex_start[q]);
@@ -57,11 +61,16 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
   }
 
   PetscCall(PetscPrintf(comm, "  left out     D never formed (A = (1 + a dt) M + (b dt + dt^2) K)"));
-  if (o.mode == MODE_COROTATIONAL) PetscCall(PetscPrintf(comm, "; K never formed (A refilled directly)"));
-  else PetscCall(PetscPrintf(comm, "; reassembly (K, A fixed)"));
+  if (o.mode == MODE_COROTATIONAL) PetscCall(PetscPrintf(comm, "; K never formed (A refilled in place)"));
+  else PetscCall(PetscPrintf(comm, "; reassembly (K and A assembled once)"));
+  if (layout.size > 1)
+    PetscCall(PetscPrintf(comm, "; matrix entries sent between ranks (each rank fills its own rows)"));
   if (fixed_bodies)
     PetscCall(PetscPrintf(comm, "; %d fixed bodies (%" PetscInt_FMT " vertices, no unknowns)",
                           fixed_bodies, fixed_vertices));
+  if (resting_bodies)
+    PetscCall(PetscPrintf(comm, "; %d bodies at rest (no velocity, gravity, deformation, contact or constraint: "
+                          "%" PetscInt_FMT " vertices, no unknowns)", resting_bodies, resting_vertices));
   if (stray) PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " vertices in no tet", stray));
   if (scene.ignored_fixed_velocities)
     PetscCall(PetscPrintf(comm, "; %d initial velocities on fixed bodies", scene.ignored_fixed_velocities));
@@ -79,7 +88,7 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscCall(KSPGetType(ksp, &ksp_type));
     PetscCall(KSPGetPC(ksp, &pc));
     PetscCall(PCGetType(pc, &pc_type));
-    // The direct preset factorises on every rank (PCREDUNDANT): name the inner solver.
+    // -pc_type redundant factorises on every rank: name the inner solver.
     PetscBool redundant;
     PetscCall(PetscObjectTypeCompare((PetscObject)pc, PCREDUNDANT, &redundant));
     PC factor_pc = pc;
@@ -93,19 +102,31 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscBool factored;
     PetscCall(PetscObjectTypeCompareAny((PetscObject)factor_pc, &factored, PCCHOLESKY, PCLU, ""));
     if (factored) PetscCall(PCFactorGetMatSolverType(factor_pc, &factor_package));
+    PetscBool supernodal;
+    PetscCall(PetscObjectTypeCompare((PetscObject)factor_pc, "supernodal", &supernodal));
+    if (supernodal) {
+      factored = PETSC_TRUE;
+      factor_package = "CHOLMOD";
+    }
     PetscCall(PetscPrintf(comm, "  solver       %s + %s%s%s%s", ksp_type, pc_type,
                           factor_package ? " " : "", factor_package ? factor_package : "",
                           redundant ? " (whole A on every rank)" : ""));
     if (o.mode == MODE_LINEAR)
       PetscCall(PetscPrintf(comm, ", %s once in %.3g s", factored ? "factorised" : "set up",
                             solver.factor_seconds));
+    else if (std::string(pc_type) == "warp")
+      PetscCall(PetscPrintf(comm, ", A refilled every step, preconditioned by the linear system's factor "
+                                  "(once per time step size) rotated per vertex"));
     else
-      PetscCall(PetscPrintf(comm, ", A refilled and set up again every step"));
+      PetscCall(PetscPrintf(comm, ", A refilled and %s again every step", factored ? "factorised" : "set up"));
     PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " solves", solver.solves));
     if (solver.solves)
       PetscCall(PetscPrintf(comm, ", iterations per step %.3g mean, %" PetscInt_FMT " min, %" PetscInt_FMT " max",
                             (double)solver.total_iterations / solver.solves, solver.min_iterations,
                             solver.max_iterations));
+    if (solver.fallback_solves)
+      PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " solves broke down and were repeated by the direct fallback "
+                                  "(MUMPS Cholesky)", solver.fallback_solves));
     PetscCall(PetscPrintf(comm, "\n"));
     if (solver.newton_iterations > 0)
       PetscCall(PetscPrintf(comm,

@@ -34,6 +34,7 @@ struct Body {
   std::string mesh_path;  // as resolved against the scene's folder
   Material material;
   bool fixed;             // immobile: contributes no unknowns
+  bool at_rest = false;   // free in the file, but nothing can set it in motion: treated as fixed
   TetMesh mesh;           // placed: vertices are the rest positions in the world
   int32_t first_vertex;   // natural index of the body's vertex 0
 };

@@ -3,10 +3,21 @@
 #include <sstream>
 #include <string>
 
+#include "supernodal.hpp"
+#include "warp_preconditioner.hpp"
+
 namespace softbody {
+
+PetscErrorCode RegisterPreconditioners() {
+  PetscFunctionBeginUser;
+  PetscCall(RegisterSupernodalPC());
+  PetscCall(RegisterWarpPC());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
 PetscErrorCode ApplyPresetDefaults(const char *preset) {
   PetscFunctionBeginUser;
+  PetscCall(RegisterPreconditioners());
   // PetscOptionsInsertString knows no comments: drop them line by line.
   std::istringstream lines(preset);
   std::string line, options;
@@ -22,6 +33,7 @@ PetscErrorCode ApplyPresetDefaults(const char *preset) {
 
 PetscErrorCode CreateSolver(Mat A, Vec coordinates, KSP *ksp) {
   PetscFunctionBeginUser;
+  PetscCall(RegisterPreconditioners());
   PetscCall(MatSetOption(A, MAT_SPD, PETSC_TRUE));
   PetscCall(MatSetOption(A, MAT_SPD_ETERNAL, PETSC_TRUE));
   MatNullSpace rigid_body_modes;
@@ -35,7 +47,14 @@ PetscErrorCode CreateSolver(Mat A, Vec coordinates, KSP *ksp) {
   // content); a direct solve ignores any guess.
   PetscBool preonly;
   PetscCall(PetscObjectTypeCompare((PetscObject)*ksp, KSPPREONLY, &preonly));
-  if (!preonly) PetscCall(KSPSetInitialGuessNonzero(*ksp, PETSC_TRUE));
+  // The warp preconditioner starts from zero (warp_preconditioner.hpp);
+  // -ksp_initial_guess_nonzero decides where given.
+  PetscBool guess_set, warp;
+  PC pc;
+  PetscCall(KSPGetPC(*ksp, &pc));
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
+  PetscCall(PetscOptionsHasName(nullptr, nullptr, "-ksp_initial_guess_nonzero", &guess_set));
+  if (!preonly && !guess_set) PetscCall(KSPSetInitialGuessNonzero(*ksp, warp ? PETSC_FALSE : PETSC_TRUE));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -12,7 +12,11 @@ namespace softbody {
 
 // Presets compiled in from config/: the defaults of linear and corotational mode.
 extern const char *const kDirectPreset;  // config/direct.opts
-extern const char *const kCgGamgPreset;  // config/cg-gamg.opts
+extern const char *const kCorotationalPreset;  // config/cg-warp.opts
+
+// Not collective. Makes softbody's own PC types known to PETSc (once):
+// "supernodal" (supernodal.hpp) and "warp" (warp_preconditioner.hpp).
+PetscErrorCode RegisterPreconditioners();
 
 // Collective. Inserts the preset's options where the command line sets none.
 PetscErrorCode ApplyPresetDefaults(const char *preset);

@@ -12,6 +12,7 @@
 """
 import glob
 import os
+import shutil
 import sys
 
 import numpy as np
@@ -84,6 +85,7 @@ def main():
         scene = harness.write_scene(os.path.join(work, "scene.txt"),
                                     [(mesh, 2.5, 10000.0, 0.3, False, (0, 0, 0), (1, 0, 0, 0))])
         matrices = os.path.join(work, "matrices")
+        shutil.rmtree(matrices, ignore_errors=True)  # no stale matrices from an earlier run
         harness.run(args, 2, ["-scene", scene, "-steps", 0, "-shear_scale", 0.25] + COMMON
                     + ["-export_matrices", matrices])
         reference = read_sections(data_path, "mmmv")
@@ -103,6 +105,7 @@ def main():
             os.path.join(work, "scene.txt"),
             [(os.path.join(folder, "bunny.mesh"), 2.5, 10000.0, 0.3, False, (0, 0, 0), (1, 0, 0, 0))])
         matrices = os.path.join(work, "matrices")
+        shutil.rmtree(matrices, ignore_errors=True)  # no stale matrices from an earlier run
         harness.run(args, 2, ["-scene", scene, "-steps", 0] + COMMON + ["-export_matrices", matrices])
         reference = read_sections(control, "mmmv")
         error, _ = relative_matrix_difference(

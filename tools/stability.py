@@ -3,7 +3,7 @@
 
 Runs a FIXED matrix of short simulations (tens of steps on meshes of at most a
 few hundred tets, generated into the work folder), in linear and corotational
-mode, each with its default solver preset (MUMPS Cholesky for linear, CG + GAMG
+mode, each with its default solver preset (CHOLMOD Cholesky for linear, CG + warp
 for corotational), and gives every case a verdict:
 
   group      what varies (everything else at the baseline)
@@ -79,7 +79,7 @@ sys.path.insert(0, HERE)
 import box_mesh  # noqa: E402
 
 MODES = ("linear", "corotational")
-PRESET = {"linear": "MUMPS Cholesky (config/direct.opts)", "corotational": "CG + GAMG (config/cg-gamg.opts)"}
+PRESET = {"linear": "CHOLMOD Cholesky (config/direct.opts)", "corotational": "CG + warp (config/cg-warp.opts)"}
 ENERGY_TOLERANCE = 1e-6
 DENSITY = 1000.0
 BASE = dict(young=1e6, poisson=0.3, dt=0.01, alpha=None, beta=None)  # None: the program's default

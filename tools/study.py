@@ -4,7 +4,7 @@
 Runs one scene to a fixed end time T over a grid of
   time steps   dt0, dt0/2, dt0/4, ... (--levels of them; steps = round(T / dt)),
   modes        linear, corotational,
-  solvers      direct (config/direct.opts: MUMPS Cholesky), CG + GAMG
+  solvers      direct (config/direct.opts: CHOLMOD Cholesky), CG + GAMG
                (config/cg-gamg.opts), CG + Jacobi (config/cg-jacobi.opts); the
                iterative ones at every -ksp_rtol of --rtols,
   ranks        1 and 2,
@@ -61,7 +61,8 @@ CONTROLLED = ("-scene", "-mode", "-dt", "-dt_schedule", "-steps", "-output", "-o
               "-options_file", "-ksp_rtol", "-deform")
 COLUMNS = ["mode", "solver", "ranks", "dt", "rtol", "steps", "setup_s", "loop_s", "iterations",
            "error_l2", "error_max", "status", "contact_s", "message"]
-SOLVER_LABELS = {"direct": "direct (MUMPS Cholesky)", "cg-gamg": "CG + GAMG", "cg-jacobi": "CG + Jacobi"}
+SOLVER_LABELS = {"direct": "direct (CHOLMOD Cholesky)", "cg-gamg": "CG + GAMG", "cg-jacobi": "CG + Jacobi",
+                 "cg-warp": "CG + warp"}
 
 
 # ----------------------------------------------------------------------------- arguments

@@ -1,0 +1,288 @@
+// RowAssembler (row_assembly.hpp): the matrix, elastic force and energy it
+// writes straight into A's CSR values equal the element-by-element COO assembly
+// (assembly.hpp) in linear and corotational mode, for both shear scales, and
+// so do the corotated stiffness damping's increment force and energy; and
+// its speed (printed, not asserted: the machine may be shared).
+#include <gtest/gtest.h>
+#include <petscmat.h>
+
+#include <chrono>
+#include <random>
+
+#include "assembly.hpp"
+#include "partition.hpp"
+#include "row_assembly.hpp"
+#include "scene.hpp"
+
+using namespace softbody;
+
+namespace {
+
+class PetscEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override { PetscInitializeNoArguments(); }
+  void TearDown() override { PetscFinalize(); }
+};
+const auto *const kPetsc = ::testing::AddGlobalTestEnvironment(new PetscEnvironment);
+
+// A box of nx x ny x nz cells, 6 Kuhn tets each (as tools/box_mesh.py), edge h.
+TetMesh BoxMesh(int nx, int ny, int nz, double h) {
+  TetMesh mesh;
+  mesh.vertices.resize((nx + 1) * (ny + 1) * (nz + 1), 3);
+  for (int k = 0; k <= nz; ++k)
+    for (int j = 0; j <= ny; ++j)
+      for (int i = 0; i <= nx; ++i) mesh.vertices.row(i + (nx + 1) * (j + (ny + 1) * k)) << i * h, j * h, k * h;
+  const int paths[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  mesh.tets.resize(6 * nx * ny * nz, 4);
+  int t = 0;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i)
+        for (const auto &path : paths) {
+          int corner[3] = {i, j, k}, v[4];
+          v[0] = i + (nx + 1) * (j + (ny + 1) * k);
+          for (int s = 0; s < 3; ++s) {
+            ++corner[path[s]];
+            v[s + 1] = corner[0] + (nx + 1) * (corner[1] + (ny + 1) * corner[2]);
+          }
+          TetPositions X;
+          for (int a = 0; a < 4; ++a) X.row(a) = mesh.vertices.row(v[a]);
+          if (SignedVolume(X) < 0) std::swap(v[1], v[2]);
+          mesh.tets.row(t++) << v[0], v[1], v[2], v[3];
+        }
+  return mesh;
+}
+
+Scene BoxScene(int nx, int ny, int nz) {
+  Scene scene;
+  Body body;
+  body.material = {1000.0, 1e6, 0.4};
+  body.fixed = false;
+  body.mesh = BoxMesh(nx, ny, nz, 0.1);
+  body.first_vertex = 0;
+  scene.bodies.push_back(body);
+  scene.initial_velocities.setZero(body.mesh.num_vertices(), 3);
+  return scene;
+}
+
+// Positions: rest positions rotated by a large angle, stretched by `stretch`
+// along x and compressed by half of it along z, and perturbed by `noise` (m;
+// the box's cells are 0.1 m).
+PetscErrorCode DeformedPositions(Vec rest, Vec x, double stretch = 0.1, double noise_size = 0.01) {
+  PetscFunctionBeginUser;
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0.0, noise_size);
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(1.1, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  const PetscScalar *X;
+  PetscScalar *y;
+  PetscInt n;
+  PetscCall(VecGetLocalSize(rest, &n));
+  PetscCall(VecGetArrayRead(rest, &X));
+  PetscCall(VecGetArray(x, &y));
+  for (PetscInt v = 0; v < n / 3; ++v) {
+    const Eigen::Vector3d p(X[3 * v] * (1 + stretch), X[3 * v + 1], X[3 * v + 2] * (1 - 0.5 * stretch));
+    const Eigen::Vector3d q = R * p;
+    for (int c = 0; c < 3; ++c) y[3 * v + c] = q[c] + noise(rng);
+  }
+  PetscCall(VecRestoreArrayRead(rest, &X));
+  PetscCall(VecRestoreArray(x, &y));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// |reference - v| (2-norm) and |reference| in *scale; reference holds v's local
+// entries in order (one rank), work is a vector like v.
+PetscReal DifferenceFrom(const std::vector<PetscScalar> &reference, Vec v, Vec work, PetscReal *scale) {
+  PetscScalar *w;
+  VecGetArray(work, &w);
+  std::copy(reference.begin(), reference.end(), w);
+  VecRestoreArray(work, &w);
+  PetscReal difference;
+  VecNorm(work, NORM_2, scale);
+  VecAXPY(work, -1.0, v);
+  VecNorm(work, NORM_2, &difference);
+  return difference;
+}
+
+double RelativeMatrixDifference(Mat A, Mat B) {
+  Mat D;
+  MatConvert(A, MATSAME, MAT_INITIAL_MATRIX, &D);
+  MatAXPY(D, -1.0, B, DIFFERENT_NONZERO_PATTERN);
+  PetscReal difference, scale;
+  MatNorm(D, NORM_FROBENIUS, &difference);
+  MatNorm(B, NORM_FROBENIUS, &scale);
+  MatDestroy(&D);
+  return difference / scale;
+}
+
+struct Fixture {
+  Scene scene;
+  DofLayout layout;
+  LocalElements elements;
+  State state;
+  RowAssembler assembler;
+  Mat A = nullptr;
+
+  explicit Fixture(int nx, int ny, int nz, double shear_scale) : scene(BoxScene(nx, ny, nz)) {
+    BuildDofLayout(PETSC_COMM_WORLD, scene, &layout);
+    elements = CollectLocalElements(scene, layout);
+    CreateState(PETSC_COMM_WORLD, scene, layout, elements, &state);
+    assembler.Setup(PETSC_COMM_WORLD, scene, layout, shear_scale, state.rest_positions);
+    assembler.CreateMatrix(&A);
+  }
+  ~Fixture() { MatDestroy(&A); }
+};
+
+}  // namespace
+
+TEST(RowAssembler, EqualsCooAssembly) {
+  for (const double shear_scale : {1.0, 0.25}) {
+    Fixture f(4, 3, 5, shear_scale);
+    const double stiffness_scale = 2e-3, mass_scale = 1.01;
+    // Linear: K and A = mass_scale M + stiffness_scale K.
+    {
+      Mat reference;
+      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference), 0);
+      PetscInt local_dofs;
+      VecGetLocalSize(f.state.lumped_mass, &local_dofs);
+      CooValues values(144 * f.elements.size() + local_dofs);
+      LinearStiffnessValues(f.elements, shear_scale, stiffness_scale, &values);
+      ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
+      ASSERT_EQ(f.assembler.Fill(f.A, false, nullptr, stiffness_scale, f.state.lumped_mass, mass_scale, nullptr,
+                                 nullptr), 0);
+      EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-14) << "shear scale " << shear_scale;
+      MatDestroy(&reference);
+    }
+    // Corotational: A, f_el and the energy at deformed, rotated positions.
+    {
+      Vec x, force, reference_force;
+      VecDuplicate(f.state.rest_positions, &x);
+      VecDuplicate(x, &force);
+      VecDuplicate(x, &reference_force);
+      ASSERT_EQ(DeformedPositions(f.state.rest_positions, x), 0);
+      PetscReal energy;
+      f.assembler.ComputeVertexRotations(true);
+      ASSERT_EQ(f.assembler.Fill(f.A, true, x, stiffness_scale, f.state.lumped_mass, mass_scale, force, &energy), 0);
+
+      Mat reference;
+      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference), 0);
+      PetscInt local_dofs;
+      VecGetLocalSize(f.state.lumped_mass, &local_dofs);
+      CooValues values(144 * f.elements.size() + local_dofs);
+      const PetscScalar *xa, *Xa;
+      VecGetArrayRead(x, &xa);
+      VecGetArrayRead(f.state.rest_positions, &Xa);
+      // One rank: the touched vertices are all vertices, in order.
+      std::vector<PetscScalar> force_touched(3 * f.elements.touched_vertices.size());
+      ASSERT_EQ(f.elements.touched_vertices.size() * 3, static_cast<size_t>(local_dofs));
+      const double reference_energy = CorotatedStiffnessValues(f.elements, shear_scale, xa, Xa, stiffness_scale,
+                                                               &values, force_touched.data());
+      VecRestoreArrayRead(x, &xa);
+      VecRestoreArrayRead(f.state.rest_positions, &Xa);
+      ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
+      EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-13) << "shear scale " << shear_scale;
+      PetscReal scale;
+      const PetscReal difference = DifferenceFrom(force_touched, force, reference_force, &scale);
+      EXPECT_LT(difference, 1e-12 * scale);
+      EXPECT_NEAR(energy, reference_energy, 1e-12 * reference_energy);
+      // Vertex rotations are proper rotations.
+      const std::vector<double> &rotations = f.assembler.vertex_rotations();
+      ASSERT_EQ(rotations.size(), 3 * static_cast<size_t>(local_dofs));
+      for (size_t v = 0; v < rotations.size() / 9; ++v) {
+        const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> R(rotations.data() + 9 * v);
+        EXPECT_LT((R.transpose() * R - Eigen::Matrix3d::Identity()).norm(), 1e-12);
+        EXPECT_NEAR(R.determinant(), 1.0, 1e-12);
+      }
+      MatDestroy(&reference);
+      VecDestroy(&x);
+      VecDestroy(&force);
+      VecDestroy(&reference_force);
+    }
+  }
+}
+
+// The corotated stiffness damping (integrator.hpp): from a start configuration
+// x0 to x1, force sum_e R1 K_e (y1_e - y0_e) and energy sum_e |y1_e - y0_e|_K_e^2 / 2
+// (y = R^T x - X) equal the element-by-element reference, which stores y_e
+// itself (the row assembler stores its displacement gradient), for both shear
+// scales; and a rigid motion between x0 and x1 has neither.
+TEST(RowAssembler, IncrementDampingEqualsReference) {
+  for (const double shear_scale : {1.0, 0.25}) {
+    Fixture f(4, 3, 5, shear_scale);
+    Vec x0, x1, force, reference_force;
+    VecDuplicate(f.state.rest_positions, &x0);
+    VecDuplicate(x0, &x1);
+    VecDuplicate(x0, &force);
+    VecDuplicate(x0, &reference_force);
+    ASSERT_EQ(DeformedPositions(f.state.rest_positions, x0, 0.05, 1e-3), 0);
+    ASSERT_EQ(DeformedPositions(f.state.rest_positions, x1, 0.1, 0.01), 0);
+    std::vector<double> start, current;
+    RowAssembler::IncrementDamping damping{&start, nullptr, force};
+    ASSERT_EQ(f.assembler.Fill(f.A, true, x0, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    damping = {&current, &start, force};
+    ASSERT_EQ(f.assembler.Fill(f.A, true, x1, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+
+    // Reference: the COO pass with CorotatedDamping, at x0 (y0) then at x1.
+    PetscInt local_dofs;
+    VecGetLocalSize(x0, &local_dofs);
+    ASSERT_EQ(f.elements.touched_vertices.size() * 3, static_cast<size_t>(local_dofs));  // one rank
+    CooValues values(144 * f.elements.size() + local_dofs);
+    std::vector<PetscScalar> force_touched(local_dofs), increment_touched(local_dofs);
+    std::vector<double> y0, y1;
+    const PetscScalar *x0a, *x1a, *Xa;
+    VecGetArrayRead(x0, &x0a);
+    VecGetArrayRead(x1, &x1a);
+    VecGetArrayRead(f.state.rest_positions, &Xa);
+    CorotatedDamping first{&y0, nullptr, nullptr};
+    CorotatedStiffnessValues(f.elements, shear_scale, x0a, Xa, 1.0, &values, force_touched.data(), &first);
+    CorotatedDamping second{&y1, y0.data(), increment_touched.data()};
+    CorotatedStiffnessValues(f.elements, shear_scale, x1a, Xa, 1.0, &values, force_touched.data(), &second);
+    VecRestoreArrayRead(x0, &x0a);
+    VecRestoreArrayRead(x1, &x1a);
+    VecRestoreArrayRead(f.state.rest_positions, &Xa);
+    EXPECT_GT(second.energy, 0.0);
+    EXPECT_NEAR(damping.energy, second.energy, 1e-12 * second.energy) << "shear scale " << shear_scale;
+    PetscReal scale;
+    const PetscReal difference = DifferenceFrom(increment_touched, force, reference_force, &scale);
+    EXPECT_LT(difference, 1e-12 * scale) << "shear scale " << shear_scale;
+
+    // x1 = x0 turned by 40 degrees and shifted: no increment, no force, no energy.
+    const Eigen::Matrix3d Q = Eigen::AngleAxisd(0.7, Eigen::Vector3d(0, 1, 1).normalized()).toRotationMatrix();
+    PetscScalar *x1w;
+    VecGetArrayRead(x0, &x0a);
+    VecGetArray(x1, &x1w);
+    for (PetscInt v = 0; v < local_dofs / 3; ++v)
+      Eigen::Map<Eigen::Vector3d>(x1w + 3 * v) = Q * Eigen::Vector3d(x0a + 3 * v) + Eigen::Vector3d(1, -2, 3);
+    VecRestoreArray(x1, &x1w);
+    VecRestoreArrayRead(x0, &x0a);
+    damping = {&current, &start, force};
+    ASSERT_EQ(f.assembler.Fill(f.A, true, x1, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    PetscReal rigid_force;
+    VecNorm(force, NORM_2, &rigid_force);
+    EXPECT_LT(rigid_force, 1e-9 * scale);
+    EXPECT_LT(damping.energy, 1e-16 * second.energy + 1e-300);
+    for (Vec *w : {&x0, &x1, &force, &reference_force}) VecDestroy(w);
+  }
+}
+
+// The corotational refill rate (rotations, rotated element blocks, force,
+// energy, written into A), best of a few fills of a ~100k-tet box turned by 63
+// degrees with strains of about 1 %. Printed only.
+TEST(RowAssembler, CorotationalRefillRate) {
+  Fixture f(40, 20, 21, 1.0);
+  Vec x, force;
+  VecDuplicate(f.state.rest_positions, &x);
+  VecDuplicate(x, &force);
+  ASSERT_EQ(DeformedPositions(f.state.rest_positions, x, 0.01, 1e-3), 0);
+  double best = 1e30;
+  for (int repeat = 0; repeat < 7; ++repeat) {
+    PetscReal energy;
+    const auto start = std::chrono::steady_clock::now();
+    ASSERT_EQ(f.assembler.Fill(f.A, true, x, 1e-3, f.state.lumped_mass, 1.0, force, &energy), 0);
+    best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  }
+  const double tets = static_cast<double>(f.scene.num_tets());
+  std::printf("corotational refill of %.0f tets: %.2f ms, %.2f M tets/s (best of 7)\n", tets, 1e3 * best,
+              tets / best / 1e6);
+  VecDestroy(&x);
+  VecDestroy(&force);
+}
