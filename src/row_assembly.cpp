@@ -508,10 +508,17 @@ PetscErrorCode RowAssembler::Fill(Mat matrix, bool rotated, Vec x, double stiffn
                                   : FillElements<true, false>(elements_, lame_, context);
     if (force) PetscCall(VecRestoreArray(force, &context.force));
     if (context.damping_force) PetscCall(VecRestoreArray(damping->force, &context.damping_force));
-    if (context.vertex_deformation)
-      for (PetscInt v = 0; v < count_; ++v) {
-        Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> F(context.vertex_deformation + 9 * v);
-        F = RotationOfDeformation(F);
+    if (context.vertex_deformation)  // four vertices at a time, as the elements' rotations
+      for (PetscInt v = 0; v < count_; v += 4) {
+        Mat3 F[4], R[4];
+        const PetscInt batch = std::min<PetscInt>(4, count_ - v);
+        for (PetscInt k = 0; k < 4; ++k)
+          F[k] = k < batch ? Mat3(Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
+                                 context.vertex_deformation + 9 * (v + k)))
+                           : Mat3::Identity();
+        RotationOfDeformation4(F, R);
+        for (PetscInt k = 0; k < batch; ++k)
+          Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(context.vertex_deformation + 9 * (v + k)) = R[k];
       }
     PetscCall(VecRestoreArrayRead(x_halo_, &x_halo));
   } else {

@@ -76,6 +76,7 @@ class RowAssembler {
   // owned vertex: the polar rotation of the volume-weighted sum of the
   // deformation gradients of its tets (for the warp preconditioner).
   void ComputeVertexRotations(bool on) { vertex_rotations_requested_ = on; }
+  bool vertex_rotations_requested() const { return vertex_rotations_requested_; }
   // 9 per owned vertex (row-major); empty unless requested and filled.
   const std::vector<double> &vertex_rotations() const { return vertex_rotations_; }
 
