@@ -279,16 +279,32 @@ void ContactSolver::BuildObstacleGrids(bool fixed_part) {
     body_box_[b] = Box();
     for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) body_box_[b].Extend(WorldPoint(body.first_vertex + v));
   }
-  std::vector<Box> &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
-  tet_boxes.assign(tets.size(), Box());
+  if (!fixed_part) {
+    free_grids_current_ = false;
+    return;
+  }
+  fixed_tet_box_.assign(tets.size(), Box());
   for (size_t t = 0; t < tets.size(); ++t)
-    for (int a = 0; a < 4; ++a) tet_boxes[t].Extend(WorldPoint(tets[t][a]));
-  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).Build(tet_boxes);
-  std::vector<Box> boxes;
-  boxes.assign(triangles.size(), Box());
+    for (int a = 0; a < 4; ++a) fixed_tet_box_[t].Extend(WorldPoint(tets[t][a]));
+  fixed_tet_grid_.Build(fixed_tet_box_);
+  std::vector<Box> boxes(triangles.size(), Box());
   for (size_t t = 0; t < triangles.size(); ++t)
     for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(triangles[t][a]));
-  (fixed_part ? fixed_triangle_grid_ : free_triangle_grid_).Build(boxes);
+  fixed_triangle_grid_.Build(boxes);
+}
+
+void ContactSolver::EnsureFreeGrids() const {
+  if (free_grids_current_) return;
+  free_tet_box_.assign(free_tets_.size(), Box());
+  for (size_t t = 0; t < free_tets_.size(); ++t)
+    for (int a = 0; a < 4; ++a) free_tet_box_[t].Extend(WorldPoint(free_tets_[t][a]));
+  free_tet_grid_.Build(free_tet_box_);
+  std::vector<Box> boxes(free_triangles_.size(), Box());
+  for (size_t t = 0; t < free_triangles_.size(); ++t)
+    for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(free_triangles_[t][a]));
+  free_triangle_grid_.Build(boxes);
+  free_grids_current_ = true;
+  ++free_grid_builds_;
 }
 
 // World arrays of the free vertices at x + dt v (dt = 0: at x), velocities v.
@@ -319,6 +335,7 @@ bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *
     return true;
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
+  if (!fixed_part) EnsureFreeGrids();
   const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
   const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
   if (grid.empty()) return false;
@@ -350,6 +367,7 @@ bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *
 
 bool ContactSolver::InsideBody(const Point &p, int32_t obstacle) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
+  if (!fixed_part) EnsureFreeGrids();
   const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
   const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
   bool inside = false;
@@ -364,6 +382,7 @@ bool ContactSolver::InsideBody(const Point &p, int32_t obstacle) const {
 
 bool ContactSolver::EntryOnBody(const Point &start, const Point &end, int32_t obstacle, SurfaceHit *hit) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
+  if (!fixed_part) EnsureFreeGrids();
   const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
   const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
   const Point direction = end - start;
@@ -392,11 +411,14 @@ bool ContactSolver::FindPenetration(const Point &p, int32_t body, const VertexOb
                                     SurfaceHit *hit) const {
   if (ground_ && p[1] < options_.ground_y && !skip.Has(-1)) return ClosestOnBody(p, -1, hit);
   // Broad phase: only bodies whose box holds p.
-  bool near = false;
-  for (size_t b = 0; b < body_box_.size() && !near; ++b)
-    near = static_cast<int32_t>(b) != body && body_box_[b].Contains(p);
-  if (!near) return false;
+  bool near_fixed = false, near_free = false;
+  for (size_t b = 0; b < body_box_.size(); ++b)
+    if (static_cast<int32_t>(b) != body && body_box_[b].Contains(p))
+      (scene_->bodies[b].fixed ? near_fixed : near_free) = true;
+  if (!near_fixed && !near_free) return false;
+  if (near_free) EnsureFreeGrids();
   for (const bool fixed_part : {true, false}) {
+    if (!(fixed_part ? near_fixed : near_free)) continue;
     const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
     const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
     int32_t inside = -1;

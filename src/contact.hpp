@@ -148,6 +148,10 @@ class ContactSolver {
   void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all);
 
   const ContactStatistics &statistics() const { return stats_; }
+  // Not collective. How often this rank built the free bodies' grids (only
+  // when a vertex came within another free body's box).
+  PetscInt free_grid_builds() const { return free_grid_builds_; }
+  bool has_free_obstacles() const { return free_obstacles_; }
   size_t num_constraints() const { return constraints_.size(); }
   // What Setup built, for the run summary.
   std::string Description() const;
@@ -174,7 +178,11 @@ class ContactSolver {
     Point position, dv;
   };
   PetscErrorCode Gather(Vec x, Vec v, PetscReal dt);
+  // Body boxes, and the fixed part's grids; the free part's grids are marked
+  // stale and built when a query first needs them (EnsureFreeGrids): while the
+  // bodies' boxes stay apart, a step builds none.
   void BuildObstacleGrids(bool fixed_part);
+  void EnsureFreeGrids() const;
   Point WorldPoint(int32_t n) const { return Point(world_x_[3 * n], world_x_[3 * n + 1], world_x_[3 * n + 2]); }
   // Per local vertex, the obstacles constraining it this step (-1: the ground).
   struct VertexObstacles {
@@ -225,9 +233,13 @@ class ContactSolver {
   // Obstacles: tets and boundary triangles as natural vertex indices + body.
   std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
   std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
-  UniformGrid fixed_tet_grid_, free_tet_grid_, fixed_triangle_grid_, free_triangle_grid_;
+  UniformGrid fixed_tet_grid_, fixed_triangle_grid_;
+  mutable UniformGrid free_tet_grid_, free_triangle_grid_;
+  mutable bool free_grids_current_ = false;
+  mutable PetscInt free_grid_builds_ = 0;
   std::vector<Box> body_box_;              // broad phase: each obstacle body's bounding box
-  std::vector<Box> fixed_tet_box_, free_tet_box_;  // each obstacle tet's box (cheap rejection)
+  std::vector<Box> fixed_tet_box_;         // each obstacle tet's box (cheap rejection)
+  mutable std::vector<Box> free_tet_box_;
   std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned free-body vertices: (local, natural)
   std::vector<double> body_edge_;          // mean boundary edge length per body
   std::vector<double> body_mass_;          // total lumped mass per body (kg)

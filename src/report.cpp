@@ -53,6 +53,11 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     const ContactStatistics &c = contact.statistics();
     PetscCall(PetscPrintf(comm, "  contact      %s; %" PetscInt_FMT " vertex collisions", contact.Description().c_str(),
                           c.collisions));
+    PetscInt grid_builds = contact.free_grid_builds();
+    PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &grid_builds, 1, MPIU_INT, MPI_MAX, comm));
+    if (contact.has_free_obstacles())
+      PetscCall(PetscPrintf(comm, "; moving obstacles' grids built in %" PetscInt_FMT " passes (only where bodies' boxes met)",
+                            grid_builds));
     if (contact.num_constraints())
       PetscCall(PetscPrintf(comm, "; constraint sweeps %" PetscInt_FMT " total, %" PetscInt_FMT
                             " max per step, worst relative violation %.1e",
