@@ -283,26 +283,25 @@ void ContactSolver::BuildObstacleGrids(bool fixed_part) {
     free_grids_current_ = false;
     return;
   }
-  fixed_tet_box_.assign(tets.size(), Box());
+  BuildGrids(tets, triangles, &fixed_tet_box_, &fixed_tet_grid_, &fixed_triangle_grid_);
+}
+
+void ContactSolver::BuildGrids(const std::vector<std::array<int32_t, 5>> &tets,
+                               const std::vector<std::array<int32_t, 4>> &triangles, std::vector<Box> *tet_boxes,
+                               UniformGrid *tet_grid, UniformGrid *triangle_grid) const {
+  tet_boxes->assign(tets.size(), Box());
   for (size_t t = 0; t < tets.size(); ++t)
-    for (int a = 0; a < 4; ++a) fixed_tet_box_[t].Extend(WorldPoint(tets[t][a]));
-  fixed_tet_grid_.Build(fixed_tet_box_);
+    for (int a = 0; a < 4; ++a) (*tet_boxes)[t].Extend(WorldPoint(tets[t][a]));
+  tet_grid->Build(*tet_boxes);
   std::vector<Box> boxes(triangles.size(), Box());
   for (size_t t = 0; t < triangles.size(); ++t)
     for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(triangles[t][a]));
-  fixed_triangle_grid_.Build(boxes);
+  triangle_grid->Build(boxes);
 }
 
 void ContactSolver::EnsureFreeGrids() const {
   if (free_grids_current_) return;
-  free_tet_box_.assign(free_tets_.size(), Box());
-  for (size_t t = 0; t < free_tets_.size(); ++t)
-    for (int a = 0; a < 4; ++a) free_tet_box_[t].Extend(WorldPoint(free_tets_[t][a]));
-  free_tet_grid_.Build(free_tet_box_);
-  std::vector<Box> boxes(free_triangles_.size(), Box());
-  for (size_t t = 0; t < free_triangles_.size(); ++t)
-    for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(free_triangles_[t][a]));
-  free_triangle_grid_.Build(boxes);
+  BuildGrids(free_tets_, free_triangles_, &free_tet_box_, &free_tet_grid_, &free_triangle_grid_);
   free_grids_current_ = true;
   ++free_grid_builds_;
 }

@@ -183,6 +183,9 @@ class ContactSolver {
   // bodies' boxes stay apart, a step builds none.
   void BuildObstacleGrids(bool fixed_part);
   void EnsureFreeGrids() const;
+  // Each tet's box, and the tets' and triangles' grids, at the world positions.
+  void BuildGrids(const std::vector<std::array<int32_t, 5>> &tets, const std::vector<std::array<int32_t, 4>> &triangles,
+                  std::vector<Box> *tet_boxes, UniformGrid *tet_grid, UniformGrid *triangle_grid) const;
   Point WorldPoint(int32_t n) const { return Point(world_x_[3 * n], world_x_[3 * n + 1], world_x_[3 * n + 2]); }
   // Per local vertex, the obstacles constraining it this step (-1: the ground).
   struct VertexObstacles {
