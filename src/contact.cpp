@@ -31,6 +31,10 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                              "Coulomb friction coefficient mu of collisions (0: frictionless, as the "
                              "coursework)",
                              nullptr, o->friction, &o->friction, nullptr));
+  PetscCall(PetscOptionsBool("-sharp_edges",
+                             "Fixed bodies' sharp edges and corners push free bodies' faces (not only free "
+                             "vertices against fixed faces)",
+                             nullptr, o->sharp_edges, &o->sharp_edges, nullptr));
   PetscCall(PetscOptionsBool("-impulse_spreading",
                              "Share each collision impulse among all vertices of the body, by inverse "
                              "squared distance",
@@ -136,6 +140,38 @@ std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh) {
   return edges;
 }
 
+// The sharp features of a body's surface as points: the vertices of its
+// boundary edges whose two faces' outward normals differ by more than
+// kFeatureAngle (or that border one face or more than two), and points along
+// those edges at most `spacing` apart. World coordinates.
+constexpr double kFeatureAngle = 30.0 * M_PI / 180.0;
+constexpr double kFeatureTolerance = 1e-3;
+std::vector<Point> FeaturePoints(const TetMesh &mesh, double spacing) {
+  const auto triangles = BoundaryTriangles(mesh);
+  std::map<std::pair<int32_t, int32_t>, std::vector<Point>> faces_of_edge;
+  for (Eigen::Index t = 0; t < triangles.rows(); ++t) {
+    const Point a = mesh.vertices.row(triangles(t, 0)), b = mesh.vertices.row(triangles(t, 1)),
+                c = mesh.vertices.row(triangles(t, 2));
+    const Point normal = (b - a).cross(c - a).normalized();
+    for (int k = 0; k < 3; ++k) {
+      const int32_t u = triangles(t, k), w = triangles(t, (k + 1) % 3);
+      faces_of_edge[{std::min(u, w), std::max(u, w)}].push_back(normal);
+    }
+  }
+  std::vector<char> corner(mesh.num_vertices(), 0);
+  std::vector<Point> points;
+  for (const auto &[edge, normals] : faces_of_edge) {
+    if (normals.size() == 2 && normals[0].dot(normals[1]) >= std::cos(kFeatureAngle)) continue;
+    corner[edge.first] = corner[edge.second] = 1;
+    const Point a = mesh.vertices.row(edge.first), b = mesh.vertices.row(edge.second);
+    const int pieces = static_cast<int>(std::ceil((b - a).norm() / spacing));
+    for (int k = 1; k < pieces; ++k) points.push_back(a + (b - a) * (double(k) / pieces));
+  }
+  for (int32_t v = 0; v < mesh.num_vertices(); ++v)
+    if (corner[v]) points.push_back(mesh.vertices.row(v).transpose());
+  return points;
+}
+
 }  // namespace
 
 PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
@@ -165,7 +201,6 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
                                 options.edge_lower * rest, options.edge_upper * rest});
       }
     }
-  gather_ = free_obstacles_ || !constraints_.empty() || (options.impulse_spreading && active());
   if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
 
   const int32_t V = scene.num_vertices();
@@ -184,6 +219,23 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     for (const auto &[a, c] : edges) length += (body.mesh.vertices.row(c) - body.mesh.vertices.row(a)).norm();
     body_edge_[b] = edges.empty() ? 1.0 : length / edges.size();
   }
+  // The fixed bodies' sharp features, sampled at half the finest free body's
+  // mean boundary edge length.
+  if (obstacles_ && options.sharp_edges) {
+    double spacing = 1e300;
+    for (size_t b = 0; b < scene.bodies.size(); ++b)
+      if (!scene.bodies[b].fixed) spacing = std::min(spacing, 0.5 * body_edge_[b]);
+    feature_begin_.assign(1, 0);
+    for (size_t b = 0; b < scene.bodies.size(); ++b) {
+      if (scene.bodies[b].fixed) {
+        const auto points = FeaturePoints(scene.bodies[b].mesh, spacing);
+        feature_point_.insert(feature_point_.end(), points.begin(), points.end());
+      }
+      feature_begin_.push_back(static_cast<int32_t>(feature_point_.size()));
+    }
+  }
+  track_free_ = free_obstacles_ || !feature_point_.empty();
+  gather_ = track_free_ || !constraints_.empty() || (options.impulse_spreading && active());
 
   owned_natural_.resize(layout.local_count());
   for (PetscInt f = 0; f < layout.num_free(); ++f) {
@@ -232,7 +284,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
           const PetscInt p = free < 0 ? -1 : layout.petsc_of_free[free] - layout.local_begin();
           if (p >= 0 && p < layout.local_count()) query_vertices_.push_back({p, natural});
         }
-      if (!body.fixed && !free_obstacles_) continue;  // a lone free body is no obstacle
+      if (!body.fixed && !track_free_) continue;  // a lone free body away from sharp features
       auto &tets = body.fixed ? fixed_tets_ : free_tets_;
       auto &triangles = body.fixed ? fixed_triangles_ : free_triangles_;
       for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
@@ -260,6 +312,7 @@ std::string ContactSolver::Description() const {
   }
   if (obstacles_) add(std::to_string(fixed_tets_.size()) + " fixed and " + std::to_string(free_tets_.size()) +
                       " moving obstacle tets in uniform grids");
+  if (!feature_point_.empty()) add(std::to_string(feature_point_.size()) + " points on fixed bodies' sharp edges");
   if (!constraints_.empty()) add(std::to_string(constraints_.size()) + " distance constraints");
   if (active() && options_.impulse_spreading) add("impulse spreading");
   if (active() && (ground_ || obstacles_)) {
@@ -330,7 +383,7 @@ PetscErrorCode ContactSolver::Gather(Vec x, Vec v, PetscReal dt) {
 
 bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
   if (obstacle < 0) {  // the ground
-    *hit = {Point(p[0], options_.ground_y, p[2]), Point(0, 1, 0), Point::Zero(), 0.0, -1};
+    *hit = {Point(p[0], options_.ground_y, p[2]), Point(0, 1, 0), Point::Zero(), 0.0, -1, -1, Eigen::Vector3d::Zero()};
     return true;
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
@@ -360,6 +413,8 @@ bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *
       hit->inverse_mass = w[0] * inverse_mass_[tri[0]] + w[1] * inverse_mass_[tri[1]] +
                           w[2] * inverse_mass_[tri[2]];
       hit->body = obstacle;
+      hit->triangle = t;
+      hit->weights = w;
     });
   return best < 1e300;
 }
@@ -377,6 +432,22 @@ bool ContactSolver::InsideBody(const Point &p, int32_t obstacle) const {
                  .minCoeff() >= -1e-12;
   });
   return inside;
+}
+
+bool ContactSolver::LocateInFreeBody(const Point &p, int32_t body, double margin, Point *velocity) const {
+  EnsureFreeGrids();
+  bool found = false;
+  free_tet_grid_.ForEachNear(p, 0.0, [&](int32_t t) {
+    const auto &tet = free_tets_[t];
+    if (found || tet[4] != body || !free_tet_box_[t].Contains(p, 1e-12)) return;
+    const Eigen::Vector4d w =
+        Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]));
+    if (!(w.minCoeff() > margin)) return;
+    found = true;
+    *velocity = Point::Zero();
+    for (int k = 0; k < 4; ++k) *velocity += w[k] * Point(&world_v_[3 * tet[k]]);
+  });
+  return found;
 }
 
 bool ContactSolver::EntryOnBody(const Point &start, const Point &end, int32_t obstacle, SurfaceHit *hit) const {
@@ -402,6 +473,8 @@ bool ContactSolver::EntryOnBody(const Point &start, const Point &end, int32_t ob
                     w[2] * Point(&world_v_[3 * tri[2]]);
     hit->inverse_mass = w[0] * inverse_mass_[tri[0]] + w[1] * inverse_mass_[tri[1]] + w[2] * inverse_mass_[tri[2]];
     hit->body = obstacle;
+    hit->triangle = t;
+    hit->weights = w;
   });
   return first <= 1;
 }
@@ -460,6 +533,96 @@ void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0, 
   obstacles.obstacle[obstacles.count++] = hit.body;
 }
 
+PetscInt ContactSolver::LocalOf(int32_t natural) const {
+  const PetscInt free = layout_->free_of_natural[natural];
+  const PetscInt local = free < 0 ? -1 : layout_->petsc_of_free[free] - layout_->local_begin();
+  return local >= 0 && local < layout_->local_count() ? local : -1;
+}
+
+PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh,
+                                         bool limit, int32_t only) {
+  const Point m = -hit.normal;
+  const auto &triangle = free_triangles_[hit.triangle];
+  const int32_t obstacle = static_cast<int32_t>(
+      std::upper_bound(feature_begin_.begin(), feature_begin_.end(), feature) - feature_begin_.begin() - 1);
+  double depth = m.dot(feature_point_[feature] - hit.point);
+  if (limit) depth = std::min(depth, 0.1 * body_edge_[triangle[3]]);
+  // The vertices that move: those with weight, but not one lying on a fixed
+  // surface that faces within kFeatureAngle of m (its own contact holds it
+  // along nearly m; both held exactly would need a sideways velocity of
+  // (c_1 - c_2) / sin(angle): a cube overhanging a fixed one's edge by a
+  // tenth was thrown off at 3 m/s), unless all do.
+  std::array<bool, 3> moves;
+  for (int k = 0; k < 3; ++k) moves[k] = hit.weights[k] >= 1e-3 && !OnFixedSurface(WorldPoint(triangle[k]), m);
+  if (std::none_of(moves.begin(), moves.end(), [](bool b) { return b; }))
+    for (int k = 0; k < 3; ++k) moves[k] = hit.weights[k] >= 1e-3;
+  double squares = 0;
+  for (int k = 0; k < 3; ++k)
+    if (moves[k]) squares += hit.weights[k] * hit.weights[k];
+  PetscInt changed = 0;
+  for (int k = 0; k < 3; ++k) {
+    const int32_t natural = triangle[k];
+    const PetscInt local = LocalOf(natural);
+    if (!moves[k] || (only >= 0 && natural != only) || local < 0) continue;
+    const Point velocity(&world_v_[3 * natural]);
+    const double push = hit.weights[k] * depth / squares / dt;  // d_k / dt
+    const VelocityConstraint constraint{local, m, m.dot(velocity) + push, true};
+    const Contact contact{natural, obstacle, 0.0, fresh && m.dot(velocity) < -bounce_speed_, feature};
+    ptrdiff_t &slot = feature_contact_[local];
+    if (slot >= 0) {  // the vertex's larger push stays
+      const VelocityConstraint &held = velocity_constraints_[slot];
+      if (push > held.velocity - held.normal.dot(velocity)) {
+        velocity_constraints_[slot] = constraint;
+        contacts_[slot] = contact;
+        ++changed;
+      }
+      continue;
+    }
+    slot = static_cast<ptrdiff_t>(contacts_.size());
+    velocity_constraints_.push_back(constraint);
+    contacts_.push_back(contact);
+    ++changed;
+  }
+  return changed;
+}
+
+bool ContactSolver::OnFixedSurface(const Point &x, const Point &direction) const {
+  const double cosine = std::cos(kFeatureAngle);
+  if (ground_ && x[1] <= options_.ground_y && direction[1] >= cosine) return true;
+  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
+    SurfaceHit hit;
+    const int32_t body = static_cast<int32_t>(b);
+    if (scene_->bodies[b].fixed && body_box_[b].Contains(x, 1e-12) && InsideBody(x, body) &&
+        ClosestOnBody(x, body, &hit) && hit.normal.dot(direction) >= cosine)
+      return true;
+  }
+  return false;
+}
+
+PetscInt ContactSolver::AddFeaturePenetrations(PetscReal dt) {
+  PetscInt found = 0;
+  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
+    if (scene_->bodies[b].fixed || body_box_[b].Empty()) continue;
+    const int32_t body = static_cast<int32_t>(b);
+    for (int32_t i = 0; i < static_cast<int32_t>(feature_point_.size()); ++i) {
+      const Point &p = feature_point_[i];
+      Point velocity;
+      if (feature_held_[i] || !body_box_[b].Contains(p) || !LocateInFreeBody(p, body, 1e-6, &velocity)) continue;
+      // Within kFeatureTolerance edge lengths of the surface it touches (a
+      // fixed edge flush with a free face). Else the triangle p entered
+      // through, on its path relative to the body (p + dt v -> p, v the body's
+      // velocity at p); if it was inside already, the closest one, and it
+      // comes out gradually.
+      SurfaceHit hit;
+      if (!ClosestOnBody(p, body, &hit) || (hit.point - p).norm() < kFeatureTolerance * body_edge_[b]) continue;
+      const bool entered = EntryOnBody(p + dt * velocity, p, body, &hit);
+      feature_held_[i] = 1;
+      found += ConstrainFeature(i, hit, dt, true, !entered, -1);
+    }
+  }
+  return found;
+}
+
 PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   PetscFunctionBeginUser;
   Timing timing(this);
@@ -471,21 +634,36 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   solve_constraints_.clear();
   contacts_.clear();
   constrained_.assign(owned_natural_.size(), VertexObstacles());
+  feature_held_.assign(feature_point_.size(), 0);
+  feature_contact_.assign(owned_natural_.size(), -1);
   global_constraints_ = 0;
   bounce_speed_ = 2 * options_.gravity * dt;
   if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
   // Obstacles where they will be if they keep their velocity.
   if (gather_) PetscCall(Gather(x0, v0, dt));
-  if (free_obstacles_) BuildObstacleGrids(false);
+  if (track_free_) BuildObstacleGrids(false);
   const PetscScalar *x, *v;
   PetscCall(VecGetArrayRead(x0, &x));
   PetscCall(VecGetArrayRead(v0, &v));
   for (const auto &[local, contact] : resting_) {
     const Point position(&x[3 * local]), velocity(&v[3 * local]);
     SurfaceHit hit;
-    if (ClosestOnBody(position + dt * velocity, contact.body, &hit)) {
+    if (contact.feature >= 0) {  // the feature point against the face now closest to it
+      if (!ClosestOnBody(feature_point_[contact.feature], body_of_[contact.natural], &hit)) continue;
+      const auto &triangle = free_triangles_[hit.triangle];
+      if (std::find(triangle.begin(), triangle.begin() + 3, contact.natural) == triangle.begin() + 3) continue;
+      feature_held_[contact.feature] = 1;
+      const bool unconstrained = feature_contact_[local] < 0;
+      ConstrainFeature(contact.feature, hit, dt, false, true, contact.natural);
+      const bool appended = unconstrained && feature_contact_[local] >= 0;
+      SurfaceHit fixed_side = hit;  // the feature's side: immobile, facing the vertex
+      fixed_side.normal = -hit.normal;
+      fixed_side.velocity = Point::Zero();
+      fixed_side.inverse_mass = 0;
+      if (appended && options_.friction > 0) Stick(local, velocity, fixed_side, feature_contact_[local]);
+    } else if (ClosestOnBody(position + dt * velocity, contact.body, &hit)) {
       Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt, hit, false);
-      if (options_.friction > 0) Stick(local, velocity, hit);
+      if (options_.friction > 0) Stick(local, velocity, hit, contacts_.size() - 1);
     }
   }
   PetscCall(VecRestoreArrayRead(x0, &x));
@@ -494,7 +672,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-void ContactSolver::Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit) {
+void ContactSolver::Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit, size_t contact) {
   const Point &n = hit.normal;
   const Point relative = velocity - hit.velocity;
   // The friction response of a sticking step leaves exactly no tangential
@@ -503,7 +681,7 @@ void ContactSolver::Stick(PetscInt local, const Point &velocity, const SurfaceHi
   const Point t1 = n.unitOrthogonal(), t2 = n.cross(t1);
   tangent_constraints_.push_back({local, t1, t1.dot(hit.velocity), hit.inverse_mass == 0});
   tangent_constraints_.push_back({local, t2, t2.dot(hit.velocity), hit.inverse_mass == 0});
-  sticking_contact_.push_back(contacts_.size() - 1);
+  sticking_contact_.push_back(contact);
 }
 
 PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released) {
@@ -566,7 +744,7 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
   *added = false;
   if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
   if (gather_) PetscCall(Gather(x0, v, dt));
-  if (free_obstacles_) BuildObstacleGrids(false);
+  if (track_free_) BuildObstacleGrids(false);
   const PetscScalar *x, *lv;
   PetscCall(VecGetArrayRead(x0, &x));
   PetscCall(VecGetArrayRead(v, &lv));
@@ -599,10 +777,12 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
       check(local, owned_natural_[local]);
   PetscCall(VecRestoreArrayRead(x0, &x));
   PetscCall(VecRestoreArrayRead(v, &lv));
-  PetscInt all_found;
-  PetscCallMPI(MPIU_Allreduce(&found, &all_found, 1, MPIU_INT, MPI_SUM, comm_));
-  stats_.collisions += all_found;
-  *added = all_found > 0;
+  // Feature points: every rank sees all (gathered positions) and constrains its own vertices.
+  PetscInt local_found[2] = {found, feature_point_.empty() ? 0 : AddFeaturePenetrations(dt)}, all_found[2];
+  PetscCallMPI(MPIU_Allreduce(local_found, all_found, 2, MPIU_INT, MPI_SUM, comm_));
+  stats_.collisions += all_found[0];
+  stats_.feature_contacts += all_found[1];
+  *added = all_found[0] + all_found[1] > 0;
   if (*added) PetscCall(CountConstraints());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -644,7 +824,7 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
   std::vector<Collision> collisions;
   if (ground_ || obstacles_) {
     if (gather_) PetscCall(Gather(x, v, 0.0));
-    if (free_obstacles_) BuildObstacleGrids(false);
+    if (track_free_) BuildObstacleGrids(false);
     PetscScalar *lx, *lv;
     PetscCall(VecGetArray(x, &lx));
     PetscCall(VecGetArray(v, &lv));
@@ -813,7 +993,8 @@ double ContactSolver::ResolveConstraints() {
 PetscErrorCode ContactSolver::GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const {
   PetscFunctionBeginUser;
   std::vector<int32_t> local;
-  for (const auto &[vertex, contact] : resting_) local.insert(local.end(), {contact.natural, contact.body});
+  for (const auto &[vertex, contact] : resting_)  // a feature contact's obstacle is written -2 - feature
+    local.insert(local.end(), {contact.natural, contact.feature >= 0 ? -2 - contact.feature : contact.body});
   PetscMPIInt rank, size, count = static_cast<PetscMPIInt>(local.size());
   PetscCallMPI(MPI_Comm_rank(comm_, &rank));
   PetscCallMPI(MPI_Comm_size(comm_, &size));
@@ -830,13 +1011,19 @@ PetscErrorCode ContactSolver::GatherRestingContacts(std::vector<std::array<int32
 
 void ContactSolver::RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all) {
   resting_.clear();
-  for (const auto &[natural, body] : all) {
-    if (body < 0 ? !ground_ : !obstacles_ || static_cast<size_t>(body) >= scene_->bodies.size()) continue;
+  for (const auto &[natural, entry] : all) {
+    const int32_t feature = entry <= -2 ? -2 - entry : -1;
+    if (feature >= 0 ? static_cast<size_t>(feature) >= feature_point_.size()
+                     : entry == -1 ? !ground_ : !obstacles_ || static_cast<size_t>(entry) >= scene_->bodies.size())
+      continue;
     if (natural < 0 || static_cast<size_t>(natural) >= layout_->free_of_natural.size()) continue;
-    const PetscInt free = layout_->free_of_natural[natural];
-    const PetscInt local = free < 0 ? -1 : layout_->petsc_of_free[free] - layout_->local_begin();
-    if (local < 0 || local >= layout_->local_count()) continue;
-    resting_.push_back({local, Contact{natural, body, 0.0, false}});
+    const PetscInt local = LocalOf(natural);
+    if (local < 0) continue;
+    const int32_t body = feature >= 0 ? static_cast<int32_t>(std::upper_bound(feature_begin_.begin(),
+                                                                             feature_begin_.end(), feature) -
+                                                            feature_begin_.begin() - 1)
+                                      : entry;
+    resting_.push_back({local, Contact{natural, body, 0.0, false, feature}});
   }
 }
 

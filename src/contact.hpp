@@ -75,12 +75,13 @@ struct ContactOptions {
   PetscReal friction = 0;             // Coulomb coefficient mu >= 0
   PetscReal gravity = 0;              // |g| (m/s^2), set by the caller: no bounce below 2 |g| dt
   PetscBool impulse_spreading = PETSC_FALSE;
+  PetscBool sharp_edges = PETSC_TRUE;   // fixed bodies' edges and corners against free faces
   std::string constraints_path;       // "" = none
   PetscBool edge_bounds = PETSC_FALSE;
   PetscReal edge_lower = 1, edge_upper = 1;  // x rest length
 };
 
-// Collective. Reads -ground -restitution -impulse_spreading -constraints -edge_bounds.
+// Collective. Reads -ground -restitution -friction -sharp_edges -impulse_spreading -constraints -edge_bounds.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
 // A distance constraint between natural vertices a and b: lower <= |x_b - x_a| <= upper (m).
@@ -96,6 +97,7 @@ std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const S
 
 struct ContactStatistics {
   PetscInt collisions = 0;          // new vertex contacts, all steps, all ranks
+  PetscInt feature_contacts = 0;    // vertex constraints from fixed bodies' sharp edges entering free faces
   PetscInt projections = 0;         // last-resort projections, all steps, all ranks
   PetscLogDouble seconds = 0;       // wall time in contact detection and response
   PetscInt constraint_sweeps = 0;   // Gauss-Seidel sweeps, all steps
@@ -149,9 +151,10 @@ class ContactSolver {
 
   const ContactStatistics &statistics() const { return stats_; }
   // Not collective. How often this rank built the free bodies' grids (only
-  // when a vertex came within another free body's box).
+  // when a vertex came within another free body's box or a fixed body's sharp
+  // edge within a free body's).
   PetscInt free_grid_builds() const { return free_grid_builds_; }
-  bool has_free_obstacles() const { return free_obstacles_; }
+  bool tracks_free_bodies() const { return track_free_; }
   size_t num_constraints() const { return constraints_.size(); }
   // What Setup built, for the run summary.
   std::string Description() const;
@@ -164,6 +167,8 @@ class ContactSolver {
     Point point, normal, velocity;
     double inverse_mass;
     int32_t body;
+    int32_t triangle = -1;          // index into the obstacle's triangle list (-1: the ground)
+    Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric coordinates of point in it
   };
   // A constrained vertex (parallel to velocity_constraints_).
   struct Contact {
@@ -171,6 +176,7 @@ class ContactSolver {
     int32_t body;              // obstacle, -1 for the ground
     double normal_velocity;    // n . v after the step's velocity response
     bool impact;               // new this step and closing faster than bounce_speed_
+    int32_t feature = -1;      // a fixed body's feature point pressing on the vertex's face
   };
   struct Collision {  // a velocity response, for impulse spreading
     int32_t vertex;
@@ -196,8 +202,11 @@ class ContactSolver {
   // The first obstacle other than `body` and those in `skip` that contains p.
   bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip, SurfaceHit *hit) const;
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
-  // Whether p lies in one of the obstacle body's tets.
+  // Whether p lies in one of the obstacle body's tets (faces included).
   bool InsideBody(const Point &p, int32_t obstacle) const;
+  // The free body's tet holding p with all barycentric coordinates above
+  // `margin`, and the body's velocity there; false if none.
+  bool LocateInFreeBody(const Point &p, int32_t body, double margin, Point *velocity) const;
   // Where the segment start -> end first enters the obstacle body through its
   // surface (a boundary triangle crossed against its outward normal).
   bool EntryOnBody(const Point &start, const Point &end, int32_t obstacle, SurfaceHit *hit) const;
@@ -207,6 +216,26 @@ class ContactSolver {
   // leaves with the two sides' momentum-weighted normal velocity.
   void Constrain(PetscInt local, int32_t natural, const Point &x0, const Point &predicted,
                  const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh);
+  // Feature contacts: a fixed body's feature point p that the step would take
+  // into a free body's surface triangle (the hit: closest point q, outward
+  // normal n, barycentric weights w) pushes the triangle away along m = -n by
+  // d = m . (p - q) (at most a tenth of an edge when `limit`): vertex k of the
+  // triangle gets m . v_k = m . v_k' + d_k / dt (v' the solve's velocity) with
+  // d_k = w_k d / sum_j w_j^2 over the vertices that move (w_k >= 1e-3, and
+  // not on a fixed surface facing nearly along m: OnFixedSurface), the least
+  // displacement that moves the triangle's point under p by d. One feature
+  // constraint per vertex (the larger d_k). Constrains this rank's vertices
+  // of the triangle, or only natural vertex `only` (>= 0); returns how many
+  // constraints it added or changed.
+  PetscInt ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh, bool limit,
+                             int32_t only);
+  // After a solve: the feature points each free body's predicted surface passes
+  // over; returns the constraints added or changed on this rank.
+  PetscInt AddFeaturePenetrations(PetscReal dt);
+  PetscInt LocalOf(int32_t natural) const;
+  // Whether x lies in or on a fixed body (or the ground) whose surface there
+  // faces within kFeatureAngle of direction.
+  bool OnFixedSurface(const Point &x, const Point &direction) const;
   PetscErrorCode ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions);
   PetscErrorCode SpreadImpulses(const std::vector<Collision> &local, Vec v);
   double ResolveConstraints();
@@ -244,6 +273,13 @@ class ContactSolver {
   std::vector<Box> fixed_tet_box_;         // each obstacle tet's box (cheap rejection)
   mutable std::vector<Box> free_tet_box_;
   std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned free-body vertices: (local, natural)
+  // Sharp features of the fixed bodies as points (world), grouped by body:
+  // body b's are [feature_begin_[b], feature_begin_[b + 1]).
+  std::vector<Point> feature_point_;
+  std::vector<int32_t> feature_begin_;
+  std::vector<char> feature_held_;          // per feature point: constrained this step
+  std::vector<ptrdiff_t> feature_contact_;  // per local vertex: its feature contact this step (-1: none)
+  bool track_free_ = false;                 // the free bodies' grids are needed (free or feature obstacles)
   std::vector<double> body_edge_;          // mean boundary edge length per body
   std::vector<double> body_mass_;          // total lumped mass per body (kg)
   double bounce_speed_ = 0;                // slower impacts do not bounce (m/s)
@@ -266,7 +302,7 @@ class ContactSolver {
   // Adds the tangent pair of the contact just constrained when it sticks: its
   // velocity relative to the obstacle has no tangential part (it stuck in the
   // last step).
-  void Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit);
+  void Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit, size_t contact);
   std::vector<Contact> contacts_;
   std::vector<VertexObstacles> constrained_;  // per local vertex
   std::vector<std::pair<PetscInt, Contact>> resting_;  // kept for the next step

@@ -53,9 +53,11 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     const ContactStatistics &c = contact.statistics();
     PetscCall(PetscPrintf(comm, "  contact      %s; %" PetscInt_FMT " vertex collisions", contact.Description().c_str(),
                           c.collisions));
+    if (c.feature_contacts)
+      PetscCall(PetscPrintf(comm, ", %" PetscInt_FMT " sharp-edge contacts", c.feature_contacts));
     PetscInt grid_builds = contact.free_grid_builds();
     PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &grid_builds, 1, MPIU_INT, MPI_MAX, comm));
-    if (contact.has_free_obstacles())
+    if (contact.tracks_free_bodies())
       PetscCall(PetscPrintf(comm, "; moving obstacles' grids built in %" PetscInt_FMT " passes (only where bodies' boxes met)",
                             grid_builds));
     if (contact.num_constraints())
