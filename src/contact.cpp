@@ -143,10 +143,16 @@ std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh) {
 // The sharp features of a body's surface as points: the vertices of its
 // boundary edges whose two faces' outward normals differ by more than
 // kFeatureAngle (or that border one face or more than two), and points along
-// those edges at most `spacing` apart. World coordinates.
+// those edges at most `spacing` apart. World coordinates; each with the
+// face normals of each edge it lies on (one pair per edge; an edge with one
+// face or more than two: each face's normal twice).
 constexpr double kFeatureAngle = 30.0 * M_PI / 180.0;
 constexpr double kFeatureTolerance = 1e-3;
-std::vector<Point> FeaturePoints(const TetMesh &mesh, double spacing) {
+struct FeatureCandidate {
+  Point point;
+  std::vector<std::pair<Point, Point>> edges;
+};
+std::vector<FeatureCandidate> FeaturePoints(const TetMesh &mesh, double spacing) {
   const auto triangles = BoundaryTriangles(mesh);
   std::map<std::pair<int32_t, int32_t>, std::vector<Point>> faces_of_edge;
   for (Eigen::Index t = 0; t < triangles.rows(); ++t) {
@@ -158,17 +164,19 @@ std::vector<Point> FeaturePoints(const TetMesh &mesh, double spacing) {
       faces_of_edge[{std::min(u, w), std::max(u, w)}].push_back(normal);
     }
   }
-  std::vector<char> corner(mesh.num_vertices(), 0);
-  std::vector<Point> points;
+  std::map<int32_t, std::vector<std::pair<Point, Point>>> corners;
+  std::vector<FeatureCandidate> points;
   for (const auto &[edge, normals] : faces_of_edge) {
     if (normals.size() == 2 && normals[0].dot(normals[1]) >= std::cos(kFeatureAngle)) continue;
-    corner[edge.first] = corner[edge.second] = 1;
+    std::vector<std::pair<Point, Point>> pairs;
+    if (normals.size() == 2) pairs.emplace_back(normals[0], normals[1]);
+    else for (const Point &n : normals) pairs.emplace_back(n, n);
+    for (const int32_t v : {edge.first, edge.second}) corners[v].insert(corners[v].end(), pairs.begin(), pairs.end());
     const Point a = mesh.vertices.row(edge.first), b = mesh.vertices.row(edge.second);
     const int pieces = static_cast<int>(std::ceil((b - a).norm() / spacing));
-    for (int k = 1; k < pieces; ++k) points.push_back(a + (b - a) * (double(k) / pieces));
+    for (int k = 1; k < pieces; ++k) points.push_back({a + (b - a) * (double(k) / pieces), pairs});
   }
-  for (int32_t v = 0; v < mesh.num_vertices(); ++v)
-    if (corner[v]) points.push_back(mesh.vertices.row(v).transpose());
+  for (const auto &[v, pairs] : corners) points.push_back({mesh.vertices.row(v).transpose(), pairs});
   return points;
 }
 
@@ -220,21 +228,16 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     body_edge_[b] = edges.empty() ? 1.0 : length / edges.size();
   }
   // The fixed bodies' sharp features, sampled at half the finest free body's
-  // mean boundary edge length.
+  // mean boundary edge length (kept once the fixed grids exist: KeepFeatures).
+  std::map<size_t, std::vector<FeatureCandidate>> feature_candidates;
   if (obstacles_ && options.sharp_edges) {
     double spacing = 1e300;
     for (size_t b = 0; b < scene.bodies.size(); ++b)
       if (!scene.bodies[b].fixed) spacing = std::min(spacing, 0.5 * body_edge_[b]);
-    feature_begin_.assign(1, 0);
-    for (size_t b = 0; b < scene.bodies.size(); ++b) {
-      if (scene.bodies[b].fixed) {
-        const auto points = FeaturePoints(scene.bodies[b].mesh, spacing);
-        feature_point_.insert(feature_point_.end(), points.begin(), points.end());
-      }
-      feature_begin_.push_back(static_cast<int32_t>(feature_point_.size()));
-    }
+    for (size_t b = 0; b < scene.bodies.size(); ++b)
+      if (scene.bodies[b].fixed) feature_candidates[b] = FeaturePoints(scene.bodies[b].mesh, spacing);
   }
-  track_free_ = free_obstacles_ || !feature_point_.empty();
+  track_free_ = free_obstacles_ || !feature_candidates.empty();
   gather_ = track_free_ || !constraints_.empty() || (options.impulse_spreading && active());
 
   owned_natural_.resize(layout.local_count());
@@ -298,6 +301,27 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     std::sort(query_vertices_.begin(), query_vertices_.end());
     query_vertices_.erase(std::unique(query_vertices_.begin(), query_vertices_.end()), query_vertices_.end());
     BuildObstacleGrids(true);
+    // A feature point is kept while one of its edges is a real edge of the
+    // fixed bodies together: both of its faces free of other fixed bodies
+    // there (a cube's top edge flush with its neighbour's top face is none).
+    feature_begin_.assign(1, 0);
+    for (size_t b = 0; b < scene.bodies.size(); ++b) {
+      const double probe = 1e-6 * body_edge_[b];
+      auto covered = [&](const Point &p) {
+        for (size_t o = 0; o < scene.bodies.size(); ++o)
+          if (o != b && scene.bodies[o].fixed && body_box_[o].Contains(p, probe) &&
+              InsideBody(p, static_cast<int32_t>(o)))
+            return true;
+        return false;
+      };
+      for (const FeatureCandidate &candidate : feature_candidates[b]) {
+        const bool real = std::any_of(candidate.edges.begin(), candidate.edges.end(), [&](const auto &faces) {
+          return !covered(candidate.point + probe * faces.first) && !covered(candidate.point + probe * faces.second);
+        });
+        if (real) feature_point_.push_back(candidate.point);
+      }
+      feature_begin_.push_back(static_cast<int32_t>(feature_point_.size()));
+    }
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -551,7 +575,9 @@ PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit,
   // surface that faces within kFeatureAngle of m (its own contact holds it
   // along nearly m; both held exactly would need a sideways velocity of
   // (c_1 - c_2) / sin(angle): a cube overhanging a fixed one's edge by a
-  // tenth was thrown off at 3 m/s), unless all do.
+  // tenth was thrown off at 3 m/s), unless all do. (Leaving every vertex on
+  // a fixed surface alone pushed the others by up to d / w_k: the edge sank
+  // deeper into the stairway's bunny.)
   std::array<bool, 3> moves;
   for (int k = 0; k < 3; ++k) moves[k] = hit.weights[k] >= 1e-3 && !OnFixedSurface(WorldPoint(triangle[k]), m);
   if (std::none_of(moves.begin(), moves.end(), [](bool b) { return b; }))
