@@ -818,13 +818,16 @@ PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, s
   PetscFunctionBeginUser;
   PetscInt projected = 0;
   auto project = [&](PetscInt local, int32_t natural) {
-    if (constrained_[local].count) return;
     const Point position(&x[3 * local]);
     SurfaceHit hit;
     if (!FindPenetration(position, body_of_[natural], VertexObstacles(), &hit)) return;
     // Deeper than a tenth of an edge: left to the next step's constraints, which
-    // bring it out gradually (a jump of that size would be a huge strain).
-    if ((hit.point - position).norm() > 0.1 * body_edge_[body_of_[natural]]) return;
+    // bring it out gradually (a jump of that size would be a huge strain). A
+    // constrained vertex ends on the surface (to round-off) unless its
+    // constraints could not all hold (more than three directions, e.g. a
+    // sticking contact's and a sharp edge's).
+    const double depth = (hit.point - position).norm(), edge = body_edge_[body_of_[natural]];
+    if (depth > 0.1 * edge || (constrained_[local].count && depth < 1e-6 * edge)) return;
     const Point velocity(&v[3 * local]);
     const double approach = hit.normal.dot(velocity - hit.velocity);
     const Point target = hit.point + 1e-9 * body_edge_[body_of_[natural]] * hit.normal;
