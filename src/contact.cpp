@@ -228,7 +228,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     body_edge_[b] = edges.empty() ? 1.0 : length / edges.size();
   }
   // The fixed bodies' sharp features, sampled at half the finest free body's
-  // mean boundary edge length (kept once the fixed grids exist: KeepFeatures).
+  // mean boundary edge length (filtered below, once the fixed grids exist).
   std::map<size_t, std::vector<FeatureCandidate>> feature_candidates;
   if (obstacles_ && options.sharp_edges) {
     double spacing = 1e300;
@@ -567,8 +567,7 @@ PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit,
                                          bool limit, int32_t only) {
   const Point m = -hit.normal;
   const auto &triangle = free_triangles_[hit.triangle];
-  const int32_t obstacle = static_cast<int32_t>(
-      std::upper_bound(feature_begin_.begin(), feature_begin_.end(), feature) - feature_begin_.begin() - 1);
+  const int32_t obstacle = FeatureBody(feature);
   double depth = m.dot(feature_point_[feature] - hit.point);
   if (limit) depth = std::min(depth, 0.1 * body_edge_[triangle[3]]);
   // The vertices that move: those with weight, but not one lying on a fixed
@@ -630,20 +629,24 @@ PetscInt ContactSolver::AddFeaturePenetrations(PetscReal dt) {
   for (size_t b = 0; b < scene_->bodies.size(); ++b) {
     if (scene_->bodies[b].fixed || body_box_[b].Empty()) continue;
     const int32_t body = static_cast<int32_t>(b);
-    for (int32_t i = 0; i < static_cast<int32_t>(feature_point_.size()); ++i) {
-      const Point &p = feature_point_[i];
-      Point velocity;
-      if (feature_held_[i] || !body_box_[b].Contains(p) || !LocateInFreeBody(p, body, 1e-6, &velocity)) continue;
-      // Within kFeatureTolerance edge lengths of the surface it touches (a
-      // fixed edge flush with a free face). Else the triangle p entered
-      // through, on its path relative to the body (p + dt v -> p, v the body's
-      // velocity at p); if it was inside already, the closest one, and it
-      // comes out gradually.
-      SurfaceHit hit;
-      if (!ClosestOnBody(p, body, &hit) || (hit.point - p).norm() < kFeatureTolerance * body_edge_[b]) continue;
-      const bool entered = EntryOnBody(p + dt * velocity, p, body, &hit);
-      feature_held_[i] = 1;
-      found += ConstrainFeature(i, hit, dt, true, !entered, -1);
+    for (size_t f = 0; f + 1 < feature_begin_.size(); ++f) {
+      // Broad phase: the fixed body's box meets the free one's.
+      if (feature_begin_[f] == feature_begin_[f + 1] || !body_box_[f].Overlaps(body_box_[b])) continue;
+      for (int32_t i = feature_begin_[f]; i < feature_begin_[f + 1]; ++i) {
+        const Point &p = feature_point_[i];
+        Point velocity;
+        if (feature_held_[i] || !body_box_[b].Contains(p) || !LocateInFreeBody(p, body, 1e-6, &velocity)) continue;
+        // Touching (within kFeatureTolerance edge lengths of the surface, e.g.
+        // a fixed edge flush with a free face) is no penetration. Else p
+        // pushes the triangle it entered through, on its path relative to the
+        // body (p + dt v -> p, v the body's velocity at p); if it was inside
+        // already, the closest one, and it comes out gradually.
+        SurfaceHit hit;
+        if (!ClosestOnBody(p, body, &hit) || (hit.point - p).norm() < kFeatureTolerance * body_edge_[b]) continue;
+        const bool entered = EntryOnBody(p + dt * velocity, p, body, &hit);
+        feature_held_[i] = 1;
+        found += ConstrainFeature(i, hit, dt, true, !entered, -1);
+      }
     }
   }
   return found;
@@ -1048,11 +1051,7 @@ void ContactSolver::RestoreRestingContacts(const std::vector<std::array<int32_t,
     if (natural < 0 || static_cast<size_t>(natural) >= layout_->free_of_natural.size()) continue;
     const PetscInt local = LocalOf(natural);
     if (local < 0) continue;
-    const int32_t body = feature >= 0 ? static_cast<int32_t>(std::upper_bound(feature_begin_.begin(),
-                                                                             feature_begin_.end(), feature) -
-                                                            feature_begin_.begin() - 1)
-                                      : entry;
-    resting_.push_back({local, Contact{natural, body, 0.0, false, feature}});
+    resting_.push_back({local, Contact{natural, feature >= 0 ? FeatureBody(feature) : entry, 0.0, false, feature}});
   }
 }
 

@@ -34,6 +34,19 @@
 // body's e^2 of the fall height.) Whatever still ends inside an obstacle is projected to its surface as a
 // last resort.
 //
+// Sharp edges (-sharp_edges, default on): a free vertex cannot enter a fixed
+// face, but a fixed body's edge or corner can cut into a free body between its
+// vertices (the stairway's bunny draped over a step's edge: 1.7 m deep, and
+// it slid off). The fixed bodies' real edges (faces meeting at more than 30
+// degrees, not flush with another fixed body) are sampled as points at most
+// half the finest free body's mean edge length apart; a point p that the
+// step's solve would take into a free body more than 1e-3 of its edge length
+// deep constrains the free surface triangle it entered through (on its path
+// relative to the body; if it was inside already, the closest one, and it
+// comes out gradually): the triangle's point under p moves away from p by the
+// depth d along m, minus the triangle's outward normal (ConstrainFeature).
+// The same velocity response, resting contacts and friction as a vertex's.
+//
 // Impulse spreading (-impulse_spreading): the momentum m_c dv_c that the
 // velocity response gives a contact vertex c is shared by all vertices j of its
 // body with weights w_j = 1 / (l + |x_j - x_c|)^2 (l the body's mean boundary
@@ -48,10 +61,12 @@
 // holds to 1e-12 relative (at most 500). Fixed and stray vertices have infinite mass.
 //
 // Parallel model: the free state is gathered on every rank when free bodies
-// collide with each other, constraints exist or impulses spread; each rank then
-// detects the contacts of its own vertices, every rank resolves all distance
-// constraints identically, and each keeps its own vertices' results. The ground
-// alone and fixed obstacles alone need no gather.
+// collide with each other or with fixed sharp edges, constraints exist or
+// impulses spread; each rank then detects the contacts of its own vertices
+// (and every sharp-edge point, constraining its own vertices of the triangle),
+// every rank resolves all distance constraints identically, and each keeps its
+// own vertices' results. The ground alone and fixed bodies without sharp
+// edges need no gather.
 #pragma once
 
 #include <petscvec.h>
@@ -232,7 +247,13 @@ class ContactSolver {
   // After a solve: the feature points each free body's predicted surface passes
   // over; returns the constraints added or changed on this rank.
   PetscInt AddFeaturePenetrations(PetscReal dt);
+  // The local index of natural vertex n if this rank owns it, else -1.
   PetscInt LocalOf(int32_t natural) const;
+  // The fixed body that feature point `feature` lies on.
+  int32_t FeatureBody(int32_t feature) const {
+    return static_cast<int32_t>(std::upper_bound(feature_begin_.begin(), feature_begin_.end(), feature) -
+                                feature_begin_.begin() - 1);
+  }
   // Whether x lies in or on a fixed body (or the ground) whose surface there
   // faces within kFeatureAngle of direction.
   bool OnFixedSurface(const Point &x, const Point &direction) const;

@@ -24,6 +24,9 @@ struct Box {
     return (p.array() >= lower.array() - margin).all() && (p.array() <= upper.array() + margin).all();
   }
   bool Empty() const { return (lower.array() > upper.array()).any(); }
+  bool Overlaps(const Box &b) const {
+    return (lower.array() <= b.upper.array()).all() && (b.lower.array() <= upper.array()).all();
+  }
 };
 
 // Barycentric coordinates of p in the tet (a, b, c, d); p is inside (or on the

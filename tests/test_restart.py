@@ -13,7 +13,9 @@ then -restart from that file with -steps N, and compares the frames:
 (c) contact: a cube dropped on the ground (gravity, restitution, friction),
     2 ranks, checkpoint while it rests (the checkpoint holds resting
     contacts): bit for bit, in both modes; two cubes thrown at each other
-    (free bodies as obstacles): bit for bit.
+    (free bodies as obstacles): bit for bit; a cube landing on a fixed cube
+    with a third of it over the edge (the checkpoint holds resting contacts
+    of the edge's points): bit for bit.
 (d) 2 ranks -> 1 rank: to round-off (linear, direct: 1e-12 of the largest
     displacement) or the solver tolerance (corotational, CG rtol 1e-10: 1e-7).
 (e) restart twice in a row (checkpoints alternate between two slots).
@@ -112,6 +114,14 @@ checks.check(len(resting) > 0 and bool(np.all(resting[:, 1] == -1)),
 restart_case("drop_corotational", "(c) drop, corotational", drop, world + ["-mode", "corotational"], 60,
              in_place=False)
 restart_case("pair", "(c) pair of free bodies", pair, world, 60, in_place=False)
+ledge = harness.write_scene(os.path.join(work, "ledge.txt"),
+                            [("cube.mesh", 1000.0, 1e6, 0.3, 1, (0, 0, 0), (1, 0, 0, 0)),
+                             ("cube.mesh", 1000.0, 1e6, 0.3, 0, (0.15, 0.51, 0), (1, 0, 0, 0))])
+checkpoint = restart_case("ledge", "(c) cube on a fixed cube's edge", ledge, world, 60, in_place=False)
+resting = checkpoint["checkpoint/0/resting_contacts"]
+checks.check(bool(np.any(resting[:, 1] <= -2)),
+             f"(c) the ledge checkpoint holds {int(np.sum(resting[:, 1] <= -2))} resting sharp-edge contacts "
+             f"(written -2 - feature point)")
 
 print("(d) another rank count")
 restart_case("d_linear", "(d) linear 2->1 ranks, beam scene", beam, [], 30, restart_ranks=1, exact=False,
