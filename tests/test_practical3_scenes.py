@@ -27,13 +27,14 @@
     centroid over the arm and above its top face y = 11; from 1 s after the
     impact on, the arm's end edge lies at most 5 % of the bunny's mean edge
     length inside it (the bunny lands at 42 m/s, above its wave speed 32 m/s:
-    during the impact the edge sinks in up to ~0.9 m). The same run with
+    during the impact the edge sinks in up to ~0.4 m). The same run with
     -sharp_edges 0 is the control: only bunny vertices meet cube faces, the
     edge cuts more than half an edge length into the bunny between its
     vertices and the bunny slides off (before the sharp-edge contacts this
     test could only accept the scene sliding off).
     A copy with the bunny at x = 18 (over the middle of that arm), the same
     options: the bunny rests on the stairs, never inside a cube.
+
 The fertility scene places its two statues overlapping each other (z from -85
 to 60 and from -35 to 110) and 6.2 m into the ground, so frame 0 is below the
 ground by construction: the ground pushes them out; the statues only stop
