@@ -564,7 +564,7 @@ PetscInt ContactSolver::LocalOf(int32_t natural) const {
 }
 
 PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh,
-                                         bool limit, int32_t only) {
+                                         bool limit) {
   const Point m = -hit.normal;
   const auto &triangle = free_triangles_[hit.triangle];
   const int32_t obstacle = FeatureBody(feature);
@@ -588,7 +588,7 @@ PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit,
   for (int k = 0; k < 3; ++k) {
     const int32_t natural = triangle[k];
     const PetscInt local = LocalOf(natural);
-    if (!moves[k] || (only >= 0 && natural != only) || local < 0) continue;
+    if (!moves[k] || local < 0) continue;
     const Point velocity(&world_v_[3 * natural]);
     const double push = hit.weights[k] * depth / squares / dt;  // d_k / dt
     const VelocityConstraint constraint{local, m, m.dot(velocity) + push, true};
@@ -645,7 +645,7 @@ PetscInt ContactSolver::AddFeaturePenetrations(PetscReal dt) {
         if (!ClosestOnBody(p, body, &hit) || (hit.point - p).norm() < kFeatureTolerance * body_edge_[b]) continue;
         const bool entered = EntryOnBody(p + dt * velocity, p, body, &hit);
         feature_held_[i] = 1;
-        found += ConstrainFeature(i, hit, dt, true, !entered, -1);
+        found += ConstrainFeature(i, hit, dt, true, !entered);
       }
     }
   }
@@ -677,13 +677,20 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   for (const auto &[local, contact] : resting_) {
     const Point position(&x[3 * local]), velocity(&v[3 * local]);
     SurfaceHit hit;
-    if (contact.feature >= 0) {  // the feature point against the face now closest to it
-      if (!ClosestOnBody(feature_point_[contact.feature], body_of_[contact.natural], &hit)) continue;
+    if (contact.feature >= 0) {
+      // The feature point against the face now closest to it, once per step:
+      // all of this rank's vertices of that face (the other ranks do theirs
+      // as new contacts), also those whose own contact was released (pushing
+      // only the resting one, a vertex of weight 0.1, let the stairway's edge
+      // sink 0.16 m into the bunny).
+      if (feature_held_[contact.feature] ||
+          !ClosestOnBody(feature_point_[contact.feature], body_of_[contact.natural], &hit))
+        continue;
       const auto &triangle = free_triangles_[hit.triangle];
       if (std::find(triangle.begin(), triangle.begin() + 3, contact.natural) == triangle.begin() + 3) continue;
       feature_held_[contact.feature] = 1;
       const bool unconstrained = feature_contact_[local] < 0;
-      ConstrainFeature(contact.feature, hit, dt, false, true, contact.natural);
+      ConstrainFeature(contact.feature, hit, dt, false, true);
       const bool appended = unconstrained && feature_contact_[local] >= 0;
       SurfaceHit fixed_side = hit;  // the feature's side: immobile, facing the vertex
       fixed_side.normal = -hit.normal;
@@ -828,9 +835,12 @@ PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, s
     // bring it out gradually (a jump of that size would be a huge strain). A
     // constrained vertex ends on the surface (to round-off) unless its
     // constraints could not all hold (more than three directions, e.g. a
-    // sticking contact's and a sharp edge's).
+    // sticking contact's and a sharp edge's); it is projected out of fixed
+    // bodies and the ground only (out of a free body, one side's projection
+    // would change the momentum of the pair).
     const double depth = (hit.point - position).norm(), edge = body_edge_[body_of_[natural]];
-    if (depth > 0.1 * edge || (constrained_[local].count && depth < 1e-6 * edge)) return;
+    const bool immobile = hit.body < 0 || scene_->bodies[hit.body].fixed;
+    if (depth > 0.1 * edge || (constrained_[local].count && (depth < 1e-6 * edge || !immobile))) return;
     const Point velocity(&v[3 * local]);
     const double approach = hit.normal.dot(velocity - hit.velocity);
     const Point target = hit.point + 1e-9 * body_edge_[body_of_[natural]] * hit.normal;

@@ -240,10 +240,8 @@ class ContactSolver {
   // not on a fixed surface facing nearly along m: OnFixedSurface), the least
   // displacement that moves the triangle's point under p by d. One feature
   // constraint per vertex (the larger d_k). Constrains this rank's vertices
-  // of the triangle, or only natural vertex `only` (>= 0); returns how many
-  // constraints it added or changed.
-  PetscInt ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh, bool limit,
-                             int32_t only);
+  // of the triangle; returns how many constraints it added or changed.
+  PetscInt ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh, bool limit);
   // After a solve: the feature points each free body's predicted surface passes
   // over; returns the constraints added or changed on this rank.
   PetscInt AddFeaturePenetrations(PetscReal dt);
