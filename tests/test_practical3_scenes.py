@@ -29,10 +29,10 @@
     length inside it (the bunny lands at 42 m/s, above its wave speed 32 m/s:
     during the impact the edge sinks in up to ~0.4 m; the edge is sampled
     every half edge length, and a bunny edge can cross it between samples:
-    up to 0.15 m measured across rank counts, time steps and the ground). The same run
-    with -sharp_edges 0 is the control: only bunny vertices meet cube faces
-    and the edge cuts more than half an edge length (1.8 m) into the bunny
-    between its vertices. Friction 1: with 0.5 the bunny rests in most runs
+    up to 0.15 m measured across rank counts, time steps and the ground).
+    The same run with -sharp_edges 0 is the control: only bunny vertices
+    meet cube faces and the edge cuts more than half an edge length (1.8 m)
+    into the bunny between its vertices. Friction 1: with 0.5 the bunny rests in most runs
     but crept off the edge in one of six (time step and friction varied by
     10 %); with friction 0.5 and -sharp_edges 0 it slid off.
     A copy with the bunny at x = 18 (over the middle of that arm), the same
