@@ -238,7 +238,8 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
       if (scene.bodies[b].fixed) feature_candidates[b] = FeaturePoints(scene.bodies[b].mesh, spacing);
   }
   track_free_ = free_obstacles_ || !feature_candidates.empty();
-  gather_ = track_free_ || !constraints_.empty() || (options.impulse_spreading && active());
+  gather_always_ = free_obstacles_ || !constraints_.empty() || (options.impulse_spreading && active());
+  gather_ = gather_always_ || track_free_;
 
   owned_natural_.resize(layout.local_count());
   for (PetscInt f = 0; f < layout.num_free(); ++f) {
@@ -383,9 +384,51 @@ void ContactSolver::EnsureFreeGrids() const {
   ++free_grid_builds_;
 }
 
+PetscErrorCode ContactSolver::Refresh(Vec x, Vec v, PetscReal dt, bool features) {
+  PetscFunctionBeginUser;
+  features_near_ = false;
+  if (features && !feature_point_.empty()) {
+    // Each free body's box at x + dt v (the owned vertices' boxes, reduced:
+    // -lower and upper by MPI_MAX) and whether any rank holds resting
+    // sharp-edge contacts.
+    const size_t bodies = scene_->bodies.size();
+    std::vector<double> bounds(6 * bodies + 1, -1e300);
+    const PetscScalar *ax, *av;
+    PetscCall(VecGetArrayRead(x, &ax));
+    PetscCall(VecGetArrayRead(v, &av));
+    for (size_t p = 0; p < owned_natural_.size(); ++p) {
+      const size_t b = body_of_[owned_natural_[p]];
+      for (int c = 0; c < 3; ++c) {
+        const double at = ax[3 * p + c] + dt * av[3 * p + c];
+        bounds[6 * b + c] = std::max(bounds[6 * b + c], -at);
+        bounds[6 * b + 3 + c] = std::max(bounds[6 * b + 3 + c], at);
+      }
+    }
+    PetscCall(VecRestoreArrayRead(x, &ax));
+    PetscCall(VecRestoreArrayRead(v, &av));
+    for (const auto &[local, contact] : resting_)
+      if (contact.feature >= 0) bounds[6 * bodies] = 1;
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bounds.data(), static_cast<int>(bounds.size()), MPI_DOUBLE, MPI_MAX,
+                               comm_));
+    features_near_ = bounds[6 * bodies] > 0;
+    for (size_t b = 0; b < bodies && !features_near_; ++b) {
+      if (scene_->bodies[b].fixed) continue;
+      Box box;
+      box.lower = -Point(&bounds[6 * b]);
+      box.upper = Point(&bounds[6 * b + 3]);
+      for (size_t f = 0; f < bodies && !features_near_; ++f)
+        features_near_ = feature_begin_[f] < feature_begin_[f + 1] && body_box_[f].Overlaps(box);
+    }
+  }
+  if (gather_always_ || features_near_) PetscCall(Gather(x, v, dt));
+  if (free_obstacles_ || features_near_) BuildObstacleGrids(false);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // World arrays of the free vertices at x + dt v (dt = 0: at x), velocities v.
 PetscErrorCode ContactSolver::Gather(Vec x, Vec v, PetscReal dt) {
   PetscFunctionBeginUser;
+  ++stats_.gathers;
   for (auto [from, to] : {std::pair<Vec, Vec>(x, all_x_), std::pair<Vec, Vec>(v, all_v_)}) {
     PetscCall(VecScatterBegin(to_all_, from, to, INSERT_VALUES, SCATTER_FORWARD));
     PetscCall(VecScatterEnd(to_all_, from, to, INSERT_VALUES, SCATTER_FORWARD));
@@ -669,8 +712,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   bounce_speed_ = 2 * options_.gravity * dt;
   if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
   // Obstacles where they will be if they keep their velocity.
-  if (gather_) PetscCall(Gather(x0, v0, dt));
-  if (track_free_) BuildObstacleGrids(false);
+  PetscCall(Refresh(x0, v0, dt, true));
   const PetscScalar *x, *v;
   PetscCall(VecGetArrayRead(x0, &x));
   PetscCall(VecGetArrayRead(v0, &v));
@@ -779,8 +821,7 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
   Timing timing(this);
   *added = false;
   if (!ground_ && !obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
-  if (gather_) PetscCall(Gather(x0, v, dt));
-  if (track_free_) BuildObstacleGrids(false);
+  PetscCall(Refresh(x0, v, dt, true));
   const PetscScalar *x, *lv;
   PetscCall(VecGetArrayRead(x0, &x));
   PetscCall(VecGetArrayRead(v, &lv));
@@ -814,7 +855,7 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
   PetscCall(VecRestoreArrayRead(x0, &x));
   PetscCall(VecRestoreArrayRead(v, &lv));
   // Feature points: every rank sees all (gathered positions) and constrains its own vertices.
-  PetscInt local_found[2] = {found, feature_point_.empty() ? 0 : AddFeaturePenetrations(dt)}, all_found[2];
+  PetscInt local_found[2] = {found, features_near_ ? AddFeaturePenetrations(dt) : 0}, all_found[2];
   PetscCallMPI(MPIU_Allreduce(local_found, all_found, 2, MPIU_INT, MPI_SUM, comm_));
   stats_.collisions += all_found[0];
   stats_.feature_contacts += all_found[1];
@@ -865,8 +906,7 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
   if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
   std::vector<Collision> collisions;
   if (ground_ || obstacles_) {
-    if (gather_) PetscCall(Gather(x, v, 0.0));
-    if (track_free_) BuildObstacleGrids(false);
+    PetscCall(Refresh(x, v, 0.0, false));
     PetscScalar *lx, *lv;
     PetscCall(VecGetArray(x, &lx));
     PetscCall(VecGetArray(v, &lv));

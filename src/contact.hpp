@@ -112,6 +112,7 @@ std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const S
 
 struct ContactStatistics {
   PetscInt collisions = 0;          // new vertex contacts, all steps, all ranks
+  PetscInt gathers = 0;             // times the free state was gathered on every rank
   PetscInt feature_contacts = 0;    // vertex constraints from fixed bodies' sharp edges entering free faces
   PetscInt projections = 0;         // last-resort projections, all steps, all ranks
   PetscLogDouble seconds = 0;       // wall time in contact detection and response
@@ -199,6 +200,11 @@ class ContactSolver {
     Point position, dv;
   };
   PetscErrorCode Gather(Vec x, Vec v, PetscReal dt);
+  // Collective. The free state and grids that this call needs at x + dt v:
+  // gathered when free bodies collide, constraints exist or impulses spread,
+  // and, when `features`, while a free body's box meets a fixed body with
+  // sharp-edge points or a sharp-edge contact rests (sets features_near_).
+  PetscErrorCode Refresh(Vec x, Vec v, PetscReal dt, bool features);
   // Body boxes, and the fixed part's grids; the free part's grids are marked
   // stale and built when a query first needs them (EnsureFreeGrids): while the
   // bodies' boxes stay apart, a step builds none.
@@ -299,6 +305,8 @@ class ContactSolver {
   std::vector<char> feature_held_;          // per feature point: constrained this step
   std::vector<ptrdiff_t> feature_contact_;  // per local vertex: its feature contact this step (-1: none)
   bool track_free_ = false;                 // the free bodies' grids are needed (free or feature obstacles)
+  bool gather_always_ = false;              // every call gathers (free obstacles, constraints, spreading)
+  bool features_near_ = false;              // this call's sharp-edge contacts need the free state
   std::vector<double> body_edge_;          // mean boundary edge length per body
   std::vector<double> body_mass_;          // total lumped mass per body (kg)
   double bounce_speed_ = 0;                // slower impacts do not bounce (m/s)

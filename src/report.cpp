@@ -58,8 +58,8 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
     PetscInt grid_builds = contact.free_grid_builds();
     PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &grid_builds, 1, MPIU_INT, MPI_MAX, comm));
     if (contact.tracks_free_bodies())
-      PetscCall(PetscPrintf(comm, "; moving obstacles' grids built in %" PetscInt_FMT " passes (only where bodies' boxes met)",
-                            grid_builds));
+      PetscCall(PetscPrintf(comm, "; moving obstacles' grids built in %" PetscInt_FMT " passes (only where bodies' boxes met)"
+                            ", free state gathered %" PetscInt_FMT " times", grid_builds, c.gathers));
     if (contact.num_constraints())
       PetscCall(PetscPrintf(comm, "; constraint sweeps %" PetscInt_FMT " total, %" PetscInt_FMT
                             " max per step, worst relative violation %.1e",

@@ -30,7 +30,10 @@ at 0.75 m, a 0.75 m fall to the ground).
     grid is built, and the first cube moves bit for bit as with the other 100 m
     away.
 (d) A cube dropped onto a fixed cube (no ground): rests on it, no penetration,
-    the fixed cube bit-for-bit still.
+    the fixed cube bit-for-bit still; the fixed cube's sharp edges met it (run
+    summary). Dropped beside a fixed cube 5 m away onto the ground: no
+    sharp-edge contact and the free body's grids never built (its state is
+    gathered only while its box meets a fixed body with sharp edges).
 (e) Sliding with Coulomb friction 0.5: decelerates at mu g (+ mass damping,
     10 %) while sliding and stops (centroid speed < 1 % of the start) within
     1 s, never sooner than Coulomb's law allows (0.9 x the rigid stopping time
@@ -283,7 +286,7 @@ print("(d) a cube dropped onto a fixed cube")
 fixed_scene = harness.write_scene(os.path.join(args.work, "fixed.txt"),
                                   [("cube.mesh", RHO, YOUNG, NU, 1, (0, 0, 0), (1, 0, 0, 0)),
                                    ("cube.mesh", RHO, YOUNG, NU, 0, (0.05, 1.0, 0.0), (1, 0, 0, 0))])
-d, _, _, _, _ = simulate("fixed", fixed_scene, ["-gravity", "0,-9.81,0", "-restitution", "0", "-dt", "0.01",
+d, out_d, _, _, _ = simulate("fixed", fixed_scene, ["-gravity", "0,-9.81,0", "-restitution", "0", "-dt", "0.01",
                                                 "-steps", "300"])
 body, tets, P = d["mesh/vertex_body"], d["mesh/tets"], d["positions"]
 tet_body = body[tets[:, 0]]
@@ -305,6 +308,22 @@ still = bool(np.array_equal(P[:, body == 0], np.broadcast_to(d["mesh/rest_positi
                                                               P[:, body == 0].shape)))
 checks.check(still and d["mesh/body_fixed"][0] == 1,
              f"(d) the fixed cube is bit-for-bit at its rest positions in all {len(P)} frames")
+
+# Sharp edges cost nothing while no free body comes near a fixed one: the same
+# cube dropped beside the fixed cube (5 m away) onto the ground builds no grid
+# of the free body (nor gathers its state); over it, the grids are built.
+builds = re.search(r"(\d+) sharp-edge contacts; moving obstacles' grids built in (\d+) passes", out_d)
+checks.check(builds is not None and int(builds.group(1)) > 0 and int(builds.group(2)) > 0,
+             f"(d) the fixed cube's sharp edges met the falling cube: {builds.group(0) if builds else None}")
+beside_scene = harness.write_scene(os.path.join(args.work, "beside.txt"),
+                                   [("cube.mesh", RHO, YOUNG, NU, 1, (5.0, 0, 0), (1, 0, 0, 0)),
+                                    ("cube.mesh", RHO, YOUNG, NU, 0, (0.05, 1.0, 0.0), (1, 0, 0, 0))])
+_, out_beside, _, _, _ = simulate("beside", beside_scene, ["-gravity", "0,-9.81,0", "-ground", "0", "-dt", "0.01",
+                                                           "-steps", "100"])
+builds = re.search(r"grids built in (\d+) passes.*gathered (\d+) times", out_beside)
+checks.check(builds is not None and int(builds.group(1)) == 0 and int(builds.group(2)) == 0 and
+             "sharp-edge contacts" not in out_beside,
+             f"(d) a fixed cube 5 m away: no sharp-edge contact, {builds.group(0) if builds else None}")
 
 # ---------------------------------------------------------------- (e) friction
 print("(e) sliding on the ground")
