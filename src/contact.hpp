@@ -36,16 +36,20 @@
 //
 // Sharp edges (-sharp_edges, default on): a free vertex cannot enter a fixed
 // face, but a fixed body's edge or corner can cut into a free body between its
-// vertices (the stairway's bunny draped over a step's edge: 1.7 m deep, and
-// it slid off). The fixed bodies' real edges (faces meeting at more than 30
-// degrees, not flush with another fixed body) are sampled as points at most
-// half the finest free body's mean edge length apart; a point p that the
-// step's solve would take into a free body more than 1e-3 of its edge length
-// deep constrains the free surface triangle it entered through (on its path
-// relative to the body; if it was inside already, the closest one, and it
-// comes out gradually): the triangle's point under p moves away from p by the
-// depth d along m, minus the triangle's outward normal (ConstrainFeature).
-// The same velocity response, resting contacts and friction as a vertex's.
+// vertices (the stairway's bunny draped over a step's edge: 1.8 m deep). The
+// fixed bodies' real edges (faces meeting at more than 30 degrees, not flush
+// with another fixed body) are sampled as points at most half the finest free
+// body's mean edge length apart; a point p that the step's solve would take
+// into a free body more than 1e-3 of its edge length deep constrains the free
+// surface triangle it entered through (on its path relative to the body; if
+// it was inside already, the closest one, and it comes out gradually): the
+// triangle's point under p moves away from p by the depth d along m, minus
+// the triangle's outward normal (ConstrainFeature). The same velocity
+// response, resting contacts (re-aimed at the face now closest to p, all of
+// its vertices) and friction as a vertex's. A free vertex that its
+// constraints could not all keep out of a fixed body or the ground (more than
+// three directions) is projected out after the step. Edges are sampled, so a
+// free edge can still cross a fixed one between samples.
 //
 // Impulse spreading (-impulse_spreading): the momentum m_c dv_c that the
 // velocity response gives a contact vertex c is shared by all vertices j of its
@@ -61,12 +65,12 @@
 // holds to 1e-12 relative (at most 500). Fixed and stray vertices have infinite mass.
 //
 // Parallel model: the free state is gathered on every rank when free bodies
-// collide with each other or with fixed sharp edges, constraints exist or
-// impulses spread; each rank then detects the contacts of its own vertices
-// (and every sharp-edge point, constraining its own vertices of the triangle),
-// every rank resolves all distance constraints identically, and each keeps its
-// own vertices' results. The ground alone and fixed bodies without sharp
-// edges need no gather.
+// collide with each other, constraints exist or impulses spread, and while a
+// free body's box meets a fixed body with sharp edges (Refresh); each rank
+// then detects the contacts of its own vertices (and every sharp-edge point,
+// constraining its own vertices of the triangle), every rank resolves all
+// distance constraints identically, and each keeps its own vertices' results.
+// The ground alone and fixed bodies away from the free ones need no gather.
 #pragma once
 
 #include <petscvec.h>
