@@ -17,6 +17,8 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kReal, "-ground"},
                                      {OptionSyntax::kReal, "-restitution"},
                                      {OptionSyntax::kReal, "-friction"},
+                                     {OptionSyntax::kBool, "-sharp_edges"},
+                                     {OptionSyntax::kBool, "-impulse_spreading"},
                                      {OptionSyntax::kRealList, "-edge_bounds"}}));
   char path[PETSC_MAX_PATH_LEN] = "";
   PetscReal bounds[2] = {o->edge_lower, o->edge_upper};
