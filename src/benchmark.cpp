@@ -16,7 +16,8 @@ namespace softbody {
 
 PetscErrorCode ProcessBenchmarkOptions(MPI_Comm comm, BenchmarkOptions *o) {
   PetscFunctionBeginUser;
-  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kInteger, "-bench_assembly_repeats"},
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kBool, "-bench"},
+                                     {OptionSyntax::kInteger, "-bench_assembly_repeats"},
                                      {OptionSyntax::kReal, "-bench_triad_mb"}}));
   PetscOptionsBegin(comm, nullptr, "Benchmark (measurements against the machine)", nullptr);
   PetscCall(PetscOptionsBool("-bench",

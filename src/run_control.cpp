@@ -8,6 +8,8 @@
 #include <cstring>
 #include <string>
 
+#include "options.hpp"
+
 namespace softbody {
 
 namespace {
@@ -54,6 +56,7 @@ bool StderrIsTerminal() {
 PetscErrorCode ProcessRunControlOptions(MPI_Comm comm, RunControlOptions *o) {
   PetscFunctionBeginUser;
   PetscBool progress_set = PETSC_FALSE;
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kBool, "-quiet"}, {OptionSyntax::kBool, "-progress"}}));
   PetscOptionsBegin(comm, nullptr, "Run control", nullptr);
   PetscCall(PetscOptionsBool("-quiet", "Print nothing but errors (no run summary, no progress line)",
                              nullptr, o->quiet, &o->quiet, nullptr));

@@ -198,6 +198,9 @@ def main():
         # (PETSc's own parse of these ended in a traceback and exit 139)
         option("-sharp_edges", "maybe", ["true or false", "maybe"]),
         option("-impulse_spreading", "2", ["true or false"]),
+        option("-quiet", "maybe", ["true or false"]),
+        option("-progress", "maybe", ["true or false"]),
+        option("-bench", "maybe", ["true or false"]),
     ]
 
     for case in cases:
