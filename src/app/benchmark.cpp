@@ -1,0 +1,194 @@
+#include "app/benchmark.hpp"
+
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+#include "common/large_array.hpp"
+#include "common/options.hpp"
+#include "solvers/supernodal/supernodal.hpp"
+#include "solvers/warp/warp_preconditioner.hpp"
+
+namespace softbody {
+
+PetscErrorCode ProcessBenchmarkOptions(MPI_Comm comm, BenchmarkOptions *o) {
+  PetscFunctionBeginUser;
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kBool, "-bench"},
+                                     {OptionSyntax::kInteger, "-bench_assembly_repeats"},
+                                     {OptionSyntax::kReal, "-bench_triad_mb"}}));
+  PetscOptionsBegin(comm, nullptr, "Benchmark (measurements against the machine)", nullptr);
+  PetscCall(PetscOptionsBool("-bench",
+                             "Measure the run: median step, assembly, factorisation, peak memory, triad "
+                             "bandwidth and the step's memory-traffic bound (printed and in the result file)",
+                             nullptr, o->enabled, &o->enabled, nullptr));
+  PetscCall(PetscOptionsInt("-bench_assembly_repeats", "Timed fills of A after the time loop", nullptr,
+                            o->assembly_repeats, &o->assembly_repeats, nullptr));
+  PetscCall(PetscOptionsReal("-bench_triad_mb", "Size of each triad array per rank (MB)", nullptr, o->triad_mb,
+                             &o->triad_mb, nullptr));
+  PetscOptionsEnd();
+  PetscCheck(o->assembly_repeats >= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -bench_assembly_repeats: must be >= 1 (got %" PetscInt_FMT ")", o->assembly_repeats);
+  PetscCheck(o->triad_mb > 0, comm, PETSC_ERR_USER_INPUT, "option -bench_triad_mb: must be > 0 (got %g)",
+             (double)o->triad_mb);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+double PeakResidentMegabytes() {
+  struct rusage usage;
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_maxrss / 1024.0;  // Linux: kilobytes
+}
+
+PetscErrorCode TriadBandwidth(MPI_Comm comm, PetscReal megabytes_per_array, double *gigabytes_per_second) {
+  PetscFunctionBeginUser;
+  const size_t n = static_cast<size_t>(megabytes_per_array * 1e6 / sizeof(double));
+  LargeArray<double> a(n), b(n), c(n);  // as the factor of the single-precision solves
+  for (size_t i = 0; i < n; ++i) {  // first touch: the pages exist before timing
+    a[i] = 0.0;
+    b[i] = 1.0;
+    c[i] = 2.0;
+  }
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  double best = 1e30;
+  for (int pass = 0; pass < 5; ++pass) {
+    PetscCallMPI(MPI_Barrier(comm));
+    const double start = MPI_Wtime();
+    double *PETSC_RESTRICT pa = a.data();
+    const double *PETSC_RESTRICT pb = b.data(), *PETSC_RESTRICT pc = c.data();
+    for (size_t i = 0; i < n; ++i) pa[i] = pb[i] + 3.0 * pc[i];
+    PetscCallMPI(MPI_Barrier(comm));
+    best = std::min(best, MPI_Wtime() - start);
+  }
+  double checksum = a[n / 2];  // keeps the loop
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &checksum, 1, MPI_DOUBLE, MPI_SUM, comm));
+  PetscCheck(checksum == 7.0 * size, comm, PETSC_ERR_PLIB, "triad: wrong result");
+  *gigabytes_per_second = size * 3.0 * sizeof(double) * n / best / 1e9;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void Benchmark::RecordStep(double seconds, const SolverStatistics &statistics) {
+  if (!options_.enabled) return;
+  step_seconds_.push_back(seconds);
+  setup_seconds_.push_back(statistics.last_setup_seconds);
+  last_total_iterations_ = statistics.total_iterations;
+}
+
+namespace {
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0;
+  std::sort(values.begin(), values.end());
+  const size_t n = values.size();
+  return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
+}
+
+// Nonzeros of the Cholesky factor behind pc (0 when there is none) and the
+// bytes per entry its solves read.
+PetscErrorCode FactorNonzeros(PC pc, double *nonzeros, int *bytes_per_entry) {
+  PetscFunctionBeginUser;
+  *nonzeros = 0;
+  *bytes_per_entry = 8;
+  PetscBool warp, supernodal, cholesky;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
+  if (warp) PetscCall(PCWarpGetInnerPC(pc, &pc));
+  if (!pc) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &supernodal));
+  PetscCall(PetscObjectTypeCompareAny((PetscObject)pc, &cholesky, PCCHOLESKY, PCLU, ""));
+  if (supernodal) {
+    double stored, flops;
+    PetscCall(PCSupernodalGetFactorSize(pc, &stored, nonzeros, &flops, bytes_per_entry));
+  } else if (cholesky) {
+    MatSolverType package;
+    PetscCall(PCFactorGetMatSolverType(pc, &package));
+    PetscBool mumps;
+    PetscCall(PetscStrcmp(package, MATSOLVERMUMPS, &mumps));
+    if (mumps) {
+      Mat factor;
+      PetscInt entries;
+      PetscCall(PCFactorGetMatrix(pc, &factor));
+      PetscCall(MatMumpsGetInfog(factor, 29, &entries));  // entries in the factors (< 0: millions)
+      *nonzeros = entries < 0 ? -1e6 * entries : entries;
+    } else {
+      Mat factor;
+      MatInfo info;
+      PetscCall(PCFactorGetMatrix(pc, &factor));
+      PetscCall(MatGetInfo(factor, MAT_GLOBAL_SUM, &info));
+      *nonzeros = info.nz_used;
+    }
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
+PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEuler *integrator, Vec x) {
+  PetscFunctionBeginUser;
+  if (!options_.enabled) PetscFunctionReturn(PETSC_SUCCESS);
+  double peak_rss = PeakResidentMegabytes();
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &peak_rss, 1, MPI_DOUBLE, MPI_MAX, comm));
+  PetscMPIInt ranks;
+  PetscCallMPI(MPI_Comm_size(comm, &ranks));
+
+  std::vector<double> assembly;
+  PetscCall(integrator->TimeAssembly(x, options_.assembly_repeats, &assembly));
+  double assemble_s = Median(assembly);
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &assemble_s, 1, MPI_DOUBLE, MPI_MAX, comm));
+
+  const SolverStatistics &stats = integrator->statistics();
+  const bool corotational = integrator->mode() == MODE_COROTATIONAL;
+  MatInfo info;
+  PetscCall(MatGetInfo(integrator->system_matrix(), MAT_GLOBAL_SUM, &info));
+  const double matrix_nonzeros = info.nz_used;
+  PC pc;
+  PetscCall(KSPGetPC(integrator->solver(), &pc));
+  double factor_nonzeros;
+  int factor_bytes;
+  PetscCall(FactorNonzeros(pc, &factor_nonzeros, &factor_bytes));
+  PetscBool preonly;
+  PetscCall(PetscObjectTypeCompare((PetscObject)integrator->solver(), KSPPREONLY, &preonly));
+
+  const double steps = static_cast<double>(step_seconds_.size());
+  const double iterations = stats.solves ? double(stats.total_iterations) / stats.solves : 0;
+  const double step_s = Median(step_seconds_);
+  double factor_s = stats.factor_seconds;
+  for (double s : setup_seconds_) factor_s = std::max(factor_s, s);
+
+  double bandwidth;
+  PetscCall(TriadBandwidth(comm, options_.triad_mb, &bandwidth));
+  // Bytes a step must move at least (see benchmark.hpp).
+  const double solves_per_step = steps > 0 ? stats.solves / steps : 1;
+  const double products = preonly ? (corotational ? 0.0 : 1.0) : iterations * solves_per_step;
+  const double factor_solves = preonly ? solves_per_step : (factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
+  const double bytes = 12.0 * matrix_nonzeros * products + 2.0 * factor_bytes * factor_nonzeros * factor_solves +
+                       (corotational ? 8.0 * matrix_nonzeros : 0.0);
+  const double bound_s = bytes / (bandwidth * 1e9);
+  const double tets = static_cast<double>(scene.num_tets());
+
+  attributes_ = {{"bench_tets", tets},
+                 {"bench_vertices", double(scene.num_vertices())},
+                 {"bench_ranks", double(ranks)},
+                 {"bench_steps", steps},
+                 {"step_s", step_s},
+                 {"assemble_s", assemble_s},
+                 {"assemble_rate", tets / assemble_s / ranks},
+                 {"factor_s", factor_s},
+                 {"iterations", iterations},
+                 {"matrix_nonzeros", matrix_nonzeros},
+                 {"factor_nonzeros", factor_nonzeros},
+                 {"peak_rss_mb", peak_rss},
+                 {"bandwidth_gbs", bandwidth},
+                 {"bound_s", bound_s},
+                 {"bound_fraction", step_s > 0 ? bound_s / step_s : 0.0}};
+  std::ostringstream line;
+  line << "softbody bench:";
+  line.precision(6);
+  for (const auto &[name, value] : attributes_) line << ' ' << name << '=' << value;
+  PetscCall(PetscPrintf(comm, "%s\n", line.str().c_str()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody

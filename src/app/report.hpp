@@ -1,0 +1,45 @@
+// The run summary printed by rank 0 at the end of a run.
+#pragma once
+
+#include <petscksp.h>
+
+#include <string>
+
+#include "contact/contact.hpp"
+#include "solvers/integrator.hpp"
+#include "io/output.hpp"
+#include "fem/partition.hpp"
+#include "io/scene.hpp"
+
+namespace softbody {
+
+struct RunTimes {
+  PetscLogDouble setup = 0;   // s: reading, partitioning, assembly, factorisation
+  PetscLogDouble loop = 0;    // s: the time steps (contact included), output excluded
+  PetscLogDouble output = 0;  // s: gathering and writing frames
+};
+
+struct RunReport {
+  PetscInt first_step = 0;        // step the run started from (a restart's checkpoint)
+  PetscInt steps = 0;             // steps taken since the original start
+  PetscInt checkpoint_step = -1;  // the last checkpoint written (-1: none)
+  std::string restarted_from;     // -restart file ("": a fresh start)
+  PetscReal final_time = 0;
+  EnergySample energy;  // at the end
+  PetscInt frames = 0;
+  RunTimes times;
+};
+
+// Collective (the solver description is queried collectively); prints on rank 0.
+// ksp may be null when the scene has no unknowns.
+PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                               const IntegratorOptions &integration, const OutputOptions &output,
+                               const SolverStatistics &solver, KSP ksp, const ContactSolver &contact,
+                               const RunReport &report);
+
+// Rank 0 prints, on stderr, the one line that says a signal stopped the run and
+// what the result file holds.
+PetscErrorCode PrintInterruption(MPI_Comm comm, int signal, const IntegratorOptions &integration,
+                                 const OutputOptions &output, const RunReport &report);
+
+}  // namespace softbody

@@ -1,0 +1,118 @@
+#include "contact/geometry.hpp"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+namespace softbody {
+
+Eigen::Vector4d Barycentric(const Point &p, const Point &a, const Point &b, const Point &c,
+                            const Point &d) {
+  // Cramer's rule with triple products: l_b = det[p-a, c-a, d-a] / det[b-a, c-a, d-a], ...
+  const Point ab = b - a, ac = c - a, ad = d - a, ap = p - a;
+  const Point cd = ac.cross(ad);
+  const double volume = ab.dot(cd);
+  const double lb = ap.dot(cd) / volume;
+  const double lc = ab.dot(ap.cross(ad)) / volume;
+  const double ld = ab.dot(ac.cross(ap)) / volume;
+  return {1 - lb - lc - ld, lb, lc, ld};
+}
+
+Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, const Point &c,
+                             Eigen::Vector3d *w) {
+  const Point ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return *w = {1, 0, 0}, a;
+  const Point bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return *w = {0, 1, 0}, b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    return *w = {1 - v, v, 0}, a + v * ab;
+  }
+  const Point cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return *w = {0, 0, 1}, c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double v = d2 / (d2 - d6);
+    return *w = {1 - v, 0, v}, a + v * ac;
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double v = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return *w = {0, 1 - v, v}, b + v * (c - b);
+  }
+  const double denominator = 1 / (va + vb + vc);
+  const double v = vb * denominator, u = vc * denominator;
+  return *w = {1 - v - u, v, u}, a + v * ab + u * ac;
+}
+
+bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b, const Point &c,
+                            double *t, Eigen::Vector3d *w) {
+  // p + t (q - p) = a + u (b - a) + v (c - a), solved by Cramer's rule.
+  const Point d = q - p, ab = b - a, ac = c - a;
+  const Point h = d.cross(ac);
+  const double det = ab.dot(h);
+  const double scale = ab.norm() * ac.norm() * d.norm();
+  if (!(std::abs(det) > 1e-12 * scale)) return false;
+  const Point s = p - a;
+  const double u = s.dot(h) / det;
+  if (u < 0 || u > 1) return false;
+  const Point k = s.cross(ab);
+  const double v = d.dot(k) / det;
+  if (v < 0 || u + v > 1) return false;
+  *t = ac.dot(k) / det;
+  if (*t < 0 || *t > 1) return false;
+  *w = {1 - u - v, u, v};
+  return true;
+}
+
+void UniformGrid::Build(const std::vector<Box> &boxes) {
+  bounds_ = Box();
+  double edge_sum = 0;
+  for (const Box &b : boxes) {
+    bounds_.Extend(b);
+    edge_sum += (b.upper - b.lower).sum() / 3;
+  }
+  item_start_.assign(1, 0);
+  if (boxes.empty()) return;
+  const Eigen::Array3d extent = (bounds_.upper - bounds_.lower).array();
+  h_ = std::max(edge_sum / boxes.size(), 1e-12 * std::max(1.0, extent.maxCoeff()));
+  // At most ~64 cells per item on average: keeps memory bounded for odd inputs.
+  const double max_cells = 64.0 * boxes.size() + 64;
+  while ((extent / h_ + 1).prod() > max_cells) h_ *= 1.5;
+  cells_ = (extent / h_).floor().cast<int>() + 1;
+  // Count, then fill (CSR).
+  cell_start_.assign(static_cast<size_t>(cells_.prod()) + 1, 0);
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<int64_t> next;
+    if (pass == 1) {
+      for (size_t n = 1; n < cell_start_.size(); ++n) cell_start_[n] += cell_start_[n - 1];
+      items_.resize(cell_start_.back());
+      next.assign(cell_start_.begin(), cell_start_.end() - 1);
+    }
+    for (size_t item = 0; item < boxes.size(); ++item) {
+      const Eigen::Array3i lo = CellOf(boxes[item].lower.array()), hi = CellOf(boxes[item].upper.array());
+      for (int k = lo[2]; k <= hi[2]; ++k)
+        for (int j = lo[1]; j <= hi[1]; ++j)
+          for (int i = lo[0]; i <= hi[0]; ++i) {
+            const int64_t cell = Index(i, j, k);
+            if (pass == 0) ++cell_start_[cell + 1];
+            else items_[next[cell]++] = static_cast<int32_t>(item);
+          }
+    }
+  }
+}
+
+Eigen::Array3i UniformGrid::CellOf(const Eigen::Array3d &p) const {
+  const Eigen::Array3d relative = (p - bounds_.lower.array()) / h_;
+  return relative.floor().max(-1.0).min(cells_.cast<double>()).cast<int>().max(0).min(cells_ - 1);
+}
+
+int64_t UniformGrid::Index(int i, int j, int k) const {
+  return i + static_cast<int64_t>(cells_[0]) * (j + static_cast<int64_t>(cells_[1]) * k);
+}
+
+}  // namespace softbody

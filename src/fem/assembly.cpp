@@ -1,0 +1,240 @@
+#include "fem/assembly.hpp"
+
+#include <algorithm>
+
+namespace softbody {
+
+LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) {
+  LocalElements elements;
+  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
+  for (const Body &body : scene.bodies) {
+    if (body.fixed) continue;
+    const Lame lame = LameFromYoungPoisson(body.material.young, body.material.poisson);
+    for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
+      std::array<PetscInt, 4> vertices;
+      TetPositions X;
+      for (int a = 0; a < 4; ++a) {
+        const int32_t local = body.mesh.tets(t, a);
+        vertices[a] = layout.petsc_of_free[layout.free_of_natural[body.first_vertex + local]];
+        X.row(a) = body.mesh.vertices.row(local);
+      }
+      const PetscInt owner_vertex = *std::min_element(vertices.begin(), vertices.end());
+      if (owner_vertex < begin || owner_vertex >= end) continue;
+      elements.vertices.push_back(vertices);
+      elements.gradients.push_back(ComputeShapeGradients(X));
+      elements.volumes.push_back(std::abs(SignedVolume(X)));
+      elements.lame.push_back(lame);
+      elements.densities.push_back(body.material.density);
+    }
+  }
+  elements.touched_vertices.reserve(4 * elements.size());
+  for (const auto &v : elements.vertices)
+    elements.touched_vertices.insert(elements.touched_vertices.end(), v.begin(), v.end());
+  auto &touched = elements.touched_vertices;
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  for (const auto &v : elements.vertices) {
+    std::array<PetscInt, 4> index;
+    for (int a = 0; a < 4; ++a)
+      index[a] = std::lower_bound(touched.begin(), touched.end(), v[a]) - touched.begin();
+    elements.touched_index.push_back(index);
+  }
+  return elements;
+}
+
+PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
+                                   const LocalElements &elements, PetscBool with_diagonal,
+                                   Mat *matrix) {
+  PetscFunctionBeginUser;
+  const PetscInt local_dofs = 3 * layout.local_count(), dof_begin = 3 * layout.local_begin();
+  const PetscCount entries = 144 * static_cast<PetscCount>(elements.size()) +
+                             (with_diagonal ? local_dofs : 0);
+  std::vector<PetscInt> rows, cols;
+  rows.reserve(entries);
+  cols.reserve(entries);
+  for (const auto &v : elements.vertices)
+    for (int a = 0; a < 4; ++a)
+      for (int ca = 0; ca < 3; ++ca)
+        for (int b = 0; b < 4; ++b)
+          for (int cb = 0; cb < 3; ++cb) {
+            rows.push_back(3 * v[a] + ca);
+            cols.push_back(3 * v[b] + cb);
+          }
+  if (with_diagonal)
+    for (PetscInt i = 0; i < local_dofs; ++i) {
+      rows.push_back(dof_begin + i);
+      cols.push_back(dof_begin + i);
+    }
+  PetscCall(MatCreate(comm, matrix));
+  PetscCall(MatSetSizes(*matrix, local_dofs, local_dofs, PETSC_DETERMINE, PETSC_DETERMINE));
+  PetscCall(MatSetBlockSize(*matrix, 3));
+  PetscCall(MatSetType(*matrix, MATAIJ));
+  PetscCall(MatSetPreallocationCOO(*matrix, entries, rows.data(), cols.data()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
+                           double stiffness_scale, CooValues *values) {
+  PetscScalar *out = values->data();
+  for (size_t e = 0; e < elements.size(); ++e) {
+    const Mat12 K = ElementStiffness(elements.gradients[e], elements.volumes[e], elements.lame[e],
+                                     shear_scale);
+    // Row-major, as the pattern: entry (3a+ca, 3b+cb).
+    for (int i = 0; i < 12; ++i)
+      for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
+  }
+}
+
+// Positions of element e's vertices from a touched-vertex array.
+static TetPositions ElementPositions(const LocalElements &elements, size_t e, const PetscScalar *touched) {
+  TetPositions x;
+  for (int a = 0; a < 4; ++a)
+    for (int c = 0; c < 3; ++c) x(a, c) = touched[3 * elements.touched_index[e][a] + c];
+  return x;
+}
+
+double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
+                                const PetscScalar *x_touched, const PetscScalar *X_touched,
+                                double stiffness_scale, CooValues *values,
+                                PetscScalar *force_touched, CorotatedDamping *damping) {
+  const size_t touched = 3 * elements.touched_vertices.size();
+  std::fill(force_touched, force_touched + touched, 0.0);
+  if (damping) {
+    damping->current->resize(12 * elements.size());
+    damping->energy = 0;
+    if (damping->start) std::fill(damping->force_touched, damping->force_touched + touched, 0.0);
+  }
+  PetscScalar *out = values->data();
+  double energy = 0;
+  for (size_t e = 0; e < elements.size(); ++e) {
+    const TetPositions x = ElementPositions(elements, e, x_touched), X = ElementPositions(elements, e, X_touched);
+    TetPositions force;
+    Mat12 K;
+    double element_energy;
+    const Mat3 R = CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
+                                    x, X, &force, &element_energy, &K);
+    energy += element_energy;
+    for (int a = 0; a < 4; ++a)
+      for (int c = 0; c < 3; ++c) force_touched[3 * elements.touched_index[e][a] + c] += force(a, c);
+    if (damping) {
+      Eigen::Map<Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y(damping->current->data() + 12 * e);
+      y = x * R - X;  // rows R^T x_a - X_a
+      if (damping->start) {
+        const Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y_start(damping->start + 12 * e);
+        TetPositions increment_force;
+        double increment_energy;
+        ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
+                              y - y_start, &increment_force, &increment_energy);
+        damping->energy += increment_energy;
+        increment_force = increment_force * R.transpose();
+        for (int a = 0; a < 4; ++a)
+          for (int c = 0; c < 3; ++c)
+            damping->force_touched[3 * elements.touched_index[e][a] + c] += increment_force(a, c);
+      }
+    }
+    for (int i = 0; i < 12; ++i)
+      for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
+  }
+  return energy;
+}
+
+double LinearStrainEnergy(const LocalElements &elements, double shear_scale,
+                          const PetscScalar *x_touched, const PetscScalar *X_touched) {
+  double energy = 0;
+  for (size_t e = 0; e < elements.size(); ++e) {
+    TetPositions force;
+    double element_energy;
+    ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
+                          ElementPositions(elements, e, x_touched) - ElementPositions(elements, e, X_touched),
+                          &force, &element_energy);
+    energy += element_energy;
+  }
+  return energy;
+}
+
+PetscErrorCode SetElasticMatrixValues(Vec lumped_mass, double mass_scale, CooValues *values,
+                                      Mat matrix) {
+  PetscFunctionBeginUser;
+  if (lumped_mass) {
+    PetscInt local_dofs;
+    const PetscScalar *mass;
+    PetscCall(VecGetLocalSize(lumped_mass, &local_dofs));
+    PetscCall(VecGetArrayRead(lumped_mass, &mass));
+    PetscScalar *diagonal = values->data() + values->size() - local_dofs;
+    for (PetscInt i = 0; i < local_dofs; ++i) diagonal[i] = mass_scale * mass[i];
+    PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
+  }
+  PetscCall(MatSetValuesCOO(matrix, values->data(), INSERT_VALUES));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode CreateStiffnessMatrix(MPI_Comm comm, const DofLayout &layout,
+                                     const LocalElements &elements, double shear_scale, Mat *K) {
+  PetscFunctionBeginUser;
+  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_FALSE, K));
+  CooValues values(144 * elements.size());
+  LinearStiffnessValues(elements, shear_scale, 1.0, &values);
+  PetscCall(SetElasticMatrixValues(nullptr, 0.0, &values, *K));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode AssembleLumpedMass(MPI_Comm comm, const DofLayout &layout,
+                                  const LocalElements &elements, Vec *lumped_mass) {
+  PetscFunctionBeginUser;
+  PetscCall(VecCreate(comm, lumped_mass));
+  PetscCall(VecSetSizes(*lumped_mass, 3 * layout.local_count(), PETSC_DETERMINE));
+  PetscCall(VecSetBlockSize(*lumped_mass, 3));
+  PetscCall(VecSetType(*lumped_mass, VECMPI));
+  for (size_t e = 0; e < elements.size(); ++e) {
+    const double m = LumpedVertexMass(elements.densities[e], elements.volumes[e]);
+    for (int a = 0; a < 4; ++a) {
+      const PetscInt block = elements.vertices[e][a];
+      const PetscScalar values[3] = {m, m, m};
+      PetscCall(VecSetValuesBlocked(*lumped_mass, 1, &block, values, ADD_VALUES));
+    }
+  }
+  PetscCall(VecAssemblyBegin(*lumped_mass));
+  PetscCall(VecAssemblyEnd(*lumped_mass));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
+
+namespace softbody {
+
+State::~State() {
+  VecDestroy(&rest_positions);
+  VecDestroy(&positions);
+  VecDestroy(&velocities);
+  VecDestroy(&lumped_mass);
+}
+
+PetscErrorCode CreateState(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                           const LocalElements &elements, State *state) {
+  PetscFunctionBeginUser;
+  PetscCall(AssembleLumpedMass(comm, layout, elements, &state->lumped_mass));
+  PetscCall(VecDuplicate(state->lumped_mass, &state->rest_positions));
+  PetscCall(VecDuplicate(state->lumped_mass, &state->velocities));
+  PetscScalar *X, *v;
+  PetscCall(VecGetArray(state->rest_positions, &X));
+  PetscCall(VecGetArray(state->velocities, &v));
+  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
+  for (const Body &body : scene.bodies)
+    for (int32_t i = 0; i < body.mesh.num_vertices(); ++i) {
+      const PetscInt f = layout.free_of_natural[body.first_vertex + i];
+      if (f < 0) continue;
+      const PetscInt p = layout.petsc_of_free[f];
+      if (p < begin || p >= end) continue;
+      for (int c = 0; c < 3; ++c) {
+        X[3 * (p - begin) + c] = body.mesh.vertices(i, c);
+        v[3 * (p - begin) + c] = scene.initial_velocities(body.first_vertex + i, c);
+      }
+    }
+  PetscCall(VecRestoreArray(state->rest_positions, &X));
+  PetscCall(VecRestoreArray(state->velocities, &v));
+  PetscCall(VecDuplicate(state->rest_positions, &state->positions));
+  PetscCall(VecCopy(state->rest_positions, state->positions));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody

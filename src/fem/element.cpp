@@ -1,0 +1,275 @@
+#include "fem/element.hpp"
+
+#include <cmath>
+
+namespace softbody {
+
+Lame LameFromYoungPoisson(double young, double poisson) {
+  return {young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson)),
+          young / (2.0 * (1.0 + poisson))};
+}
+
+static Mat3 EdgeMatrix(const TetPositions &X) {
+  Mat3 Dm;
+  Dm.col(0) = (X.row(1) - X.row(0)).transpose();
+  Dm.col(1) = (X.row(2) - X.row(0)).transpose();
+  Dm.col(2) = (X.row(3) - X.row(0)).transpose();
+  return Dm;
+}
+
+double SignedVolume(const TetPositions &X) { return EdgeMatrix(X).determinant() / 6.0; }
+
+double LongestEdge(const TetPositions &X) {
+  double longest = 0;
+  for (int a = 0; a < 4; ++a)
+    for (int b = a + 1; b < 4; ++b) longest = std::max(longest, (X.row(a) - X.row(b)).norm());
+  return longest;
+}
+
+ShapeGradients ComputeShapeGradients(const TetPositions &X) {
+  const Mat3 Dm_inv = EdgeMatrix(X).inverse();
+  ShapeGradients grad;
+  grad.row(1) = Dm_inv.row(0);
+  grad.row(2) = Dm_inv.row(1);
+  grad.row(3) = Dm_inv.row(2);
+  grad.row(0) = -(grad.row(1) + grad.row(2) + grad.row(3));
+  return grad;
+}
+
+Mat12 ElementStiffness(const ShapeGradients &grad, double volume, const Lame &lame,
+                       double shear_scale) {
+  const double l = lame.lambda, m = lame.mu, sm = shear_scale * lame.mu;
+  Mat12 K;
+  for (int a = 0; a < 4; ++a) {
+    const Vec3 ga = grad.row(a).transpose();
+    for (int b = a; b < 4; ++b) {
+      const Vec3 gb = grad.row(b).transpose();
+      const Vec3 product = ga.cwiseProduct(gb);
+      Mat3 block = l * ga * gb.transpose() + sm * gb * ga.transpose();
+      block.diagonal().array() += sm * ga.dot(gb);
+      block.diagonal() += (2.0 * m - 2.0 * sm) * product;
+      block *= volume;
+      K.block<3, 3>(3 * a, 3 * b) = block;
+      if (b != a) K.block<3, 3>(3 * b, 3 * a) = block.transpose();
+    }
+  }
+  return K;
+}
+
+void ElasticForceAndEnergy(const ShapeGradients &grad, double volume, const Lame &lame,
+                           double shear_scale, const TetPositions &u, TetPositions *force,
+                           double *energy) {
+  // Displacement gradient du_i/dX_j from differences to vertex 0 (the gradients
+  // sum to zero, so this is the same H, without the round-off of a large common
+  // translation: stiff bodies far from their rest place keep exact energies).
+  const TetPositions relative = u.rowwise() - u.row(0);
+  const Mat3 H = relative.transpose() * grad;
+  const double trace = H.trace(), sm = shear_scale * lame.mu;
+  Mat3 stress = sm * (H + H.transpose());
+  stress.diagonal() = (lame.lambda * trace) * Vec3::Ones() + 2.0 * lame.mu * H.diagonal();
+  *force = volume * grad * stress;  // row a: V (sigma g_a)^T, sigma symmetric
+  // strain . stress: normal parts H_ii sigma_ii, shear parts gamma_ij tau_ij.
+  double density = 0;
+  for (int i = 0; i < 3; ++i) density += H(i, i) * stress(i, i);
+  density += (H(0, 1) + H(1, 0)) * stress(0, 1) + (H(1, 2) + H(2, 1)) * stress(1, 2) +
+             (H(2, 0) + H(0, 2)) * stress(2, 0);
+  *energy = 0.5 * volume * density;
+}
+
+Mat3 DeformationGradient(const TetPositions &x, const ShapeGradients &grad) {
+  return x.transpose() * grad;
+}
+
+Mat3 RotationOfDeformationSvd(const Mat3 &F) {
+  const Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 U = svd.matrixU(), V = svd.matrixV();
+  // Eigen orders singular values decreasingly: column 2 is the smallest.
+  if (U.determinant() < 0) U.col(2) *= -1.0;
+  if (V.determinant() < 0) V.col(2) *= -1.0;
+  return U * V.transpose();
+}
+
+bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
+  // Newton iteration for the polar factor (Higham 1986, "Computing the polar
+  // decomposition with applications"): X <- (z X + X^-T / z) / 2, X^-T = C / det X
+  // with C the cofactor matrix (columns: cross products of the columns of X).
+  // Far from orthogonal (|X|_F^2 / 3 or det X off 1 by more than 10 %), the
+  // Frobenius-norm scaling z = (|X^-1|_F / |X|_F)^(1/2), until it is within 1 %
+  // of 1; unscaled (z = 1) after that. A singular value 1 + e becomes
+  // 1 + e^2 / (2 (1 + e)): once an update d is below 1e-4, the iterate after
+  // next is off by at most d^4 / 8 < 2e-17, so that one is returned unchecked.
+  double x[3][3], c[3][3];  // x[j]: column j of X; c[j]: column j of C
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) x[j][i] = F(i, j);
+  const auto cofactor = [](const double (*m)[3], double (*out)[3]) {
+    for (int j = 0; j < 3; ++j) {
+      const double *u = m[(j + 1) % 3], *v = m[(j + 2) % 3];
+      out[j][0] = u[1] * v[2] - u[2] * v[1];
+      out[j][1] = u[2] * v[0] - u[0] * v[2];
+      out[j][2] = u[0] * v[1] - u[1] * v[0];
+    }
+  };
+  cofactor(x, c);
+  double det = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
+  double x2 = 0;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
+  // Only clearly non-inverted, well-conditioned F: det F > 1e-3 (|F|_F^2 / 3)^(3/2)
+  // bounds the ratio of the smallest to the largest singular value from below.
+  if (!(det > 1e-3 * (x2 / 3.0) * std::sqrt(x2 / 3.0))) return false;
+  bool scaled = std::abs(x2 / 3.0 - 1.0) > 0.1 || std::abs(det - 1.0) > 0.1;
+  bool last = false;
+  for (int iteration = 0; iteration < 40; ++iteration) {
+    const double inverse_det = 1.0 / det;
+    double z = 1.0;
+    if (scaled) {
+      double c2 = 0;
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) c2 += c[j][i] * c[j][i];
+      const double z2 = std::sqrt(c2 / x2) * inverse_det;  // |X^-1|_F / |X|_F
+      if (std::abs(z2 - 1.0) > 1e-2) z = std::sqrt(z2);
+      else scaled = false;
+    }
+    const double a = 0.5 * z, b = 0.5 * inverse_det / z;
+    if (last) {
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) (*R)(i, j) = a * x[j][i] + b * c[j][i];
+      return true;
+    }
+    double change2 = 0;
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) {
+        const double next = a * x[j][i] + b * c[j][i];
+        change2 += (next - x[j][i]) * (next - x[j][i]);
+        x[j][i] = next;
+      }
+    if (scaled) {
+      x2 = 0;
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
+    }
+    if (change2 < 1e-34) {  // converged outright (F was a rotation)
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) (*R)(i, j) = x[j][i];
+      return true;
+    }
+    last = !scaled && change2 < 1e-8;
+    cofactor(x, c);
+    det = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
+  }
+  return false;
+}
+
+void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
+  // The unscaled Newton iteration of RotationOfDeformationNewton on four
+  // matrices at once, lane l of every array being matrix l (the loops over
+  // lanes vectorise). Lanes that are not nearly orthogonal (|F|_F^2 / 3 or
+  // det F off 1 by more than 10 %), or not converged after 30 iterations, take
+  // RotationOfDeformation.
+  double x[9][4], c[9][4], det[4], change2[4];
+  bool eligible[4], converged[4];
+  for (int l = 0; l < 4; ++l)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) x[3 * j + i][l] = F[l](i, j);
+  const auto cofactor_and_det = [&]() {
+    for (int j = 0; j < 3; ++j) {
+      const int u = 3 * ((j + 1) % 3), v = 3 * ((j + 2) % 3);
+      for (int l = 0; l < 4; ++l) {
+        c[3 * j + 0][l] = x[u + 1][l] * x[v + 2][l] - x[u + 2][l] * x[v + 1][l];
+        c[3 * j + 1][l] = x[u + 2][l] * x[v + 0][l] - x[u + 0][l] * x[v + 2][l];
+        c[3 * j + 2][l] = x[u + 0][l] * x[v + 1][l] - x[u + 1][l] * x[v + 0][l];
+      }
+    }
+    for (int l = 0; l < 4; ++l) det[l] = x[0][l] * c[0][l] + x[1][l] * c[1][l] + x[2][l] * c[2][l];
+  };
+  cofactor_and_det();
+  bool any = false;
+  for (int l = 0; l < 4; ++l) {
+    double x2 = 0;
+    for (int k = 0; k < 9; ++k) x2 += x[k][l] * x[k][l];
+    eligible[l] = std::abs(x2 / 3.0 - 1.0) <= 0.1 && std::abs(det[l] - 1.0) <= 0.1;
+    converged[l] = false;
+    any = any || eligible[l];
+    if (!eligible[l]) {  // iterate the identity instead (no division by a small det)
+      for (int k = 0; k < 9; ++k) x[k][l] = c[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
+      det[l] = 1.0;
+    }
+  }
+  bool final_round = false;
+  for (int iteration = 0; any && iteration < 30; ++iteration) {
+    double b[4];
+    for (int l = 0; l < 4; ++l) {
+      b[l] = 0.5 / det[l];
+      change2[l] = 0;
+    }
+    for (int k = 0; k < 9; ++k)
+      for (int l = 0; l < 4; ++l) {
+        const double next = 0.5 * x[k][l] + b[l] * c[k][l];
+        change2[l] += (next - x[k][l]) * (next - x[k][l]);
+        x[k][l] = next;
+      }
+    if (final_round) break;  // one iteration after the last lane's update fell below 1e-4
+    bool all = true;
+    for (int l = 0; l < 4; ++l) {
+      converged[l] = converged[l] || change2[l] < 1e-8;
+      all = all && (converged[l] || !eligible[l]);
+    }
+    final_round = all;
+    cofactor_and_det();
+  }
+  for (int l = 0; l < 4; ++l) {
+    if (eligible[l] && converged[l]) {
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) R[l](i, j) = x[3 * j + i][l];
+    } else {
+      R[l] = RotationOfDeformation(F[l]);
+    }
+  }
+}
+
+Mat3 RotationOfDeformation(const Mat3 &F) {
+  Mat3 R;
+  if (RotationOfDeformationNewton(F, &R)) return R;
+  return RotationOfDeformationSvd(F);
+}
+
+Mat3 CorotatedElement(const ShapeGradients &grad, double volume, const Lame &lame,
+                      double shear_scale, const TetPositions &x, const TetPositions &X,
+                      TetPositions *force, double *energy, Mat12 *stiffness) {
+  const Mat3 R = RotationOfDeformation(DeformationGradient(x, grad));
+  const TetPositions y = x * R - X;  // rows: R^T x_a - X_a
+  TetPositions local_force;
+  ElasticForceAndEnergy(grad, volume, lame, shear_scale, y, &local_force, energy);
+  *force = local_force * R.transpose();  // rows: (R f_a)^T
+  if (stiffness) {
+    *stiffness = ElementStiffness(grad, volume, lame, shear_scale);
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        stiffness->block<3, 3>(3 * a, 3 * b) = R * stiffness->block<3, 3>(3 * a, 3 * b) * R.transpose();
+  }
+  return R;
+}
+
+Mat12 ElementStiffnessReference(const ShapeGradients &grad, double volume, const Lame &lame,
+                                double shear_scale) {
+  Eigen::Matrix<double, 6, 12> B = Eigen::Matrix<double, 6, 12>::Zero();
+  for (int a = 0; a < 4; ++a) {
+    const double gx = grad(a, 0), gy = grad(a, 1), gz = grad(a, 2);
+    B(0, 3 * a + 0) = gx;  // exx
+    B(1, 3 * a + 1) = gy;  // eyy
+    B(2, 3 * a + 2) = gz;  // ezz
+    B(3, 3 * a + 0) = gy;  // gxy = du/dy + dv/dx
+    B(3, 3 * a + 1) = gx;
+    B(4, 3 * a + 1) = gz;  // gyz = dv/dz + dw/dy
+    B(4, 3 * a + 2) = gy;
+    B(5, 3 * a + 0) = gz;  // gzx = dw/dx + du/dz
+    B(5, 3 * a + 2) = gx;
+  }
+  Eigen::Matrix<double, 6, 6> C = Eigen::Matrix<double, 6, 6>::Zero();
+  C.topLeftCorner<3, 3>().setConstant(lame.lambda);
+  C.topLeftCorner<3, 3>().diagonal().array() += 2.0 * lame.mu;
+  C.bottomRightCorner<3, 3>().diagonal().setConstant(shear_scale * lame.mu);
+  return volume * B.transpose() * C * B;
+}
+
+}  // namespace softbody

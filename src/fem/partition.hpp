@@ -1,0 +1,58 @@
+// Degrees of freedom and their distribution.
+//
+// Free vertices are the vertices of bodies that are not fixed and that belong to
+// at least one tet (a stray vertex has no mass and no stiffness: it stays put).
+// Their natural order ("free index") follows the scene's natural vertex order.
+// METIS splits the free-vertex graph (vertices adjacent when they share a tet)
+// into one part per rank; the vertices are renumbered part by part, keeping the
+// natural order inside a part, so rank r owns the contiguous block
+// [vertex_start[r], vertex_start[r+1]) of "PETSc vertex" indices. DOF 3 p + c is
+// coordinate c of PETSc vertex p (block size 3).
+#pragma once
+
+#include <petscsys.h>
+
+#include <vector>
+
+#include "io/scene.hpp"
+
+namespace softbody {
+
+struct DofLayout {
+  std::vector<PetscInt> free_of_natural;     // natural vertex -> free index, or -1
+  std::vector<PetscInt> natural_of_free;     // free index -> natural vertex
+  std::vector<PetscInt> petsc_of_free;       // free index -> PETSc vertex
+  std::vector<PetscInt> vertex_start;        // size ranks + 1: ownership of PETSc vertices
+  PetscMPIInt rank = 0, size = 1;
+
+  PetscInt num_free() const { return static_cast<PetscInt>(natural_of_free.size()); }
+  PetscInt local_begin() const { return vertex_start[rank]; }
+  PetscInt local_count() const { return vertex_start[rank + 1] - vertex_start[rank]; }
+  // Natural-order layout of the free vertices with the same local sizes as the
+  // PETSc layout: rank r holds free indices [vertex_start[r], vertex_start[r+1]).
+};
+
+// Collective. Rank 0 partitions with METIS and broadcasts the parts.
+PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layout);
+
+// Not collective. The body of each vertex this rank owns, in PETSc order.
+std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout);
+
+// What could set a body in motion besides its initial velocities.
+struct MotionSources {
+  bool gravity = false;               // g != 0
+  bool ground = false;                // a ground plane (a body inside it is pushed out)
+  bool constraints = false;           // distance constraints or edge bounds
+  std::vector<bool> deformed;         // per body: named by a -deform
+};
+
+// Not collective. Bodies that nothing can set in motion become immobile like
+// fixed ones (body.fixed = body.at_rest = true), so they add no unknowns: a body
+// that is not fixed, all of whose initial velocities are zero, that no -deform
+// names, in a scene without gravity, ground or constraints in which every other
+// free body is just as still (a moving body could hit it), and whose bounding
+// box meets no other body's (contact would push overlapping bodies apart).
+// Returns how many bodies were marked.
+int MarkBodiesAtRest(const MotionSources &sources, Scene *scene);
+
+}  // namespace softbody

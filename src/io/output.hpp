@@ -1,0 +1,152 @@
+// Results on disk.
+//
+// HDF5 (written by rank 0 after a gather; natural vertex order, every vertex of
+// every body, fixed ones included):
+//   /time [F] (s), /positions [F][V][3] (m), /velocities [F][V][3] (m/s),
+//   /energy/kinetic [F], /energy/elastic [F], /energy/gravitational [F] (J),
+//   /mesh/tets [T][4], /mesh/boundary_triangles [B][3] (0-based natural vertex
+//   indices), /mesh/vertex_body [V], /mesh/rest_positions [V][3],
+//   /mesh/body_fixed [bodies] (1 for fixed bodies), /mesh/body_material
+//   [bodies][3] (density kg/m^3, Young's modulus Pa, Poisson ratio);
+//   /checkpoint (checkpoint.hpp).
+// Frame 0 is the initial state. The file is flushed every -flush_every frames
+// (default: every frame), and OUT.xdmf beside it (a ParaView time series of the
+// deformed mesh with velocity and body index as point fields) is written when
+// the file is opened and extended after every flush, listing only the frames
+// already on disk: a run killed at any moment leaves a file and an .xdmf that
+// open, with every frame up to the last flush. Root attributes: "complete" is 0
+// until the run has finished (1); "interrupted" is the signal that stopped the
+// run early (0: none); then the run's statistics (set-up and loop seconds,
+// solver iterations, ...).
+//
+// Matrices: PETSc binary files of M, K and D in the natural order of the free
+// vertices' coordinates (xyzxyz).
+#pragma once
+
+#include <hdf5.h>
+#include <petscmat.h>
+
+#include <cstdio>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "fem/assembly.hpp"
+#include "fem/partition.hpp"
+#include "io/scene.hpp"
+
+namespace softbody {
+
+struct OutputOptions {
+  std::string path;         // -output FILE.h5 ("" = write nothing)
+  PetscInt every = 1;       // -output_every k
+  PetscInt flush_every = 1; // -flush_every k: flush the file and extend the .xdmf every k frames
+  std::string matrix_dir;   // -export_matrices DIR ("" = none)
+};
+
+// Collective. Reads -output -output_every -flush_every -export_matrices.
+PetscErrorCode ProcessOutputOptions(MPI_Comm comm, OutputOptions *options);
+
+// Collective. Fails (one line naming `option`) unless rank 0 could create or
+// overwrite `path` and the .xdmf beside it: the folder exists and is writable,
+// neither is a folder, and the name does not end in .xdmf. Creates nothing.
+PetscErrorCode CheckOutputPath(MPI_Comm comm, const char *option, const std::string &path);
+
+// Rank 0 collective: Bcasts rank 0's verdict, and every rank fails with the same
+// user-facing message when rank 0 failed.
+PetscErrorCode AgreeOnSuccess(MPI_Comm comm, bool ok, const std::string &message);
+
+// PETSc-ordered DOF vectors <-> rank 0's natural-order vectors of every vertex
+// (3 V values on rank 0, none elsewhere). Collective except where noted.
+class NaturalOrder {
+ public:
+  NaturalOrder() = default;
+  NaturalOrder(const NaturalOrder &) = delete;
+  NaturalOrder &operator=(const NaturalOrder &) = delete;
+  ~NaturalOrder();
+
+  // `like` is a PETSc-ordered DOF vector.
+  PetscErrorCode Setup(const Scene &scene, const DofLayout &layout, Vec like);
+  // A natural vector: rank 0 holds the rest positions (rest = true) or zeros.
+  PetscErrorCode CreateVector(bool rest, Vec *natural) const;
+  // natural <- dofs at the free vertices (the others keep their values).
+  PetscErrorCode Gather(Vec dofs, Vec natural) const;
+  // dofs <- natural (rank 0's values of the free vertices).
+  PetscErrorCode Scatter(Vec natural, Vec dofs) const;
+  // Not collective. Vertices of the scene (after Setup).
+  int32_t num_vertices() const { return scene_->num_vertices(); }
+
+ private:
+  const Scene *scene_ = nullptr;
+  VecScatter scatter_ = nullptr;  // PETSc-ordered free DOFs -> rank 0, all vertices
+  Vec natural_template_ = nullptr;
+};
+
+// A result file to continue (restart): its first `frames` frames are kept.
+struct Continuation {
+  std::string source;  // the restart file (may be the output path itself)
+  PetscInt frames = 0;
+};
+
+class ResultWriter {
+ public:
+  ResultWriter() = default;
+  ResultWriter(const ResultWriter &) = delete;
+  ResultWriter &operator=(const ResultWriter &) = delete;
+  ~ResultWriter();
+
+  // Collective. Creates the file with the mesh and the empty series and its
+  // .xdmf; fails on every rank when rank 0 cannot. With `continuation`, the
+  // file starts with the continued file's first frames instead: the same file,
+  // cut back to them (source == path), or a new file with a copy of them.
+  // `like` is a PETSc-ordered DOF vector.
+  PetscErrorCode Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
+                      const DofLayout &layout, Vec like, const Continuation *continuation = nullptr);
+  // Collective. Appends one frame; flushes every options.flush_every frames.
+  PetscErrorCode WriteFrame(PetscReal time, Vec positions, Vec velocities,
+                            const EnergySample &energy);
+  // Collective. Flushes the file, then extends the .xdmf by the frames written
+  // since the last flush.
+  PetscErrorCode Flush();
+  // Collective. Writes the run's statistics as root attributes (name, value:
+  // e.g. "loop_seconds"), "interrupted" (the signal that stopped the run, 0:
+  // none) and "complete" (1 unless interrupted), flushes, completes the .xdmf
+  // and closes.
+  PetscErrorCode Close(const std::vector<std::pair<std::string, double>> &statistics,
+                       int interrupted_by = 0);
+
+  PetscInt frames() const { return static_cast<PetscInt>(times_.size()); }
+  const std::string &path() const { return options_.path; }
+  // Rank 0: the open HDF5 file (other ranks: -1).
+  hid_t file() const { return file_; }
+  const NaturalOrder &natural_order() const { return natural_; }
+  MPI_Comm comm() const { return comm_; }
+
+ private:
+  bool CreateFile(const Scene &scene);
+  bool ContinueInPlace(const Continuation &continuation);
+  bool CopyFrames(const Continuation &continuation);
+  bool ExtendXdmf();
+
+  MPI_Comm comm_ = MPI_COMM_NULL;
+  PetscMPIInt rank_ = 0;
+  OutputOptions options_;
+  hid_t file_ = -1;
+  NaturalOrder natural_;
+  Vec positions_ = nullptr, velocities_ = nullptr;  // rank 0: 3 V natural; others: empty
+  int32_t num_vertices_ = 0;
+  int64_t num_tets_ = 0;
+  std::vector<double> times_;
+  // The .xdmf (rank 0): frames it lists, and where its closing tags start.
+  std::FILE *xdmf_ = nullptr;
+  size_t xdmf_frames_ = 0;
+  long xdmf_tail_ = 0;
+};
+
+// Collective. Writes DIR/M.bin, DIR/K.bin, DIR/D.bin (D = alpha M + beta K).
+// K is the rest stiffness (in both modes).
+PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout,
+                              const LocalElements &elements, PetscReal shear_scale,
+                              Vec lumped_mass, PetscReal alpha, PetscReal beta);
+
+}  // namespace softbody

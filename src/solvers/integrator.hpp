@@ -1,0 +1,230 @@
+// Time integration of the finite-element equations of motion
+//
+//     M x'' + D x' + f_el(x) = f_ext,    D = a M + b K  (Rayleigh damping),
+//
+// with backward (implicit) Euler in velocity form, one linear solve per step:
+//
+//     (M + dt D + dt^2 K) v1 = M v0 - dt f_el(x0) + dt f_ext,    x1 = x0 + dt v1.
+//
+// M is the lumped mass (kg, kept as a Vec), X the rest positions (m), x positions
+// (m), v velocities (m/s), dt in s, a in 1/s, b in s. D is never formed:
+// A = (1 + a dt) M + (b dt + dt^2) K.
+//
+// Linear mode: K is the rest stiffness, f_el = K (x - X); A is assembled and
+//   factorised once per time step size; a step costs one K x product and one solve.
+// Corotational mode (Mueller & Gross 2004, "Interactive Virtual Materials"): each
+//   step extracts every tet's rotation R from F = Ds Dm^-1 (see element.hpp),
+//   K = K(R) = sum_e R K_e R^T and f_el = sum_e R K_e (R^T x_e - X_e); A's values
+//   are refilled into the same pattern (no symbolic work) and solved again,
+//   by default with CG preconditioned by the linear system's factor rotated per
+//   vertex (warp_preconditioner.hpp), warm-started from the previous velocity; A
+//   is filled straight into its CSR rows (row_assembly.hpp).
+//   The step is the root of
+//       g(v) = M (v - v0) + a dt M v + dt f_el(x) + b h(x) - dt f_ext,  x = x0 + dt v,
+//   h = sum_e R K_e (y_e - y_e0), y_e = R^T x_e - X_e: the stiffness damping acts on
+//   the rotation-free deformation increment of the step, (y_e - y_e0) / dt, so a
+//   rigid rotation is not damped (b K(R) v would damp a chord's centripetal part
+//   and, for stiff bodies, pump energy into strain). g is the gradient of
+//       P(v) = |v - v0|_M^2 / 2 + a dt |v|_M^2 / 2 + E(x) + (b / dt) Psi(x) - dt f_ext . v,
+//   Psi = sum_e |y_e - y_e0|_K_e^2 / 2 (up to rotation derivatives of the damping
+//   term), and is solved from v_0 = 0 by
+//       A_k d = -g(v_k),  A_k = (1 + a dt) M + (b dt + dt^2) K(R_k)  (the rotation's
+//       own derivative left out: A_k is SPD, d descends),  v_k+1 = v_k + s d,
+//   s halved until P falls (Armijo; near the root, until |g| falls). The first
+//   iterate is Mueller & Gross's single linearised step with D = a M + b K(R0);
+//   it stands unless it gains energy (|v1|_M^2 / 2 + E(x1) - dt f_ext . v1 >
+//   |v0|_M^2 / 2 + E(x0)); such steps iterate until |g| <= -newton_rtol
+//   (|M v0| + dt |f_el(x0)| + dt |f_ext|) (-newton_always: every step does), or
+//   until the iteration stalls at an iterate that gains no energy (reported).
+//   With contact, the step is the single linearised solve (projected_solve.hpp).
+// Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode
+// (summed element by element, each term non-negative),
+// sum_e y_e^T K_e y_e / 2 with y_e = R^T x_e - X_e in corotational mode (J).
+// External force: gravity, f_ext = M g.
+#pragma once
+
+#include <petscksp.h>
+
+#include <utility>
+#include <vector>
+
+#include "fem/assembly.hpp"
+#include "contact/contact.hpp"
+#include "solvers/projected_solve.hpp"
+#include "fem/row_assembly.hpp"
+
+namespace softbody {
+
+typedef enum { MODE_LINEAR, MODE_COROTATIONAL } ElasticityMode;
+extern const char *const kElasticityModes[];
+
+struct IntegratorOptions {
+  ElasticityMode mode = MODE_LINEAR;
+  PetscReal dt = 0.02;     // s
+  // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
+  std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2
+  PetscInt steps = 100;
+  PetscReal alpha = 0.1;   // mass damping a, 1/s
+  PetscReal beta = 0.1;    // stiffness damping b, s
+  PetscReal shear_scale = 1.0;
+  // Corotational mode: the step's nonlinear equation is solved by Newton-type
+  // iterations until |g| <= newton_rtol |g(0)| (see CorotationalStep).
+  PetscReal newton_rtol = 1e-4;
+  PetscInt newton_max_it = 50;
+  PetscBool newton_always = PETSC_FALSE;
+  // A solve that breaks down (a factor or preconditioner that is not positive
+  // definite, NaN) is repeated by a direct factorisation (MUMPS Cholesky).
+  PetscBool fallback_direct = PETSC_TRUE;
+};
+
+// The time step at time t (s): -dt until the first -dt_schedule entry applies.
+PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time);
+
+// Collective. Reads -mode -dt -dt_schedule -steps -alpha -beta -shear_scale
+// -gravity; rejects impossible values.
+PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *options);
+
+struct SolverStatistics {
+  PetscInt solves = 0;
+  PetscInt total_iterations = 0;
+  PetscInt last_iterations = 0;
+  PetscInt min_iterations = PETSC_MAX_INT;
+  PetscInt max_iterations = 0;
+  PetscLogDouble factor_seconds = 0;  // wall time of the last (re)factorisation/set-up
+  PetscLogDouble assemble_seconds = 0;  // wall time of the last fill of A (linear: with K)
+  PetscLogDouble last_setup_seconds = 0;  // preconditioner set-up inside the last step
+  PetscInt assemblies = 0;            // fills of A
+  PetscInt time_step_changes = 0;     // SetTimeStep calls after the first
+  PetscInt contact_solves = 0;        // solves with contact constraints
+  PetscInt contact_iterations = 0;    // their CG iterations
+  PetscInt newton_iterations = 0;     // corotational: linearised solves, all steps
+  PetscInt max_newton_iterations = 0; // corotational: most in one step
+  PetscInt backtracks = 0;            // corotational: line-search step halvings
+  PetscInt newton_stopped_short = 0;  // corotational: dissipative steps that stalled above -newton_rtol
+  PetscInt fallback_solves = 0;       // solves repeated by the direct fallback after a breakdown
+};
+
+class ImplicitEuler {
+ public:
+  ImplicitEuler() = default;
+  ImplicitEuler(const ImplicitEuler &) = delete;
+  ImplicitEuler &operator=(const ImplicitEuler &) = delete;
+  ~ImplicitEuler();
+
+  // Collective. Creates the matrices and the solver for options.dt (linear mode:
+  // assembles and factorises A). rest_positions and lumped_mass are referenced.
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                       const LocalElements &elements, Vec rest_positions, Vec lumped_mass,
+                       const IntegratorOptions &options);
+  // Collective. Linear mode: owned_body[i] is the body of owned vertex i; each
+  // step then takes every body's rigid-body velocity (translation and
+  // infinitesimal rotation about its rest centre of mass) from its momentum:
+  // K annihilates these modes exactly, so (1 + a dt) Z^T M Z y = Z^T (M v0 + dt f_ext)
+  // holds for them, and the factorisation, which cannot resolve them when the
+  // mass part of A is below K's round-off (stiff slivers), is not asked to.
+  PetscErrorCode SetBodies(std::vector<int32_t> owned_body, int num_bodies);
+  // Collective. New time step size (s); linear mode refills A and refactorises.
+  PetscErrorCode SetTimeStep(PetscReal dt);
+  // Collective. Advances positions x and velocities v by one step; the external
+  // force is gravity, f_ext = M g (none when g = 0). With contact (may be null):
+  // solve, constrain the vertices the step would take inside obstacles, solve
+  // again with the constraints until no new one appears (contact.hpp), then the
+  // contact's velocity response and distance constraints.
+  PetscErrorCode Step(Vec x, Vec v, ContactSolver *contact);
+  // Collective. For a restart: sets the solver up once for the original run's
+  // first step (positions x_first, time step dt_first), so that a solver that
+  // keeps state from its first set-up holds what it held in the uninterrupted
+  // run (GAMG copies the near-null space at its first set-up and reuses the copy
+  // at every later one, until PCReset). Nothing to do in linear mode.
+  PetscErrorCode PrimeSolver(Vec x_first, PetscReal dt_first);
+  // Not collective. To be called after positions were changed outside Step.
+  void PositionsChanged() { elastic_state_current_ = false; }
+  // Collective. Kinetic, elastic and gravitational energy (J) of the state (x, v);
+  // the gravitational energy is -sum_i m_i g . x_i (zero at the origin).
+  PetscErrorCode Energies(Vec x, Vec v, EnergySample *energy);
+
+  // Collective. Fills A `repeats` more times as a step would (linear: the rest
+  // stiffness; corotational: at positions x, with forces and energy) and
+  // returns each fill's wall time (s); A's values stay the same. For -bench.
+  PetscErrorCode TimeAssembly(Vec x, PetscInt repeats, std::vector<double> *seconds);
+
+  KSP solver() const { return ksp_; }
+  ElasticityMode mode() const { return options_.mode; }
+  // The system matrix A and (linear mode) the rest stiffness K (null in corotational mode).
+  Mat system_matrix() const { return A_; }
+  Mat stiffness_matrix() const { return K_; }
+  // Elements this rank's assembly computes (its own and those shared with a neighbour).
+  size_t assembled_elements() const { return assembler_.num_elements(); }
+  PetscReal time_step() const { return dt_; }
+  const SolverStatistics &statistics() const { return stats_; }
+
+ private:
+  // f_el(x) into elastic_force_ and the elastic energy; corotational mode also
+  // refills A for x. Skipped when already done for these positions (x changes
+  // only in Step).
+  PetscErrorCode UpdateElasticState(Vec x);
+  PetscErrorCode UpdateNearNullSpace(Vec x);
+  // v = A^-1 rhs_ (v: initial guess), with the contact's velocity constraints
+  // when any rank has one.
+  PetscErrorCode Solve(Vec v, const ContactSolver *contact);
+  // Collective. A v = rhs again by the direct fallback (-fallback_direct) after
+  // the solver broke down with `failed`; its reason in *reason.
+  PetscErrorCode SolveDirectly(Vec v, KSPConvergedReason failed, KSPConvergedReason *reason);
+  // Linear mode: per body, the momentum and angular momentum about the rest
+  // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
+  PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
+  // Corotational step without contact: the Newton-type iteration above.
+  PetscErrorCode CorotationalStep(Vec x, Vec v);
+  // g(v) and the merit P(v) for the state at x0 + dt v (element pass done).
+  PetscErrorCode Residual(Vec v, Vec g, PetscReal *merit);
+
+  const LocalElements *elements_ = nullptr;
+  IntegratorOptions options_;
+  PetscReal dt_ = 0;
+  Vec rest_ = nullptr, mass_ = nullptr;  // not owned
+  Mat A_ = nullptr;
+  KSP ksp_ = nullptr;
+  KSP fallback_ksp_ = nullptr;  // created at the first breakdown
+  Vec elastic_force_ = nullptr, rhs_ = nullptr;
+  Vec gravity_force_ = nullptr;           // M g, only when g != 0
+  Vec x_start_ = nullptr;                 // x0 during a step with contact
+  // Corotational iteration: v0, the iterate v_k (and v_k before its line search),
+  // the direction d, a work vector.
+  Vec v_start_ = nullptr, iterate_ = nullptr, v_trial_base_ = nullptr, direction_ = nullptr,
+      work_ = nullptr;
+  // Corotational stiffness damping (b > 0): the displacement gradients of y_e of
+  // the last element pass and at the start of the step (9 doubles per element
+  // each), h = sum_e R K_e (y_e - y_e,start) and Psi (during a step).
+  std::vector<double> corotated_, corotated_start_;
+  bool step_started_ = false;
+  Vec damping_force_ = nullptr;
+  PetscReal damping_energy_ = 0;
+  ProjectedSolver projected_;
+  std::vector<PetscReal> reactions_;
+  PetscReal elastic_energy_ = 0;           // corotational mode (linear: in Energies)
+  bool elastic_state_current_ = false;
+  bool gamg_ = false;                     // the PC uses the near-null space
+  RowAssembler assembler_;                // fills A (and K) straight into their CSR values
+  // Linear mode, rigid-body velocities (SetBodies): per body mass (kg), rest centre
+  // of mass (m) and inverse rotational inertia about it (1/(kg m^2)).
+  struct RigidBody {
+    double mass = 0;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d inverse_inertia = Eigen::Matrix3d::Zero();
+  };
+  std::vector<int32_t> owned_body_;
+  std::vector<RigidBody> rigid_;
+  // Linear mode: the rest stiffness and a work vector for x - X.
+  Mat K_ = nullptr;
+  // Corotational mode with the warp preconditioner: A0, the linear system.
+  Mat A_linear_ = nullptr;
+  Vec displacement_ = nullptr;
+  // Positions of the vertices the local elements touch (corotational steps,
+  // element-wise energies).
+  VecScatter touched_scatter_ = nullptr;
+  Vec x_touched_ = nullptr, X_touched_ = nullptr;
+  SolverStatistics stats_;
+};
+
+}  // namespace softbody

@@ -1,0 +1,827 @@
+#include "solvers/supernodal/supernodal.hpp"
+
+// A new PC type is added as PETSc documents it (PCRegister with a creation
+// routine that fills the PC's operations), which needs the PC's private header.
+#include <petsc/private/pcimpl.h>
+
+#include <cholmod.h>
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "common/large_array.hpp"
+
+// LAPACK / BLAS (Fortran interface): the separator's dense Schur complement.
+extern "C" {
+void dpotrf_(const char *uplo, const int *n, double *a, const int *lda, int *info);
+void dsyrk_(const char *uplo, const char *trans, const int *n, const int *k, const double *alpha, const double *a,
+            const int *lda, const double *beta, double *c, const int *ldc);
+}
+
+namespace softbody {
+
+namespace {
+
+static_assert(sizeof(PetscInt) == sizeof(int), "CHOLMOD is called with 32-bit indices");
+
+const char *const kOrderings[] = {"best", "amd", "metis", "SupernodalOrdering", "", nullptr};
+enum SupernodalOrdering { kOrderingBest, kOrderingAmd, kOrderingMetis };
+const char *const kPrecisions[] = {"double", "single", "SupernodalPrecision", "", nullptr};
+enum SupernodalPrecision { kDouble, kSingle };
+
+// CHOLMOD's supernodal factor copied into softbody's own storage (huge pages,
+// large_array.hpp) in the precision Real, and the two triangular sweeps with
+// it on y (in the factor's permuted order), optionally only over the columns
+// before `limit` (the interior of a split factor, see Split).
+//
+// Supernode k holds columns [first, first + columns) of L, `height` rows each
+// in CHOLMOD (the triangle on top, then the rows listed in `rows`); here column
+// j of a supernode keeps only its rows j..height-1, so the zeros above the
+// diagonal blocks' diagonals (a fifth of CHOLMOD's storage for the 1e5-tet
+// beam) are neither stored nor streamed. Plain loops (vectorised; the sums by
+// omp simd): in single precision they stream the factor at the memory's speed,
+// where BLAS-2 calls reached about two thirds of it. (In double precision
+// CHOLMOD's own solve was faster on one rank.)
+template <typename Real>
+struct PackedFactor {
+  int n = 0, supernodes = 0;
+  std::vector<int> permutation, first_column, row_start, rows;  // CHOLMOD's Perm, super, pi, s
+  std::vector<size_t> value_start;  // per supernode: its first value (packed columns)
+  LargeArray<Real> values;
+  std::vector<Real> inverse_diagonal;  // per column: 1 / L_jj
+  std::vector<Real> y, work;
+
+  void From(const cholmod_factor *L) {
+    n = static_cast<int>(L->n);
+    supernodes = static_cast<int>(L->nsuper);
+    const int *perm = static_cast<const int *>(L->Perm), *super = static_cast<const int *>(L->super),
+              *pi = static_cast<const int *>(L->pi), *px = static_cast<const int *>(L->px),
+              *s = static_cast<const int *>(L->s);
+    permutation.assign(perm, perm + n);
+    first_column.assign(super, super + supernodes + 1);
+    row_start.assign(pi, pi + supernodes + 1);
+    value_start.resize(supernodes + 1);
+    rows.assign(s, s + pi[supernodes]);
+    const double *x = static_cast<const double *>(L->x);
+    size_t packed = 0;
+    for (int k = 0; k < supernodes; ++k) {
+      const size_t columns = super[k + 1] - super[k], height = pi[k + 1] - pi[k];
+      value_start[k] = packed;
+      packed += columns * height - columns * (columns - 1) / 2;
+    }
+    value_start[supernodes] = packed;
+    values.resize(packed);
+    inverse_diagonal.resize(n);
+    for (int k = 0; k < supernodes; ++k) {
+      const int columns = super[k + 1] - super[k], height = pi[k + 1] - pi[k];
+      Real *out = values.data() + value_start[k];
+      for (int j = 0; j < columns; ++j) {
+        inverse_diagonal[super[k] + j] = static_cast<Real>(1.0 / x[px[k] + static_cast<size_t>(j) * height + j]);
+        for (int i = j; i < height; ++i) *out++ = static_cast<Real>(x[px[k] + static_cast<size_t>(j) * height + i]);
+      }
+    }
+    y.resize(n);
+    size_t largest = 0;
+    for (int k = 0; k < supernodes; ++k) largest = std::max<size_t>(largest, pi[k + 1] - pi[k]);
+    work.resize(largest);
+  }
+
+  // Entries of the columns before `limit` (what a pair of sweeps streams).
+  double EntriesBefore(int limit) const {
+    double entries = 0;
+    for (int k = 0; k < supernodes; ++k) {
+      const int columns = std::min(first_column[k + 1], limit) - first_column[k];
+      const int height = row_start[k + 1] - row_start[k];
+      for (int j = 0; j < columns; ++j) entries += height - j;
+    }
+    return entries;
+  }
+
+  // Column j of supernode k from its diagonal entry down (height - j entries).
+  const Real *Column(int k, int j, int height) const {
+    return values.data() + value_start[k] + static_cast<size_t>(j) * height - static_cast<size_t>(j) * (j - 1) / 2;
+  }
+
+  // out[i] -= sum_q c_q[i] v_q over i < count, four columns q at once.
+  static void Update4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, Real v0, Real v1, Real v2,
+                      Real v3, Real *out, int count) {
+#pragma omp simd
+    for (int i = 0; i < count; ++i) out[i] -= c0[i] * v0 + c1[i] * v1 + c2[i] * v2 + c3[i] * v3;
+  }
+  // s_q = sum_i c_q[i] x[i] over i < count, four columns q at once.
+  static void Dot4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, const Real *x, int count,
+                   Real *s) {
+    Real s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+#pragma omp simd reduction(+ : s0, s1, s2, s3)
+    for (int i = 0; i < count; ++i) {
+      s0 += c0[i] * x[i];
+      s1 += c1[i] * x[i];
+      s2 += c2[i] * x[i];
+      s3 += c3[i] * x[i];
+    }
+    s[0] = s0;
+    s[1] = s1;
+    s[2] = s2;
+    s[3] = s3;
+  }
+
+  // y <- L^-1 y over the columns j < limit (their updates reach every row).
+  // Columns four at a time: their 4 x 4 triangle first, then one pass over the
+  // rows below it, in the triangle and in the rows below the supernode.
+  void Forward(int limit) {
+    for (int k = 0; k < supernodes && first_column[k] < limit; ++k) {
+      const int first = first_column[k], columns = first_column[k + 1] - first;
+      const int used = std::min(columns, limit - first);
+      const int height = row_start[k + 1] - row_start[k], below = height - columns;
+      Real *yk = y.data() + first, *w = work.data();
+      const Real *inverse = inverse_diagonal.data() + first;
+      if (below > 0)
+        for (int i = 0; i < below; ++i) w[i] = 0;
+      int j = 0;
+      for (; j + 4 <= used; j += 4) {
+        const Real *c[4];  // c[q][i]: row i of column j + q
+        for (int q = 0; q < 4; ++q) c[q] = Column(k, j + q, height) - (j + q);
+        for (int q = 0; q < 4; ++q) {
+          yk[j + q] *= inverse[j + q];
+          for (int i = j + q + 1; i < j + 4; ++i) yk[i] -= c[q][i] * yk[j + q];
+        }
+        Update4(c[0] + j + 4, c[1] + j + 4, c[2] + j + 4, c[3] + j + 4, yk[j], yk[j + 1], yk[j + 2], yk[j + 3],
+                yk + j + 4, columns - j - 4);
+        if (below > 0)
+          Update4(c[0] + columns, c[1] + columns, c[2] + columns, c[3] + columns, -yk[j], -yk[j + 1], -yk[j + 2],
+                  -yk[j + 3], w, below);
+      }
+      for (; j < used; ++j) {
+        const Real *column = Column(k, j, height) - j;  // column[i]: row i
+        const Real v = yk[j] * inverse[j];
+        yk[j] = v;
+#pragma omp simd
+        for (int i = j + 1; i < columns; ++i) yk[i] -= column[i] * v;
+        if (below > 0) {
+#pragma omp simd
+          for (int i = 0; i < below; ++i) w[i] += column[columns + i] * v;
+        }
+      }
+      if (below > 0) {
+        const int *r = rows.data() + row_start[k] + columns;
+        for (int i = 0; i < below; ++i) y[r[i]] -= w[i];
+      }
+    }
+  }
+
+  // y <- L^-T y over the columns j < limit, the others' y taken as known.
+  // Columns four at a time from the last: their dot products with the rows
+  // below their 4 x 4 triangle in one pass, then the triangle.
+  void Backward(int limit) {
+    for (int k = supernodes - 1; k >= 0; --k) {
+      const int first = first_column[k], columns = first_column[k + 1] - first;
+      if (first >= limit) continue;
+      const int used = std::min(columns, limit - first);
+      const int height = row_start[k + 1] - row_start[k], below = height - columns;
+      Real *yk = y.data() + first, *w = work.data();
+      const Real *inverse = inverse_diagonal.data() + first;
+      if (below > 0) {
+        const int *r = rows.data() + row_start[k] + columns;
+        for (int i = 0; i < below; ++i) w[i] = y[r[i]];
+      }
+      int j = used;
+      for (; j >= 4; j -= 4) {
+        const int j0 = j - 4;
+        const Real *c[4];
+        for (int q = 0; q < 4; ++q) c[q] = Column(k, j0 + q, height) - (j0 + q);
+        Real s[4] = {0, 0, 0, 0}, t[4];
+        Dot4(c[0] + j, c[1] + j, c[2] + j, c[3] + j, yk + j, columns - j, s);
+        if (below > 0) {
+          Dot4(c[0] + columns, c[1] + columns, c[2] + columns, c[3] + columns, w, below, t);
+          for (int q = 0; q < 4; ++q) s[q] += t[q];
+        }
+        for (int q = 3; q >= 0; --q) {
+          Real sum = s[q];
+          for (int i = j0 + q + 1; i < j; ++i) sum += c[q][i] * yk[i];
+          yk[j0 + q] = (yk[j0 + q] - sum) * inverse[j0 + q];
+        }
+      }
+      for (--j; j >= 0; --j) {
+        const Real *column = Column(k, j, height) - j;
+        Real sum = 0;
+#pragma omp simd reduction(+ : sum)
+        for (int i = j + 1; i < columns; ++i) sum += column[i] * yk[i];
+        if (below > 0) {
+#pragma omp simd reduction(+ : sum)
+          for (int i = 0; i < below; ++i) sum += column[columns + i] * w[i];
+        }
+        yk[j] = (yk[j] - sum) * inverse[j];
+      }
+    }
+  }
+
+  // x = A^-1 b with A = P^T L L^T P.
+  void Solve(const double *b, double *x) {
+    for (int i = 0; i < n; ++i) y[i] = static_cast<Real>(b[permutation[i]]);
+    Forward(n);
+    Backward(n);
+    for (int i = 0; i < n; ++i) x[permutation[i]] = y[i];
+  }
+};
+
+// A dense Cholesky factor (lower, column-major) and its two sweeps.
+template <typename Real>
+struct DenseFactor {
+  int n = 0;
+  LargeArray<Real> values;
+
+  void From(const std::vector<double> &lower, int size) {
+    n = size;
+    values.resize(static_cast<size_t>(n) * n);
+    for (size_t i = 0; i < values.size(); ++i) values[i] = static_cast<Real>(lower[i]);
+  }
+  void Solve(Real *y) const {
+    for (int j = 0; j < n; ++j) {
+      const Real *column = values.data() + static_cast<size_t>(j) * n;
+      const Real v = y[j] / column[j];
+      y[j] = v;
+#pragma omp simd
+      for (int i = j + 1; i < n; ++i) y[i] -= column[i] * v;
+    }
+    for (int j = n - 1; j >= 0; --j) {
+      const Real *column = values.data() + static_cast<size_t>(j) * n;
+      Real sum = 0;
+#pragma omp simd reduction(+ : sum)
+      for (int i = j + 1; i < n; ++i) sum += column[i] * y[i];
+      y[j] = (y[j] - sum) / column[j];
+    }
+  }
+};
+
+// More than one rank: the factor split at a separator. S = the owned DOFs that
+// couple to a DOF of a higher rank; every rank's other DOFs (its interior I_r)
+// then couple only to its own and to S. Rank r factors its piece
+// M_r = A[I_r + S, I_r + S] with S ordered last (METIS/AMD order inside I_r); the
+// trailing block of that factor gives C_r = A_SS - A_S,I_r A_I_r^-1 A_I_r,S, and
+// rank 0 factors the separator's dense Schur complement
+//     S = A_SS - sum_r A_S,I_r A_I_r^-1 A_I_r,S = sum_r C_r - (ranks - 1) A_SS.
+// A solve: every rank sweeps forward over its interior (streaming its own part
+// of the factor, all ranks at once), the separator's right-hand side
+// b_S - sum_r L_S,I_r L_I_r^-1 b_I_r is summed on rank 0, solved with the dense
+// factor and broadcast, and every rank sweeps backward over its interior.
+struct Split {
+  PetscInt interior = 0, separator = 0;
+  std::vector<PetscInt> separator_dofs;  // global DOFs of S, increasing (the same on every rank)
+  std::vector<PetscInt> local_dofs;      // global DOFs of M_r, increasing
+  std::vector<PetscInt> owned_position;  // per local index: position among the owned DOFs, or -1
+  std::vector<PetscInt> separator_local; // per separator index k: local index in M_r
+  Mat *local = nullptr;                  // M_r
+  cholmod_factor *factor = nullptr;      // symbolic (values dropped after the copy)
+  PackedFactor<float> single;
+  PackedFactor<double> full;
+  DenseFactor<float> dense_single;       // rank 0
+  DenseFactor<double> dense_full;
+  std::vector<double> separator_values;  // n_S: right-hand side, then solution
+  std::vector<double> local_b;           // per local index
+};
+
+struct Supernodal {
+  cholmod_common common;
+  bool started = false;
+  cholmod_factor *factor = nullptr;      // one rank
+  PetscObjectState pattern_state = -1;   // nonzero state of the factorised pattern
+  SupernodalOrdering ordering = kOrderingBest;
+  SupernodalPrecision precision = kDouble;
+  PackedFactor<float> single;
+  cholmod_dense *solution = nullptr, *work_y = nullptr, *work_e = nullptr;  // cholmod_solve2's
+  Split split;                           // more than one rank
+  double stored = 0, nonzeros = 0, flops = 0;
+  // The last set-up met a matrix that is not (numerically) positive definite:
+  // decided on all ranks together; the PC then reports PC_FACTOR_NUMERIC_ZEROPIVOT
+  // and its applications return NaN, so the KSP stops with DIVERGED_PC_FAILED
+  // on every rank (no rank left waiting).
+  bool failed = false;
+};
+
+PetscErrorCode ReleaseFactor(Supernodal *s) {
+  PetscFunctionBeginUser;
+  if (s->started) {
+    cholmod_free_factor(&s->factor, &s->common);
+    cholmod_free_factor(&s->split.factor, &s->common);
+    cholmod_free_dense(&s->solution, &s->common);
+    cholmod_free_dense(&s->work_y, &s->common);
+    cholmod_free_dense(&s->work_e, &s->common);
+    cholmod_finish(&s->common);
+    s->started = false;
+  }
+  if (s->split.local) PetscCall(MatDestroySubMatrices(1, &s->split.local));
+  s->pattern_state = -1;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCReset_Supernodal(PC pc) {
+  PetscFunctionBeginUser;
+  PetscCall(ReleaseFactor(static_cast<Supernodal *>(pc->data)));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCDestroy_Supernodal(PC pc) {
+  PetscFunctionBeginUser;
+  PetscCall(PCReset_Supernodal(pc));
+  delete static_cast<Supernodal *>(pc->data);
+  pc->data = nullptr;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCSetFromOptions_Supernodal(PC pc, PetscOptionItems *PetscOptionsObject) {
+  PetscFunctionBeginUser;
+  Supernodal *s = static_cast<Supernodal *>(pc->data);
+  PetscOptionsHeadBegin(PetscOptionsObject, "Supernodal Cholesky (CHOLMOD) options");
+  PetscCall(PetscOptionsEnum("-pc_supernodal_ordering",
+                             "Fill-reducing ordering: best (CHOLMOD tries AMD, then METIS if AMD fills "
+                             "much, and keeps the better), amd or metis",
+                             nullptr, kOrderings, (PetscEnum)s->ordering, (PetscEnum *)&s->ordering, nullptr));
+  PetscCall(PetscOptionsEnum("-pc_supernodal_precision",
+                             "Precision of the factor in the solves: double, or single (half the memory traffic, "
+                             "about 1e-7 relative accuracy: for use as a preconditioner)",
+                             nullptr, kPrecisions, (PetscEnum)s->precision, (PetscEnum *)&s->precision, nullptr));
+  PetscOptionsHeadEnd();
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The upper triangle of a symmetric SeqAIJ matrix by rows is the lower triangle
+// by columns: CHOLMOD reads the CSR arrays in place as a lower-stored CSC matrix.
+cholmod_sparse LowerView(PetscInt n, const PetscInt *row_start, const PetscInt *columns,
+                         const PetscScalar *values) {
+  cholmod_sparse view;
+  std::memset(&view, 0, sizeof(view));
+  view.nrow = view.ncol = n;
+  view.nzmax = row_start[n];
+  view.p = const_cast<PetscInt *>(row_start);
+  view.i = const_cast<PetscInt *>(columns);
+  view.x = const_cast<PetscScalar *>(values);
+  view.stype = -1;
+  view.itype = CHOLMOD_INT;
+  view.xtype = CHOLMOD_REAL;
+  view.dtype = CHOLMOD_DOUBLE;
+  view.sorted = 1;
+  view.packed = 1;
+  return view;
+}
+
+void StartCholmod(Supernodal *s) {
+  if (s->started) return;
+  cholmod_start(&s->common);
+  s->common.supernodal = CHOLMOD_SUPERNODAL;
+  s->common.print = 0;
+  s->common.error_handler = nullptr;
+  if (s->ordering == kOrderingAmd || s->ordering == kOrderingMetis) {
+    s->common.nmethods = 1;
+    s->common.method[0].ordering = s->ordering == kOrderingAmd ? CHOLMOD_AMD : CHOLMOD_METIS;
+    s->common.postorder = 1;
+  }
+  s->started = true;
+}
+
+// Analyses (when `*factor` is null: with `user_order`, given in full, if not
+// null) and factorises the SeqAIJ matrix A into *factor; a matrix that is not
+// positive definite sets s->failed.
+PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_order, cholmod_factor **factor) {
+  PetscFunctionBeginUser;
+  StartCholmod(s);
+  PetscInt n;
+  const PetscInt *row_start, *columns;
+  PetscBool done;
+  PetscCall(MatGetRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
+  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "supernodal: no CSR access to the matrix");
+  const PetscScalar *values;
+  PetscCall(MatSeqAIJGetArrayRead(A, &values));
+  cholmod_sparse view = LowerView(n, row_start, columns, values);
+  if (!*factor) {
+    if (user_order) {  // exactly this order: one method, no postorder
+      const int methods = s->common.nmethods, postorder = s->common.postorder, ordering = s->common.method[0].ordering;
+      s->common.nmethods = 1;
+      s->common.method[0].ordering = CHOLMOD_GIVEN;
+      s->common.postorder = 0;
+      *factor = cholmod_analyze_p(&view, const_cast<int *>(user_order->data()), nullptr, 0, &s->common);
+      s->common.nmethods = methods;
+      s->common.postorder = postorder;
+      s->common.method[0].ordering = ordering;
+    } else {
+      *factor = cholmod_analyze(&view, &s->common);
+    }
+    PetscCheck(*factor, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD analysis failed (status %d)",
+               s->common.status);
+  }
+  const int ok = cholmod_factorize(&view, *factor, &s->common);
+  PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
+  PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
+  PetscCheck(ok && (s->common.status == CHOLMOD_OK || s->common.status == CHOLMOD_NOT_POSDEF), PETSC_COMM_SELF,
+             PETSC_ERR_LIB, "supernodal: CHOLMOD factorisation failed (status %d)", s->common.status);
+  if (s->common.status == CHOLMOD_NOT_POSDEF) {
+    PetscCall(PetscInfo(nullptr, "supernodal: the matrix is not positive definite (column %d)\n",
+                        (int)(*factor)->minor));
+    s->failed = true;
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  PetscCheck((*factor)->is_super && (*factor)->xtype == CHOLMOD_REAL, PETSC_COMM_SELF, PETSC_ERR_LIB,
+             "supernodal: CHOLMOD did not return a real supernodal factor");
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Keeps the symbolic factor (for refactorisations), frees CHOLMOD's values.
+PetscErrorCode DropValues(Supernodal *s, cholmod_factor *factor) {
+  PetscFunctionBeginUser;
+  PetscCheck(cholmod_change_factor(CHOLMOD_PATTERN, 0, 1, 1, 1, factor, &s->common), PETSC_COMM_SELF,
+             PETSC_ERR_LIB, "supernodal: CHOLMOD could not drop the factor's values");
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// One rank: the whole matrix.
+PetscErrorCode SetUpOneRank(Supernodal *s, Mat A, bool new_pattern) {
+  PetscFunctionBeginUser;
+  if (new_pattern) cholmod_free_factor(&s->factor, &s->common);
+  PetscCall(Factorise(s, A, nullptr, &s->factor));
+  if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
+  s->stored = static_cast<double>(s->factor->xsize);
+  s->nonzeros = s->common.lnz;
+  s->flops = s->common.fl;
+  if (s->precision == kSingle) {
+    s->single.From(s->factor);
+    PetscCall(DropValues(s, s->factor));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The separator, the local piece M_r and its order (Split's comment).
+PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
+  PetscFunctionBeginUser;
+  Split &p = s->split;
+  MPI_Comm comm = PetscObjectComm((PetscObject)A);
+  PetscMPIInt rank, size;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  const PetscInt *ranges;
+  PetscCall(MatGetOwnershipRanges(A, &ranges));
+  const PetscInt begin = ranges[rank], owned = ranges[rank + 1] - ranges[rank];
+  // Owned DOFs coupled to a higher rank's DOF: the columns of the off-diagonal part.
+  Mat diagonal_part, off_part;
+  const PetscInt *garray;
+  PetscCall(MatMPIAIJGetSeqAIJ(A, &diagonal_part, &off_part, &garray));
+  PetscInt rows;
+  const PetscInt *oi, *oj;
+  PetscBool done;
+  PetscCall(MatGetRowIJ(off_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &oi, &oj, &done));
+  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "supernodal: no CSR access to the matrix");
+  std::vector<PetscInt> mine;
+  for (PetscInt i = 0; i < owned; ++i)
+    for (PetscInt k = oi[i]; k < oi[i + 1]; ++k)
+      if (garray[oj[k]] >= ranges[rank + 1]) {
+        mine.push_back(begin + i);
+        break;
+      }
+  PetscCall(MatRestoreRowIJ(off_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &oi, &oj, &done));
+  std::vector<int> counts(size), offsets(size + 1, 0);
+  const int count = static_cast<int>(mine.size());
+  PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm));
+  for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + counts[r];
+  p.separator_dofs.resize(offsets[size]);
+  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, p.separator_dofs.data(), counts.data(), offsets.data(),
+                              MPIU_INT, comm));
+  p.separator = static_cast<PetscInt>(p.separator_dofs.size());
+
+  // M_r's DOFs: the owned interior and the whole separator, increasing.
+  p.local_dofs.clear();
+  for (PetscInt g = begin; g < begin + owned; ++g)
+    if (!std::binary_search(mine.begin(), mine.end(), g)) p.local_dofs.push_back(g);
+  p.interior = static_cast<PetscInt>(p.local_dofs.size());
+  p.local_dofs.insert(p.local_dofs.end(), p.separator_dofs.begin(), p.separator_dofs.end());
+  std::sort(p.local_dofs.begin(), p.local_dofs.end());
+  const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
+  p.owned_position.assign(n, -1);
+  p.separator_local.resize(p.separator);
+  std::vector<int> interior_local;
+  for (PetscInt l = 0; l < n; ++l) {
+    const PetscInt g = p.local_dofs[l];
+    if (g >= begin && g < begin + owned) p.owned_position[l] = g - begin;
+    const auto k = std::lower_bound(p.separator_dofs.begin(), p.separator_dofs.end(), g);
+    if (k != p.separator_dofs.end() && *k == g) p.separator_local[k - p.separator_dofs.begin()] = l;
+    else interior_local.push_back(static_cast<int>(l));
+  }
+  IS local;
+  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, n, p.local_dofs.data(), PETSC_USE_POINTER, &local));
+  if (p.local) PetscCall(MatDestroySubMatrices(1, &p.local));
+  PetscCall(MatCreateSubMatrices(A, 1, &local, &local, MAT_INITIAL_MATRIX, &p.local));
+  PetscCall(ISDestroy(&local));
+
+  // Order: the interior by CHOLMOD's fill-reducing ordering of A[I_r, I_r],
+  // then the separator.
+  std::vector<int> order;
+  if (p.interior > 0) {
+    IS interior;
+    Mat interior_matrix;
+    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, p.interior, interior_local.data(), PETSC_USE_POINTER, &interior));
+    PetscCall(MatCreateSubMatrix(p.local[0], interior, interior, MAT_INITIAL_MATRIX, &interior_matrix));
+    PetscCall(ISDestroy(&interior));
+    StartCholmod(s);
+    PetscInt m;
+    const PetscInt *row_start, *columns;
+    PetscCall(MatGetRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+    const PetscScalar *values;
+    PetscCall(MatSeqAIJGetArrayRead(interior_matrix, &values));
+    cholmod_sparse view = LowerView(m, row_start, columns, values);
+    cholmod_factor *symbolic = cholmod_analyze(&view, &s->common);
+    PetscCall(MatSeqAIJRestoreArrayRead(interior_matrix, &values));
+    PetscCall(MatRestoreRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+    PetscCheck(symbolic, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD analysis failed (status %d)",
+               s->common.status);
+    const int *perm = static_cast<const int *>(symbolic->Perm);
+    for (PetscInt i = 0; i < p.interior; ++i) order.push_back(interior_local[perm[i]]);
+    cholmod_free_factor(&symbolic, &s->common);
+    PetscCall(MatDestroy(&interior_matrix));
+  }
+  for (PetscInt k = 0; k < p.separator; ++k) order.push_back(static_cast<int>(p.separator_local[k]));
+  cholmod_free_factor(&p.factor, &s->common);
+  if (n > 0) {
+    PetscCall(Factorise(s, p.local[0], &order, &p.factor));
+    PetscCheck(s->failed || std::equal(order.begin(), order.end(), static_cast<const int *>(p.factor->Perm)), PETSC_COMM_SELF,
+               PETSC_ERR_LIB, "supernodal: CHOLMOD changed the given order");
+  }
+  p.local_b.assign(n, 0.0);
+  p.separator_values.assign(p.separator, 0.0);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
+  PetscFunctionBeginUser;
+  Split &p = s->split;
+  MPI_Comm comm = PetscObjectComm((PetscObject)A);
+  PetscMPIInt rank, size;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
+  if (new_pattern || !p.local) {
+    PetscCall(SplitStructure(s, A));  // also factorises
+  } else {
+    IS local;
+    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, n, p.local_dofs.data(), PETSC_USE_POINTER, &local));
+    PetscCall(MatCreateSubMatrices(A, 1, &local, &local, MAT_REUSE_MATRIX, &p.local));
+    PetscCall(ISDestroy(&local));
+    if (n > 0) PetscCall(Factorise(s, p.local[0], nullptr, &p.factor));
+  }
+  {  // every rank learns whether any local factorisation failed
+    int failed = s->failed;
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_LOR, comm));
+    s->failed = failed;
+    if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  const int interior = static_cast<int>(p.interior), separator = static_cast<int>(p.separator);
+  // The trailing block L_SS of this rank's factor, dense, then C_r = L_SS L_SS^T.
+  std::vector<double> schur(static_cast<size_t>(separator) * separator, 0.0);
+  double entries = 0, flops = 0;
+  if (static_cast<PetscInt>(p.local_dofs.size()) > 0) {
+    const cholmod_factor *L = p.factor;
+    const int *super = static_cast<const int *>(L->super), *pi = static_cast<const int *>(L->pi),
+              *px = static_cast<const int *>(L->px), *srow = static_cast<const int *>(L->s);
+    const double *x = static_cast<const double *>(L->x);
+    std::vector<double> trailing(static_cast<size_t>(separator) * separator, 0.0);
+    for (size_t k = 0; k < L->nsuper; ++k) {
+      const int first = super[k], last = super[k + 1], height = pi[k + 1] - pi[k];
+      for (int j = std::max(first, interior); j < last; ++j)
+        for (int q = j - first; q < height; ++q) {
+          const int row = srow[pi[k] + q];
+          trailing[static_cast<size_t>(j - interior) * separator + (row - interior)] =
+              x[px[k] + static_cast<size_t>(j - first) * height + q];
+        }
+    }
+    if (s->precision == kSingle) {
+      p.single.From(L);
+      entries = p.single.EntriesBefore(interior);
+    } else {
+      p.full.From(L);
+      entries = p.full.EntriesBefore(interior);
+    }
+    flops = s->common.fl;
+    PetscCall(DropValues(s, p.factor));
+    if (separator > 0) {
+      const double one = 1.0, zero = 0.0;
+      dsyrk_("L", "N", &separator, &separator, &one, trailing.data(), &separator, &zero, schur.data(), &separator);
+    }
+  }
+  // Rank 0: S = sum_r C_r - (ranks - 1) A_SS, factorised densely.
+  if (separator > 0) {
+    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : schur.data(), schur.data(), separator * separator, MPI_DOUBLE,
+                            MPI_SUM, 0, comm));
+    if (rank == 0) {
+      PetscInt m;
+      const PetscInt *row_start, *columns;
+      PetscBool done;
+      const PetscScalar *values;
+      PetscCall(MatGetRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+      PetscCall(MatSeqAIJGetArrayRead(p.local[0], &values));
+      std::vector<PetscInt> separator_index(m, -1);
+      for (PetscInt k = 0; k < p.separator; ++k) separator_index[p.separator_local[k]] = k;
+      for (PetscInt k = 0; k < p.separator; ++k) {
+        const PetscInt l = p.separator_local[k];
+        for (PetscInt e = row_start[l]; e < row_start[l + 1]; ++e) {
+          const PetscInt c = separator_index[columns[e]];
+          if (c >= 0 && c >= k) schur[static_cast<size_t>(k) * separator + c] -= (size - 1) * values[e];
+        }
+      }
+      PetscCall(MatSeqAIJRestoreArrayRead(p.local[0], &values));
+      PetscCall(MatRestoreRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+      int info = 0;
+      dpotrf_("L", &separator, schur.data(), &separator, &info);
+      PetscCheck(info >= 0, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: LAPACK dpotrf failed (info %d)", info);
+      if (info > 0) {
+        PetscCall(PetscInfo(nullptr, "supernodal: the separator's Schur complement is not positive definite\n"));
+        s->failed = true;
+      }
+    }
+    int failed = s->failed;  // rank 0's verdict on the separator
+    PetscCallMPI(MPI_Bcast(&failed, 1, MPI_INT, 0, comm));
+    s->failed = failed;
+    if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
+    if (rank == 0) {
+      for (int j = 0; j < separator; ++j)  // dpotrf leaves the upper triangle as it was
+        for (int i = 0; i < j; ++i) schur[static_cast<size_t>(j) * separator + i] = 0.0;
+      if (s->precision == kSingle) p.dense_single.From(schur, separator);
+      else p.dense_full.From(schur, separator);
+      entries += 0.5 * separator * (separator + 1.0);
+      flops += separator * (double)separator * separator / 3.0;
+    }
+  }
+  double sums[2] = {entries, flops};
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, sums, 2, MPI_DOUBLE, MPI_SUM, comm));
+  s->stored = s->nonzeros = sums[0];
+  s->flops = sums[1];
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+template <typename Real>
+PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, PackedFactor<Real> &factor, const DenseFactor<Real> &dense,
+                          const PetscScalar *b, PetscScalar *x) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
+  const int interior = static_cast<int>(p.interior);
+  for (PetscInt l = 0; l < n; ++l) p.local_b[l] = 0.0;
+  for (PetscInt l = 0; l < n; ++l)
+    if (p.owned_position[l] >= 0) p.local_b[l] = b[p.owned_position[l]];
+  // Forward over the interior; the separator rows collect -L_S,I L_I^-1 b_I.
+  if (n > 0) {
+    for (PetscInt i = 0; i < interior; ++i) factor.y[i] = static_cast<Real>(p.local_b[factor.permutation[i]]);
+    for (PetscInt i = interior; i < n; ++i) factor.y[i] = 0;
+    factor.Forward(interior);
+  }
+  for (PetscInt k = 0; k < p.separator; ++k) {
+    const PetscInt l = p.separator_local[k];
+    p.separator_values[k] = static_cast<double>(factor.y[interior + k]) + p.local_b[l];  // b_S where owned
+  }
+  if (p.separator > 0) {
+    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : p.separator_values.data(), p.separator_values.data(),
+                            static_cast<int>(p.separator), MPI_DOUBLE, MPI_SUM, 0, comm));
+    if (rank == 0) {
+      std::vector<Real> y(p.separator_values.begin(), p.separator_values.end());
+      dense.Solve(y.data());
+      std::copy(y.begin(), y.end(), p.separator_values.begin());
+    }
+    PetscCallMPI(MPI_Bcast(p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE, 0, comm));
+  }
+  if (n > 0) {
+    for (PetscInt k = 0; k < p.separator; ++k) factor.y[interior + k] = static_cast<Real>(p.separator_values[k]);
+    factor.Backward(interior);
+    for (PetscInt i = 0; i < n; ++i) {
+      const PetscInt l = factor.permutation[i];
+      if (p.owned_position[l] >= 0) x[p.owned_position[l]] = factor.y[i];
+    }
+  }
+  for (PetscInt k = 0; k < p.separator; ++k) {  // the separator exactly as broadcast
+    const PetscInt l = p.separator_local[k];
+    if (p.owned_position[l] >= 0) x[p.owned_position[l]] = p.separator_values[k];
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCSetUp_Supernodal(PC pc) {
+  PetscFunctionBeginUser;
+  Supernodal *s = static_cast<Supernodal *>(pc->data);
+  Mat A = pc->pmat;
+  PetscObjectState pattern;
+  PetscCall(MatGetNonzeroState(A, &pattern));
+  const bool new_pattern = pattern != s->pattern_state;
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)pc), &size));
+  s->failed = false;
+  if (size == 1) PetscCall(SetUpOneRank(s, A, new_pattern));
+  else PetscCall(SetUpSplit(s, A, new_pattern));
+  s->pattern_state = pattern;
+  PetscCall(PCSetFailedReason(pc, s->failed ? PC_FACTOR_NUMERIC_ZEROPIVOT : PC_NOERROR));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
+  PetscFunctionBeginUser;
+  Supernodal *s = static_cast<Supernodal *>(pc->data);
+  PetscMPIInt size;
+  MPI_Comm comm = PetscObjectComm((PetscObject)pc);
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  if (s->failed) {  // the KSP sees NaN and stops on every rank
+    PetscCall(VecSet(x, std::numeric_limits<PetscReal>::quiet_NaN()));
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  const PetscScalar *rhs;
+  PetscScalar *out;
+  PetscCall(VecGetArrayRead(b, &rhs));
+  PetscCall(VecGetArrayWrite(x, &out));
+  if (size > 1) {
+    if (s->precision == kSingle) PetscCall(ApplySplit(comm, s->split, s->split.single, s->split.dense_single, rhs, out));
+    else PetscCall(ApplySplit(comm, s->split, s->split.full, s->split.dense_full, rhs, out));
+  } else if (s->precision == kSingle) {
+    s->single.Solve(rhs, out);
+  } else {  // CHOLMOD's own solve (BLAS-2 per supernode) streams the double factor fastest
+    PetscInt n;
+    PetscCall(VecGetLocalSize(b, &n));
+    cholmod_dense dense;
+    std::memset(&dense, 0, sizeof(dense));
+    dense.nrow = dense.d = dense.nzmax = n;
+    dense.ncol = 1;
+    dense.x = const_cast<PetscScalar *>(rhs);
+    dense.xtype = CHOLMOD_REAL;
+    dense.dtype = CHOLMOD_DOUBLE;
+    const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr, &s->work_y,
+                                  &s->work_e, &s->common);
+    PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)", s->common.status);
+    std::memcpy(out, s->solution->x, sizeof(PetscScalar) * n);
+  }
+  PetscCall(VecRestoreArrayWrite(x, &out));
+  PetscCall(VecRestoreArrayRead(b, &rhs));
+  PetscCall(PetscLogFlops(4.0 * s->nonzeros / size));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCView_Supernodal(PC pc, PetscViewer viewer) {
+  PetscFunctionBeginUser;
+  Supernodal *s = static_cast<Supernodal *>(pc->data);
+  PetscBool ascii;
+  PetscCall(PetscObjectTypeCompare((PetscObject)viewer, PETSCVIEWERASCII, &ascii));
+  if (ascii) {
+    PetscMPIInt size;
+    PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)pc), &size));
+    PetscCall(PetscViewerASCIIPrintf(viewer, "  CHOLMOD supernodal Cholesky, ordering %s, solves in %s precision\n",
+                                     kOrderings[s->ordering], kPrecisions[s->precision]));
+    if (size > 1)
+      PetscCall(PetscViewerASCIIPrintf(viewer, "  split at a separator of %" PetscInt_FMT
+                                       " DOFs: a factor of the interior per rank, the dense Schur complement "
+                                       "on rank 0\n", s->split.separator));
+    if (s->stored > 0)
+      PetscCall(PetscViewerASCIIPrintf(viewer, "  factor: %.4g nonzeros, %.4g stored entries, %.4g flops\n",
+                                       s->nonzeros, s->stored, s->flops));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCCreate_Supernodal(PC pc) {
+  PetscFunctionBeginUser;
+  pc->data = new Supernodal();
+  pc->ops->setup = PCSetUp_Supernodal;
+  pc->ops->apply = PCApply_Supernodal;
+  pc->ops->reset = PCReset_Supernodal;
+  pc->ops->destroy = PCDestroy_Supernodal;
+  pc->ops->setfromoptions = PCSetFromOptions_Supernodal;
+  pc->ops->view = PCView_Supernodal;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
+PetscErrorCode RegisterSupernodalPC() {
+  PetscFunctionBeginUser;
+  static bool registered = false;
+  if (!registered) PetscCall(PCRegister(kPCSupernodal, PCCreate_Supernodal));
+  registered = true;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCSupernodalSetSinglePrecision(PC pc, bool single) {
+  PetscFunctionBeginUser;
+  PetscBool is_supernodal;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &is_supernodal));
+  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG, "not a supernodal PC");
+  static_cast<Supernodal *>(pc->data)->precision = single ? kSingle : kDouble;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCSupernodalGetFactorSize(PC pc, double *stored_entries, double *nonzeros, double *factor_flops,
+                                         int *bytes_per_entry) {
+  PetscFunctionBeginUser;
+  PetscBool is_supernodal;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &is_supernodal));
+  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG, "not a supernodal PC");
+  const Supernodal *s = static_cast<const Supernodal *>(pc->data);
+  *stored_entries = s->stored;
+  *nonzeros = s->nonzeros;
+  *factor_flops = s->flops;
+  *bytes_per_entry = s->precision == kSingle ? 4 : 8;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
