@@ -10,8 +10,8 @@
 #include <cmath>
 #include <vector>
 
-#include "geometry.hpp"
-#include "projected_solve.hpp"
+#include "contact/geometry.hpp"
+#include "solvers/projected_solve.hpp"
 
 namespace softbody {
 namespace {

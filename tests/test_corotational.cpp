@@ -6,7 +6,7 @@
 #include <Eigen/Geometry>
 #include <random>
 
-#include "element.hpp"
+#include "fem/element.hpp"
 
 using namespace softbody;
 

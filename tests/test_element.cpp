@@ -9,7 +9,7 @@
 #include <random>
 #include <vector>
 
-#include "element.hpp"
+#include "fem/element.hpp"
 
 namespace softbody {
 namespace {

@@ -18,10 +18,10 @@
 #include <string>
 #include <vector>
 
-#include "errors.hpp"
-#include "mesh.hpp"
-#include "mesh_io.hpp"
-#include "scene.hpp"
+#include "common/errors.hpp"
+#include "fem/mesh.hpp"
+#include "io/mesh_io.hpp"
+#include "io/scene.hpp"
 
 namespace softbody {
 namespace {

@@ -12,9 +12,9 @@
 #include <random>
 #include <string>
 
-#include "errors.hpp"
-#include "mesh_io.hpp"
-#include "scene.hpp"
+#include "common/errors.hpp"
+#include "io/mesh_io.hpp"
+#include "io/scene.hpp"
 
 namespace softbody {
 namespace {

@@ -11,10 +11,10 @@
 #include <set>
 #include <string>
 
-#include "errors.hpp"
-#include "mesh.hpp"
-#include "mesh_io.hpp"
-#include "scene.hpp"
+#include "common/errors.hpp"
+#include "fem/mesh.hpp"
+#include "io/mesh_io.hpp"
+#include "io/scene.hpp"
 
 namespace softbody {
 namespace {

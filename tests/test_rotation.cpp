@@ -8,7 +8,7 @@
 #include <chrono>
 #include <random>
 
-#include "element.hpp"
+#include "fem/element.hpp"
 
 using namespace softbody;
 

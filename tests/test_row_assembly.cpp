@@ -9,10 +9,10 @@
 #include <chrono>
 #include <random>
 
-#include "assembly.hpp"
-#include "partition.hpp"
-#include "row_assembly.hpp"
-#include "scene.hpp"
+#include "fem/assembly.hpp"
+#include "fem/partition.hpp"
+#include "fem/row_assembly.hpp"
+#include "io/scene.hpp"
 
 using namespace softbody;
 

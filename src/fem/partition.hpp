@@ -28,6 +28,27 @@ struct DofLayout {
   PetscInt num_free() const { return static_cast<PetscInt>(natural_of_free.size()); }
   PetscInt local_begin() const { return vertex_start[rank]; }
   PetscInt local_count() const { return vertex_start[rank + 1] - vertex_start[rank]; }
+  bool OwnsPetscVertex(PetscInt petsc) const {
+    return petsc >= local_begin() && petsc < vertex_start[rank + 1];
+  }
+  // Natural vertex -> PETSc vertex; -1 for a vertex without unknowns (fixed, at
+  // rest or stray).
+  PetscInt PetscVertexOfNatural(PetscInt natural) const {
+    const PetscInt free = free_of_natural[natural];
+    return free < 0 ? -1 : petsc_of_free[free];
+  }
+  // Free index -> index among this rank's vertices (0 .. local_count() - 1), or
+  // -1 when another rank owns the vertex.
+  PetscInt LocalOfFree(PetscInt free) const {
+    const PetscInt petsc = petsc_of_free[free];
+    return OwnsPetscVertex(petsc) ? petsc - local_begin() : -1;
+  }
+  // Natural vertex -> index among this rank's vertices, or -1 when the vertex has
+  // no unknowns (fixed, at rest or stray) or another rank owns it.
+  PetscInt LocalOfNatural(PetscInt natural) const {
+    const PetscInt free = free_of_natural[natural];
+    return free < 0 ? -1 : LocalOfFree(free);
+  }
   // Natural-order layout of the free vertices with the same local sizes as the
   // PETSc layout: rank r holds free indices [vertex_start[r], vertex_start[r+1]).
 };

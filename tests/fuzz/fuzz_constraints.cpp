@@ -2,9 +2,9 @@
 // src/contact.hpp), against a fixed scene of two bodies (cube.mesh, tet.mesh of
 // fuzz::WriteMeshes). An accepted constraint joins two distinct in-range vertices
 // with 0 <= lower <= upper.
-#include "contact.hpp"
+#include "contact/contact.hpp"
 #include "fuzz_input.hpp"
-#include "scene.hpp"
+#include "io/scene.hpp"
 
 namespace {
 softbody::Scene *scene = nullptr;

@@ -16,7 +16,7 @@
 #include <fstream>
 #include <string>
 
-#include "errors.hpp"
+#include "common/errors.hpp"
 
 namespace softbody::fuzz {
 

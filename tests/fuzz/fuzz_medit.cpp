@@ -3,7 +3,7 @@
 #include <cmath>
 
 #include "fuzz_input.hpp"
-#include "mesh_io.hpp"
+#include "io/mesh_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   using namespace softbody;

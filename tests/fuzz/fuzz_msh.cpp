@@ -1,7 +1,7 @@
 // libFuzzer target: the gmsh .msh reader (ReadGmsh, src/mesh_io.hpp), formats 2.2
 // and 4.1. An accepted mesh must have tets, finite vertices and in-range corners.
 #include "fuzz_input.hpp"
-#include "mesh_io.hpp"
+#include "io/mesh_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   using namespace softbody;

@@ -6,7 +6,7 @@
 #include <set>
 
 #include "fuzz_input.hpp"
-#include "mesh_io.hpp"
+#include "io/mesh_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   using namespace softbody;

@@ -8,7 +8,7 @@
 #include <cmath>
 
 #include "fuzz_input.hpp"
-#include "scene.hpp"
+#include "io/scene.hpp"
 
 extern "C" int LLVMFuzzerInitialize(int *, char ***) {
   softbody::fuzz::WriteMeshes(softbody::fuzz::Folder());
