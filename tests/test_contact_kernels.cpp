@@ -37,17 +37,22 @@ TEST(SegmentCrossesTriangle, MissesOutsideTheTriangleOrTheSegment) {
   const Point a(0, 0, 1), b(1, 0, 1), c(0, 1, 1);
   double t;
   Eigen::Vector3d w;
-  EXPECT_FALSE(SegmentCrossesTriangle(Point(0.6, 0.6, 3), Point(0.6, 0.6, -1), a, b, c, &t, &w));  // u + v > 1
-  EXPECT_FALSE(SegmentCrossesTriangle(Point(0.2, 0.3, 3), Point(0.2, 0.3, 1.5), a, b, c, &t, &w));  // stops short
-  EXPECT_FALSE(SegmentCrossesTriangle(Point(0, 0, 2), Point(1, 0, 2), a, b, c, &t, &w));            // parallel
+  EXPECT_FALSE(SegmentCrossesTriangle(Point(0.6, 0.6, 3), Point(0.6, 0.6, -1), a, b, c, &t,
+                                      &w));  // u + v > 1
+  EXPECT_FALSE(SegmentCrossesTriangle(Point(0.2, 0.3, 3), Point(0.2, 0.3, 1.5), a, b, c, &t,
+                                      &w));  // stops short
+  EXPECT_FALSE(
+      SegmentCrossesTriangle(Point(0, 0, 2), Point(1, 0, 2), a, b, c, &t, &w));  // parallel
 }
 
-VelocityConstraint Constraint(const Eigen::Vector3d &normal, double velocity, bool immobile = false) {
+VelocityConstraint Constraint(const Eigen::Vector3d &normal, double velocity,
+                              bool immobile = false) {
   return {7, normal.normalized(), velocity, immobile};
 }
 
 // n_k . p for every constraint.
-std::vector<double> Achieved(const ConstrainedVertex &c, const std::vector<VelocityConstraint> &list) {
+std::vector<double> Achieved(const ConstrainedVertex &c,
+                             const std::vector<VelocityConstraint> &list) {
   std::vector<double> out;
   for (const VelocityConstraint &k : list) out.push_back(k.normal.dot(c.prescribed));
   return out;
@@ -84,7 +89,8 @@ TEST(CombineConstraints, NearParallelDirectionsStayBounded) {
   // n . p = 3 cos(1e-4) >= 1 still holds.
   const double angle = 1e-4;
   const Eigen::Vector3d ground(0, 1, 0), face(std::sin(angle), std::cos(angle), 0);
-  const std::vector<VelocityConstraint> list = {Constraint(ground, 1.0, true), Constraint(face, 3.0)};
+  const std::vector<VelocityConstraint> list = {Constraint(ground, 1.0, true),
+                                                Constraint(face, 3.0)};
   const ConstrainedVertex c = CombineConstraints(7, list);
   EXPECT_EQ(c.rank, 1);
   EXPECT_NEAR(c.prescribed.norm(), 3.0, 1e-12);
@@ -100,14 +106,16 @@ TEST(CombineConstraints, TiesGoToTheImmobileObstacle) {
   // velocity's component along it).
   const double angle = 3 * M_PI / 180;
   const Eigen::Vector3d ground(0, 1, 0), face(std::sin(angle), std::cos(angle), 0);
-  const std::vector<VelocityConstraint> list = {Constraint(face, 0.0), Constraint(ground, 0.0, true)};
+  const std::vector<VelocityConstraint> list = {Constraint(face, 0.0),
+                                                Constraint(ground, 0.0, true)};
   const ConstrainedVertex c = CombineConstraints(7, list);
   ASSERT_EQ(c.rank, 1);
   EXPECT_NEAR(std::abs(c.basis.col(0).dot(ground)), 1.0, 1e-15);
 }
 
 TEST(CombineConstraints, ThreeWallsOfACornerAreAllImposed) {
-  const std::vector<VelocityConstraint> list = {Constraint({1, 0, 0}, 0.5, true), Constraint({0, 1, 0}, -1.0, true),
+  const std::vector<VelocityConstraint> list = {Constraint({1, 0, 0}, 0.5, true),
+                                                Constraint({0, 1, 0}, -1.0, true),
                                                 Constraint({0, 0, 1}, 2.0, true)};
   const ConstrainedVertex c = CombineConstraints(7, list);
   EXPECT_EQ(c.rank, 3);

@@ -112,8 +112,8 @@ TEST(CorotatedElement, RigidMotionIsForceFree) {
     EXPECT_GT((K0 * (Flatten(x) - Flatten(X))).norm(), 1e-3 * scale);
     for (int a = 0; a < 4; ++a)  // rotated stiffness: blocks R K_ab R^T
       for (int b = 0; b < 4; ++b)
-        EXPECT_LT((K.block<3, 3>(3 * a, 3 * b) -
-                   R0 * K0.block<3, 3>(3 * a, 3 * b) * R0.transpose()).norm(),
+        EXPECT_LT((K.block<3, 3>(3 * a, 3 * b) - R0 * K0.block<3, 3>(3 * a, 3 * b) * R0.transpose())
+                      .norm(),
                   1e-12 * K0.norm());
   }
 }

@@ -107,7 +107,9 @@ double EnclosedVolume(const Surface &surface) {
   return volume;
 }
 
-Eigen::Vector3d Vertex(const TetMesh &mesh, int v) { return mesh.vertices.row(v).transpose(); }
+Eigen::Vector3d Vertex(const TetMesh &mesh, int v) {
+  return mesh.vertices.row(v).transpose();
+}
 
 double TetVolume(const TetMesh &mesh, int t) {
   const Eigen::Vector3d x0 = Vertex(mesh, mesh.tets(t, 0));

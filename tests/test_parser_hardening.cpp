@@ -56,7 +56,8 @@ std::string InputErrorOf(Read read) {
   return "";
 }
 
-#define EXPECT_CONTAINS(text, part) EXPECT_NE(std::string(text).find(part), std::string::npos) << text
+#define EXPECT_CONTAINS(text, part) \
+  EXPECT_NE(std::string(text).find(part), std::string::npos) << text
 
 // An OFF file with one polygon of n vertices (0 .. n-1, the last one repeated
 // when `repeat`) and three triangles.
@@ -169,8 +170,7 @@ TEST_F(HardeningTest, PlacementThatDestroysTheMeshIsAnInputError) {
   Write("huge.mesh",
         "MeshVersionFormatted 2\nDimension 3\nVertices 4\n1e100 0 0 0\n2e100 0 0 0\n"
         "1e100 1e100 0 0\n1e100 0 1e100 0\nTetrahedra 1\n1 2 3 4 0\nEnd\n");
-  const std::string huge =
-      Write("huge.txt", "1\nhuge.mesh 1000 1e5 0.3 0 0 0 0 1 0 0 0\n");
+  const std::string huge = Write("huge.txt", "1\nhuge.mesh 1000 1e5 0.3 0 0 0 0 1 0 0 0\n");
   EXPECT_CONTAINS(InputErrorOf([&] { ReadScene(huge); }), "overflows");
 }
 

@@ -68,7 +68,8 @@ TEST(RotationOfDeformation, NewtonAgreesWithSvdOnStretches) {
   // Large, anisotropic stretches (condition numbers up to 100).
   for (int trial = 0; trial < 500; ++trial) {
     std::uniform_real_distribution<double> log_s(-1, 1);
-    const Mat3 F = WithSingularValues(std::pow(10, log_s(rng)), std::pow(10, log_s(rng)), std::pow(10, log_s(rng)));
+    const Mat3 F = WithSingularValues(std::pow(10, log_s(rng)), std::pow(10, log_s(rng)),
+                                      std::pow(10, log_s(rng)));
     const Mat3 R = RotationOfDeformation(F);
     ExpectProperRotation(R);
     EXPECT_LT((R - RotationOfDeformationSvd(F)).norm(), 1e-12);
@@ -124,11 +125,16 @@ TEST(RotationOfDeformation4, EqualsOneAtATime) {
   std::uniform_real_distribution<double> u(-1, 1);
   const auto kind = [&](int k) -> Mat3 {
     switch (k % 5) {
-      case 0: return WithSingularValues(1 + 0.01 * u(rng), 1 + 0.01 * u(rng), 1 + 0.01 * u(rng));
-      case 1: return WithSingularValues(1 + 0.09 * u(rng), 1 + 0.05 * u(rng), 1 - 0.05 * u(rng));
-      case 2: return WithSingularValues(3.0, 0.5, 0.2);
-      case 3: return WithSingularValues(1.0, 1.0, -0.9);
-      default: return WithSingularValues(1.0, 1e-9, 0.0);
+      case 0:
+        return WithSingularValues(1 + 0.01 * u(rng), 1 + 0.01 * u(rng), 1 + 0.01 * u(rng));
+      case 1:
+        return WithSingularValues(1 + 0.09 * u(rng), 1 + 0.05 * u(rng), 1 - 0.05 * u(rng));
+      case 2:
+        return WithSingularValues(3.0, 0.5, 0.2);
+      case 3:
+        return WithSingularValues(1.0, 1.0, -0.9);
+      default:
+        return WithSingularValues(1.0, 1e-9, 0.0);
     }
   };
   for (int trial = 0; trial < 2000; ++trial) {
@@ -146,12 +152,14 @@ TEST(RotationOfDeformation4, EqualsOneAtATime) {
 TEST(RotationOfDeformation, Speed) {
   std::vector<Mat3> samples;
   std::uniform_real_distribution<double> u(-0.01, 0.01);
-  for (int i = 0; i < 20000; ++i) samples.push_back(WithSingularValues(1 + u(rng), 1 + u(rng), 1 + u(rng)));
+  for (int i = 0; i < 20000; ++i)
+    samples.push_back(WithSingularValues(1 + u(rng), 1 + u(rng), 1 + u(rng)));
   auto time = [&](auto &&rotation) {
     Mat3 sum = Mat3::Zero();
     const auto start = std::chrono::steady_clock::now();
     for (const Mat3 &F : samples) sum += rotation(F);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     EXPECT_TRUE(sum.allFinite());
     return 1e9 * seconds / samples.size();
   };
@@ -160,11 +168,16 @@ TEST(RotationOfDeformation, Speed) {
   {
     std::vector<Mat3> rotations(samples.size());
     const auto start = std::chrono::steady_clock::now();
-    for (size_t i = 0; i + 4 <= samples.size(); i += 4) RotationOfDeformation4(&samples[i], &rotations[i]);
-    batched = 1e9 * std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() / samples.size();
-    for (size_t i = 0; i < samples.size(); i += 997) EXPECT_LT((rotations[i] - RotationOfDeformationSvd(samples[i])).norm(), 1e-12);
+    for (size_t i = 0; i + 4 <= samples.size(); i += 4)
+      RotationOfDeformation4(&samples[i], &rotations[i]);
+    batched = 1e9 *
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() /
+              samples.size();
+    for (size_t i = 0; i < samples.size(); i += 997)
+      EXPECT_LT((rotations[i] - RotationOfDeformationSvd(samples[i])).norm(), 1e-12);
   }
   const double svd = time([](const Mat3 &F) { return RotationOfDeformationSvd(F); });
-  std::printf("rotation of F: Newton %.0f ns, four at a time %.0f ns each, JacobiSVD %.0f ns (x %.1f)\n", newton,
-              batched, svd, svd / newton);
+  std::printf(
+      "rotation of F: Newton %.0f ns, four at a time %.0f ns each, JacobiSVD %.0f ns (x %.1f)\n",
+      newton, batched, svd, svd / newton);
 }

@@ -31,7 +31,8 @@ TetMesh BoxMesh(int nx, int ny, int nz, double h) {
   mesh.vertices.resize((nx + 1) * (ny + 1) * (nz + 1), 3);
   for (int k = 0; k <= nz; ++k)
     for (int j = 0; j <= ny; ++j)
-      for (int i = 0; i <= nx; ++i) mesh.vertices.row(i + (nx + 1) * (j + (ny + 1) * k)) << i * h, j * h, k * h;
+      for (int i = 0; i <= nx; ++i)
+        mesh.vertices.row(i + (nx + 1) * (j + (ny + 1) * k)) << i * h, j * h, k * h;
   const int paths[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
   mesh.tets.resize(6 * nx * ny * nz, 4);
   int t = 0;
@@ -72,7 +73,8 @@ PetscErrorCode DeformedPositions(Vec rest, Vec x, double stretch = 0.1, double n
   PetscFunctionBeginUser;
   std::mt19937 rng(3);
   std::normal_distribution<double> noise(0.0, noise_size);
-  const Eigen::Matrix3d R = Eigen::AngleAxisd(1.1, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  const Eigen::Matrix3d R =
+      Eigen::AngleAxisd(1.1, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
   const PetscScalar *X;
   PetscScalar *y;
   PetscInt n;
@@ -80,7 +82,8 @@ PetscErrorCode DeformedPositions(Vec rest, Vec x, double stretch = 0.1, double n
   PetscCall(VecGetArrayRead(rest, &X));
   PetscCall(VecGetArray(x, &y));
   for (PetscInt v = 0; v < n / 3; ++v) {
-    const Eigen::Vector3d p(X[3 * v] * (1 + stretch), X[3 * v + 1], X[3 * v + 2] * (1 - 0.5 * stretch));
+    const Eigen::Vector3d p(X[3 * v] * (1 + stretch), X[3 * v + 1],
+                            X[3 * v + 2] * (1 - 0.5 * stretch));
     const Eigen::Vector3d q = R * p;
     for (int c = 0; c < 3; ++c) y[3 * v + c] = q[c] + noise(rng);
   }
@@ -91,7 +94,8 @@ PetscErrorCode DeformedPositions(Vec rest, Vec x, double stretch = 0.1, double n
 
 // |reference - v| (2-norm) and |reference| in *scale; reference holds v's local
 // entries in order (one rank), work is a vector like v.
-PetscReal DifferenceFrom(const std::vector<PetscScalar> &reference, Vec v, Vec work, PetscReal *scale) {
+PetscReal DifferenceFrom(const std::vector<PetscScalar> &reference, Vec v, Vec work,
+                         PetscReal *scale) {
   PetscScalar *w;
   VecGetArray(work, &w);
   std::copy(reference.begin(), reference.end(), w);
@@ -141,14 +145,16 @@ TEST(RowAssembler, EqualsCooAssembly) {
     // Linear: K and A = mass_scale M + stiffness_scale K.
     {
       Mat reference;
-      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference), 0);
+      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference),
+                0);
       PetscInt local_dofs;
       VecGetLocalSize(f.state.lumped_mass, &local_dofs);
       CooValues values(144 * f.elements.size() + local_dofs);
       LinearStiffnessValues(f.elements, shear_scale, stiffness_scale, &values);
       ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
-      ASSERT_EQ(f.assembler.Fill(f.A, false, nullptr, stiffness_scale, f.state.lumped_mass, mass_scale, nullptr,
-                                 nullptr), 0);
+      ASSERT_EQ(f.assembler.Fill(f.A, false, nullptr, stiffness_scale, f.state.lumped_mass,
+                                 mass_scale, nullptr, nullptr),
+                0);
       EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-14) << "shear scale " << shear_scale;
       MatDestroy(&reference);
     }
@@ -161,10 +167,13 @@ TEST(RowAssembler, EqualsCooAssembly) {
       ASSERT_EQ(DeformedPositions(f.state.rest_positions, x), 0);
       PetscReal energy;
       f.assembler.ComputeVertexRotations(true);
-      ASSERT_EQ(f.assembler.Fill(f.A, true, x, stiffness_scale, f.state.lumped_mass, mass_scale, force, &energy), 0);
+      ASSERT_EQ(f.assembler.Fill(f.A, true, x, stiffness_scale, f.state.lumped_mass, mass_scale,
+                                 force, &energy),
+                0);
 
       Mat reference;
-      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference), 0);
+      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference),
+                0);
       PetscInt local_dofs;
       VecGetLocalSize(f.state.lumped_mass, &local_dofs);
       CooValues values(144 * f.elements.size() + local_dofs);
@@ -174,8 +183,8 @@ TEST(RowAssembler, EqualsCooAssembly) {
       // One rank: the touched vertices are all vertices, in order.
       std::vector<PetscScalar> force_touched(3 * f.elements.touched_vertices.size());
       ASSERT_EQ(f.elements.touched_vertices.size() * 3, static_cast<size_t>(local_dofs));
-      const double reference_energy = CorotatedStiffnessValues(f.elements, shear_scale, xa, Xa, stiffness_scale,
-                                                               &values, force_touched.data());
+      const double reference_energy = CorotatedStiffnessValues(
+          f.elements, shear_scale, xa, Xa, stiffness_scale, &values, force_touched.data());
       VecRestoreArrayRead(x, &xa);
       VecRestoreArrayRead(f.state.rest_positions, &Xa);
       ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
@@ -188,7 +197,8 @@ TEST(RowAssembler, EqualsCooAssembly) {
       const std::vector<double> &rotations = f.assembler.vertex_rotations();
       ASSERT_EQ(rotations.size(), 3 * static_cast<size_t>(local_dofs));
       for (size_t v = 0; v < rotations.size() / 9; ++v) {
-        const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> R(rotations.data() + 9 * v);
+        const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> R(rotations.data() +
+                                                                               9 * v);
         EXPECT_LT((R.transpose() * R - Eigen::Matrix3d::Identity()).norm(), 1e-12);
         EXPECT_NEAR(R.determinant(), 1.0, 1e-12);
       }
@@ -233,25 +243,30 @@ TEST(RowAssembler, IncrementDampingEqualsReference) {
     VecGetArrayRead(x1, &x1a);
     VecGetArrayRead(f.state.rest_positions, &Xa);
     CorotatedDamping first{&y0, nullptr, nullptr};
-    CorotatedStiffnessValues(f.elements, shear_scale, x0a, Xa, 1.0, &values, force_touched.data(), &first);
+    CorotatedStiffnessValues(f.elements, shear_scale, x0a, Xa, 1.0, &values, force_touched.data(),
+                             &first);
     CorotatedDamping second{&y1, y0.data(), increment_touched.data()};
-    CorotatedStiffnessValues(f.elements, shear_scale, x1a, Xa, 1.0, &values, force_touched.data(), &second);
+    CorotatedStiffnessValues(f.elements, shear_scale, x1a, Xa, 1.0, &values, force_touched.data(),
+                             &second);
     VecRestoreArrayRead(x0, &x0a);
     VecRestoreArrayRead(x1, &x1a);
     VecRestoreArrayRead(f.state.rest_positions, &Xa);
     EXPECT_GT(second.energy, 0.0);
-    EXPECT_NEAR(damping.energy, second.energy, 1e-12 * second.energy) << "shear scale " << shear_scale;
+    EXPECT_NEAR(damping.energy, second.energy, 1e-12 * second.energy)
+        << "shear scale " << shear_scale;
     PetscReal scale;
     const PetscReal difference = DifferenceFrom(increment_touched, force, reference_force, &scale);
     EXPECT_LT(difference, 1e-12 * scale) << "shear scale " << shear_scale;
 
     // x1 = x0 turned by 40 degrees and shifted: no increment, no force, no energy.
-    const Eigen::Matrix3d Q = Eigen::AngleAxisd(0.7, Eigen::Vector3d(0, 1, 1).normalized()).toRotationMatrix();
+    const Eigen::Matrix3d Q =
+        Eigen::AngleAxisd(0.7, Eigen::Vector3d(0, 1, 1).normalized()).toRotationMatrix();
     PetscScalar *x1w;
     VecGetArrayRead(x0, &x0a);
     VecGetArray(x1, &x1w);
     for (PetscInt v = 0; v < local_dofs / 3; ++v)
-      Eigen::Map<Eigen::Vector3d>(x1w + 3 * v) = Q * Eigen::Vector3d(x0a + 3 * v) + Eigen::Vector3d(1, -2, 3);
+      Eigen::Map<Eigen::Vector3d>(x1w + 3 * v) =
+          Q * Eigen::Vector3d(x0a + 3 * v) + Eigen::Vector3d(1, -2, 3);
     VecRestoreArray(x1, &x1w);
     VecRestoreArrayRead(x0, &x0a);
     damping = {&current, &start, force};
@@ -278,11 +293,12 @@ TEST(RowAssembler, CorotationalRefillRate) {
     PetscReal energy;
     const auto start = std::chrono::steady_clock::now();
     ASSERT_EQ(f.assembler.Fill(f.A, true, x, 1e-3, f.state.lumped_mass, 1.0, force, &energy), 0);
-    best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    best = std::min(
+        best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
   const double tets = static_cast<double>(f.scene.num_tets());
-  std::printf("corotational refill of %.0f tets: %.2f ms, %.2f M tets/s (best of 7)\n", tets, 1e3 * best,
-              tets / best / 1e6);
+  std::printf("corotational refill of %.0f tets: %.2f ms, %.2f M tets/s (best of 7)\n", tets,
+              1e3 * best, tets / best / 1e6);
   VecDestroy(&x);
   VecDestroy(&force);
 }

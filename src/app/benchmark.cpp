@@ -20,19 +20,21 @@ PetscErrorCode ProcessBenchmarkOptions(MPI_Comm comm, BenchmarkOptions *o) {
                                      {OptionSyntax::kInteger, "-bench_assembly_repeats"},
                                      {OptionSyntax::kReal, "-bench_triad_mb"}}));
   PetscOptionsBegin(comm, nullptr, "Benchmark (measurements against the machine)", nullptr);
-  PetscCall(PetscOptionsBool("-bench",
-                             "Measure the run: median step, assembly, factorisation, peak memory, triad "
-                             "bandwidth and the step's memory-traffic bound (printed and in the result file)",
-                             nullptr, o->enabled, &o->enabled, nullptr));
-  PetscCall(PetscOptionsInt("-bench_assembly_repeats", "Timed fills of A after the time loop", nullptr,
-                            o->assembly_repeats, &o->assembly_repeats, nullptr));
-  PetscCall(PetscOptionsReal("-bench_triad_mb", "Size of each triad array per rank (MB)", nullptr, o->triad_mb,
-                             &o->triad_mb, nullptr));
+  PetscCall(PetscOptionsBool(
+      "-bench",
+      "Measure the run: median step, assembly, factorisation, peak memory, triad "
+      "bandwidth and the step's memory-traffic bound (printed and in the result file)",
+      nullptr, o->enabled, &o->enabled, nullptr));
+  PetscCall(PetscOptionsInt("-bench_assembly_repeats", "Timed fills of A after the time loop",
+                            nullptr, o->assembly_repeats, &o->assembly_repeats, nullptr));
+  PetscCall(PetscOptionsReal("-bench_triad_mb", "Size of each triad array per rank (MB)", nullptr,
+                             o->triad_mb, &o->triad_mb, nullptr));
   PetscOptionsEnd();
   PetscCheck(o->assembly_repeats >= 1, comm, PETSC_ERR_USER_INPUT,
-             "option -bench_assembly_repeats: must be >= 1 (got %" PetscInt_FMT ")", o->assembly_repeats);
-  PetscCheck(o->triad_mb > 0, comm, PETSC_ERR_USER_INPUT, "option -bench_triad_mb: must be > 0 (got %g)",
-             (double)o->triad_mb);
+             "option -bench_assembly_repeats: must be >= 1 (got %" PetscInt_FMT ")",
+             o->assembly_repeats);
+  PetscCheck(o->triad_mb > 0, comm, PETSC_ERR_USER_INPUT,
+             "option -bench_triad_mb: must be > 0 (got %g)", (double)o->triad_mb);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -42,11 +44,12 @@ double PeakResidentMegabytes() {
   return usage.ru_maxrss / 1024.0;  // Linux: kilobytes
 }
 
-PetscErrorCode TriadBandwidth(MPI_Comm comm, PetscReal megabytes_per_array, double *gigabytes_per_second) {
+PetscErrorCode TriadBandwidth(MPI_Comm comm, PetscReal megabytes_per_array,
+                              double *gigabytes_per_second) {
   PetscFunctionBeginUser;
   const size_t n = static_cast<size_t>(megabytes_per_array * 1e6 / sizeof(double));
   LargeArray<double> a(n), b(n), c(n);  // as the factor of the single-precision solves
-  for (size_t i = 0; i < n; ++i) {  // first touch: the pages exist before timing
+  for (size_t i = 0; i < n; ++i) {      // first touch: the pages exist before timing
     a[i] = 0.0;
     b[i] = 1.0;
     c[i] = 2.0;
@@ -125,7 +128,8 @@ PetscErrorCode FactorNonzeros(PC pc, double *nonzeros, int *bytes_per_entry) {
 
 }  // namespace
 
-PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEuler *integrator, Vec x) {
+PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEuler *integrator,
+                                 Vec x) {
   PetscFunctionBeginUser;
   if (!options_.enabled) PetscFunctionReturn(PETSC_SUCCESS);
   double peak_rss = PeakResidentMegabytes();
@@ -162,8 +166,10 @@ PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEule
   // Bytes a step must move at least (see benchmark.hpp).
   const double solves_per_step = steps > 0 ? stats.solves / steps : 1;
   const double products = preonly ? (corotational ? 0.0 : 1.0) : iterations * solves_per_step;
-  const double factor_solves = preonly ? solves_per_step : (factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
-  const double bytes = 12.0 * matrix_nonzeros * products + 2.0 * factor_bytes * factor_nonzeros * factor_solves +
+  const double factor_solves =
+      preonly ? solves_per_step : (factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
+  const double bytes = 12.0 * matrix_nonzeros * products +
+                       2.0 * factor_bytes * factor_nonzeros * factor_solves +
                        (corotational ? 8.0 * matrix_nonzeros : 0.0);
   const double bound_s = bytes / (bandwidth * 1e9);
   const double tets = static_cast<double>(scene.num_tets());

@@ -34,8 +34,8 @@
 #include <utility>
 #include <vector>
 
-#include "solvers/integrator.hpp"
 #include "io/scene.hpp"
+#include "solvers/integrator.hpp"
 
 namespace softbody {
 
@@ -52,7 +52,8 @@ PetscErrorCode ProcessBenchmarkOptions(MPI_Comm comm, BenchmarkOptions *options)
 double PeakResidentMegabytes();
 
 // Collective. STREAM triad on every rank at once: summed bandwidth (GB/s).
-PetscErrorCode TriadBandwidth(MPI_Comm comm, PetscReal megabytes_per_array, double *gigabytes_per_second);
+PetscErrorCode TriadBandwidth(MPI_Comm comm, PetscReal megabytes_per_array,
+                              double *gigabytes_per_second);
 
 class Benchmark {
  public:

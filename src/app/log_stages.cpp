@@ -18,6 +18,8 @@ PetscErrorCode RegisterLogStages() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-const LogStages &Stages() { return stages; }
+const LogStages &Stages() {
+  return stages;
+}
 
 }  // namespace softbody

@@ -20,25 +20,26 @@
 #include <cstring>
 #include <optional>
 
-#include "fem/assembly.hpp"
 #include "app/benchmark.hpp"
-#include "io/checkpoint.hpp"
-#include "contact/contact.hpp"
-#include "fem/deformation.hpp"
-#include "common/errors.hpp"
-#include "solvers/integrator.hpp"
 #include "app/log_stages.hpp"
-#include "io/output.hpp"
-#include "fem/partition.hpp"
 #include "app/report.hpp"
 #include "app/run_control.hpp"
+#include "common/errors.hpp"
+#include "contact/contact.hpp"
+#include "fem/assembly.hpp"
+#include "fem/deformation.hpp"
+#include "fem/partition.hpp"
+#include "io/checkpoint.hpp"
+#include "io/output.hpp"
 #include "io/scene.hpp"
+#include "solvers/integrator.hpp"
 #include "solvers/solver.hpp"
 
 static const char help[] =
     "softbody: implicit finite-element soft-body simulation (PETSc + MPI).\n"
     "Usage: mpirun -n 2 softbody -scene SCENE.txt [-output OUT.h5] [options] [PETSc options]\n"
-    "Solver presets: -options_file config/direct.opts (linear default), config/cg-warp.opts (corotational\n"
+    "Solver presets: -options_file config/direct.opts (linear default), config/cg-warp.opts "
+    "(corotational\n"
     "default), config/cg-gamg.opts, config/direct-mumps.opts, ...\n";
 
 using namespace softbody;
@@ -90,8 +91,8 @@ class Timed {
 
 // Collective. Stores the loop state after `step` as a checkpoint in the result file.
 PetscErrorCode Checkpoint(ResultWriter *writer, PetscInt step, PetscReal time,
-                          const std::vector<Deformation> &deformations, const ContactSolver &contact,
-                          const State &state) {
+                          const std::vector<Deformation> &deformations,
+                          const ContactSolver &contact, const State &state) {
   PetscFunctionBeginUser;
   LoopState loop;
   loop.step = step;
@@ -113,10 +114,11 @@ PetscErrorCode Resume(const LoopState &loop, const Scene &scene, const DofLayout
   PetscFunctionBeginUser;
   std::vector<Deformation> at_start = *deformations;
   bool changed;
-  PetscCall(ApplyDueDeformations(scene, layout, 0.0, 0.5 * dt_first, state.lumped_mass, initial_positions,
-                                 &at_start, &changed));
+  PetscCall(ApplyDueDeformations(scene, layout, 0.0, 0.5 * dt_first, state.lumped_mass,
+                                 initial_positions, &at_start, &changed));
   if (layout.num_free() > 0) PetscCall(integrator->PrimeSolver(initial_positions, dt_first));
-  for (size_t i = 0; i < deformations->size(); ++i) (*deformations)[i].applied = loop.deformations_applied[i] != 0;
+  for (size_t i = 0; i < deformations->size(); ++i)
+    (*deformations)[i].applied = loop.deformations_applied[i] != 0;
   contact->RestoreRestingContacts(loop.resting_contacts);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -124,7 +126,8 @@ PetscErrorCode Resume(const LoopState &loop, const Scene &scene, const DofLayout
 PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   PetscFunctionBeginUser;
   PetscCall(RegisterLogStages());
-  const PetscLogStage setup_stage = Stages().setup, step_stage = Stages().step, output_stage = Stages().output;
+  const PetscLogStage setup_stage = Stages().setup, step_stage = Stages().step,
+                      output_stage = Stages().output;
   RunReport report;
   std::optional<Timed> setup_timer(std::in_place, setup_stage, &report.times.setup);
 
@@ -200,7 +203,9 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   ResultWriter file;
   ResultWriter *writer = output.path.empty() ? nullptr : &file;
   const Continuation continuation{checkpoints.restart_path, start.frames};
-  if (writer) PetscCall(writer->Open(comm, output, scene, layout, state.positions, restart ? &continuation : nullptr));
+  if (writer)
+    PetscCall(writer->Open(comm, output, scene, layout, state.positions,
+                           restart ? &continuation : nullptr));
 
   // 7. A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once);
   //    collision structures and constraints, only as far as the scene needs them.
@@ -208,9 +213,10 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   const PetscReal dt_first = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start.time);
   if (has_unknowns) {
-    PetscCall(integrator.Setup(comm, scene, layout, elements, state.rest_positions, state.lumped_mass,
-                               integration));
-    PetscCall(integrator.SetBodies(OwnedVertexBodies(scene, layout), static_cast<int>(scene.bodies.size())));
+    PetscCall(integrator.Setup(comm, scene, layout, elements, state.rest_positions,
+                               state.lumped_mass, integration));
+    PetscCall(integrator.SetBodies(OwnedVertexBodies(scene, layout),
+                                   static_cast<int>(scene.bodies.size())));
   }
   if (!output.matrix_dir.empty() && has_unknowns)
     PetscCall(ExportMatrices(output.matrix_dir, layout, elements, integration.shear_scale,
@@ -222,13 +228,15 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   // 8. A fresh start applies the deformations due at t = 0 and writes frame 0;
   //    a restart takes over the checkpoint's loop state.
   if (restart) {
-    PetscCall(Resume(start, scene, layout, state, initial_positions, dt_first, &integrator, &contact,
-                     &deformations));
+    PetscCall(Resume(start, scene, layout, state, initial_positions, dt_first, &integrator,
+                     &contact, &deformations));
     PetscCall(VecDestroy(&initial_positions));
   } else {
-    PetscCall(ApplyDeformations(scene, layout, 0.0, integration.dt, state, &integrator, &deformations));
+    PetscCall(
+        ApplyDeformations(scene, layout, 0.0, integration.dt, state, &integrator, &deformations));
   }
-  if (has_unknowns) PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
+  if (has_unknowns)
+    PetscCall(integrator.Energies(state.positions, state.velocities, &report.energy));
   setup_timer.reset();
   if (writer && !restart) {
     Timed timer(output_stage, &report.times.output);
@@ -282,23 +290,25 @@ PetscErrorCode Run(MPI_Comm comm, int *exit_code) {
   if (has_unknowns) PetscCall(benchmark.Finish(comm, scene, &integrator, state.positions));
   if (writer) {
     const SolverStatistics &solver = integrator.statistics();
-    std::vector<std::pair<std::string, double>> statistics{{"setup_seconds", report.times.setup},
-                             {"loop_seconds", report.times.loop},
-                             {"output_seconds", report.times.output},
-                             {"steps", double(report.steps)},
-                             {"first_step", double(report.first_step)},
-                             {"final_time", report.final_time},
-                             {"ranks", double(layout.size)},
-                             {"dofs", 3.0 * layout.num_free()},
-                             {"solves", double(solver.solves)},
-                             {"solver_iterations", double(solver.total_iterations)},
-                             {"contact_solves", double(solver.contact_solves)},
-                             {"newton_iterations", double(solver.newton_iterations)},
-                             {"max_newton_iterations", double(solver.max_newton_iterations)},
-                             {"newton_stopped_short", double(solver.newton_stopped_short)},
-                             {"fallback_solves", double(solver.fallback_solves)},
-                             {"contact_seconds", contact.statistics().seconds}};
-    statistics.insert(statistics.end(), benchmark.attributes().begin(), benchmark.attributes().end());
+    std::vector<std::pair<std::string, double>> statistics{
+        {"setup_seconds", report.times.setup},
+        {"loop_seconds", report.times.loop},
+        {"output_seconds", report.times.output},
+        {"steps", double(report.steps)},
+        {"first_step", double(report.first_step)},
+        {"final_time", report.final_time},
+        {"ranks", double(layout.size)},
+        {"dofs", 3.0 * layout.num_free()},
+        {"solves", double(solver.solves)},
+        {"solver_iterations", double(solver.total_iterations)},
+        {"contact_solves", double(solver.contact_solves)},
+        {"newton_iterations", double(solver.newton_iterations)},
+        {"max_newton_iterations", double(solver.max_newton_iterations)},
+        {"newton_stopped_short", double(solver.newton_stopped_short)},
+        {"fallback_solves", double(solver.fallback_solves)},
+        {"contact_seconds", contact.statistics().seconds}};
+    statistics.insert(statistics.end(), benchmark.attributes().begin(),
+                      benchmark.attributes().end());
     PetscCall(writer->Close(statistics, stop_signal));
     report.frames = writer->frames();
   }
@@ -328,7 +338,8 @@ bool OptionsFilesReadable(int argc, char **argv) {
       std::fclose(file);
       continue;
     }
-    if (rank == 0) std::fprintf(stderr, "softbody: error: option -options_file: cannot open '%s'\n", path);
+    if (rank == 0)
+      std::fprintf(stderr, "softbody: error: option -options_file: cannot open '%s'\n", path);
     return false;
   }
   return true;

@@ -6,10 +6,10 @@
 #include <string>
 
 #include "contact/contact.hpp"
-#include "solvers/integrator.hpp"
-#include "io/output.hpp"
 #include "fem/partition.hpp"
+#include "io/output.hpp"
 #include "io/scene.hpp"
+#include "solvers/integrator.hpp"
 
 namespace softbody {
 
@@ -34,8 +34,8 @@ struct RunReport {
 // ksp may be null when the scene has no unknowns.
 PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                const IntegratorOptions &integration, const OutputOptions &output,
-                               const SolverStatistics &solver, KSP ksp, const ContactSolver &contact,
-                               const RunReport &report);
+                               const SolverStatistics &solver, KSP ksp,
+                               const ContactSolver &contact, const RunReport &report);
 
 // Rank 0 prints, on stderr, the one line that says a signal stopped the run and
 // what the result file holds.

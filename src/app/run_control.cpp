@@ -31,9 +31,12 @@ std::string Duration(double seconds) {
   char text[32];
   if (!(seconds >= 0) || seconds > 1e7) return "?";
   const long s = static_cast<long>(seconds + 0.5);
-  if (s < 60) std::snprintf(text, sizeof(text), "%ld s", s);
-  else if (s < 3600) std::snprintf(text, sizeof(text), "%ld min %02ld s", s / 60, s % 60);
-  else std::snprintf(text, sizeof(text), "%ld h %02ld min", s / 3600, (s % 3600) / 60);
+  if (s < 60)
+    std::snprintf(text, sizeof(text), "%ld s", s);
+  else if (s < 3600)
+    std::snprintf(text, sizeof(text), "%ld min %02ld s", s / 60, s % 60);
+  else
+    std::snprintf(text, sizeof(text), "%ld h %02ld min", s / 3600, (s % 3600) / 60);
   return text;
 }
 
@@ -56,18 +59,22 @@ bool StderrIsTerminal() {
 PetscErrorCode ProcessRunControlOptions(MPI_Comm comm, RunControlOptions *o) {
   PetscFunctionBeginUser;
   PetscBool progress_set = PETSC_FALSE;
-  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kBool, "-quiet"}, {OptionSyntax::kBool, "-progress"}}));
+  PetscCall(CheckOptionSyntax(
+      comm, {{OptionSyntax::kBool, "-quiet"}, {OptionSyntax::kBool, "-progress"}}));
   PetscOptionsBegin(comm, nullptr, "Run control", nullptr);
-  PetscCall(PetscOptionsBool("-quiet", "Print nothing but errors (no run summary, no progress line)",
-                             nullptr, o->quiet, &o->quiet, nullptr));
-  PetscCall(PetscOptionsBool("-progress",
-                             "Progress line on stderr (step, time, steps/s, ETA, solver iterations); "
-                             "default: when stderr is a terminal and not -quiet",
-                             nullptr, o->progress, &o->progress, &progress_set));
+  PetscCall(PetscOptionsBool("-quiet",
+                             "Print nothing but errors (no run summary, no progress line)", nullptr,
+                             o->quiet, &o->quiet, nullptr));
+  PetscCall(
+      PetscOptionsBool("-progress",
+                       "Progress line on stderr (step, time, steps/s, ETA, solver iterations); "
+                       "default: when stderr is a terminal and not -quiet",
+                       nullptr, o->progress, &o->progress, &progress_set));
   PetscOptionsEnd();
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  if (!progress_set) o->progress = rank == 0 && !o->quiet && StderrIsTerminal() ? PETSC_TRUE : PETSC_FALSE;
+  if (!progress_set)
+    o->progress = rank == 0 && !o->quiet && StderrIsTerminal() ? PETSC_TRUE : PETSC_FALSE;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -98,8 +105,8 @@ const char *SignalName(int signal) {
   return other;
 }
 
-PetscErrorCode ProgressLine::Start(MPI_Comm comm, const RunControlOptions &options, PetscInt first_step,
-                                   PetscInt last_step) {
+PetscErrorCode ProgressLine::Start(MPI_Comm comm, const RunControlOptions &options,
+                                   PetscInt first_step, PetscInt last_step) {
   PetscFunctionBeginUser;
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
@@ -137,11 +144,14 @@ void ProgressLine::Print(bool final_line) {
   const double elapsed = now - start_, done = static_cast<double>(step_ - first_);
   const double rate = elapsed > 0 ? done / elapsed : 0;
   char text[160];
-  int n = std::snprintf(text, sizeof(text), "step %" PetscInt_FMT "/%" PetscInt_FMT "  t = %.6g s  %.3g steps/s",
-                        step_, last_, (double)time_, rate);
+  int n = std::snprintf(text, sizeof(text),
+                        "step %" PetscInt_FMT "/%" PetscInt_FMT "  t = %.6g s  %.3g steps/s", step_,
+                        last_, (double)time_, rate);
   if (!final_line && rate > 0)
-    n += std::snprintf(text + n, sizeof(text) - n, "  ETA %s", Duration((last_ - step_) / rate).c_str());
-  if (final_line) n += std::snprintf(text + n, sizeof(text) - n, "  in %s", Duration(elapsed).c_str());
+    n += std::snprintf(text + n, sizeof(text) - n, "  ETA %s",
+                       Duration((last_ - step_) / rate).c_str());
+  if (final_line)
+    n += std::snprintf(text + n, sizeof(text) - n, "  in %s", Duration(elapsed).c_str());
   std::snprintf(text + n, sizeof(text) - n, "  solver its %" PetscInt_FMT, iterations_);
   std::string line(text);
   const size_t width = line.size();

@@ -44,7 +44,8 @@ const char *SignalName(int signal);
 class ProgressLine {
  public:
   // Not collective. Steps first_step + 1 .. last_step are to come.
-  PetscErrorCode Start(MPI_Comm comm, const RunControlOptions &options, PetscInt first_step, PetscInt last_step);
+  PetscErrorCode Start(MPI_Comm comm, const RunControlOptions &options, PetscInt first_step,
+                       PetscInt last_step);
   // After step `step` at time `time` (s); `iterations` of its last solve.
   void Update(PetscInt step, PetscReal time, PetscInt iterations);
   // Prints the final state and ends the line.

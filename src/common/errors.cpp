@@ -14,8 +14,8 @@ std::string Where(const std::string &path, long line, const std::string &what) {
 namespace {
 
 PetscErrorCode OneLineInputErrorHandler(MPI_Comm comm, int line, const char *function,
-                                        const char *file, PetscErrorCode code,
-                                        PetscErrorType type, const char *message, void *ctx) {
+                                        const char *file, PetscErrorCode code, PetscErrorType type,
+                                        const char *message, void *ctx) {
   if (code != PETSC_ERR_USER_INPUT && code != PETSC_ERR_NOT_CONVERGED)
     return PetscTraceBackErrorHandler(comm, line, function, file, code, type, message, ctx);
   if (type == PETSC_ERROR_INITIAL) {

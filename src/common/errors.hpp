@@ -33,13 +33,13 @@ PetscErrorCode InstallErrorHandler();
 
 // Runs `statement`; an InputError it throws becomes a collective PETSc user-input
 // error on `comm`. Use only in functions returning PetscErrorCode.
-#define SOFTBODY_CATCH_INPUT(comm, statement)                              \
-  do {                                                                     \
-    try {                                                                  \
-      statement;                                                           \
-    } catch (const softbody::InputError &input_error_) {                   \
-      SETERRQ(comm, PETSC_ERR_USER_INPUT, "%s", input_error_.what());      \
-    } catch (const std::bad_alloc &) {                                     \
-      SETERRQ(comm, PETSC_ERR_MEM, "out of memory while reading input");   \
-    }                                                                      \
+#define SOFTBODY_CATCH_INPUT(comm, statement)                            \
+  do {                                                                   \
+    try {                                                                \
+      statement;                                                         \
+    } catch (const softbody::InputError &input_error_) {                 \
+      SETERRQ(comm, PETSC_ERR_USER_INPUT, "%s", input_error_.what());    \
+    } catch (const std::bad_alloc &) {                                   \
+      SETERRQ(comm, PETSC_ERR_MEM, "out of memory while reading input"); \
+    }                                                                    \
   } while (0)

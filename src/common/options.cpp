@@ -45,8 +45,8 @@ PetscErrorCode CheckOptionSyntax(MPI_Comm comm, std::initializer_list<OptionSynt
           if (comma == std::string_view::npos) break;
           rest.remove_prefix(comma + 1);
         }
-        PetscCheck(ok, comm, PETSC_ERR_USER_INPUT, "option %s: '%s' is not a list of finite numbers",
-                   option.name, value);
+        PetscCheck(ok, comm, PETSC_ERR_USER_INPUT,
+                   "option %s: '%s' is not a list of finite numbers", option.name, value);
         break;
       }
       case OptionSyntax::kInteger:
@@ -54,8 +54,8 @@ PetscErrorCode CheckOptionSyntax(MPI_Comm comm, std::initializer_list<OptionSynt
                    "option %s: '%s' is not an integer", option.name, value);
         break;
       case OptionSyntax::kBool: {  // PetscOptionsBool's spellings; no value means true
-        static const char *const kBools[] = {"",  "1",   "0",    "true", "false", "yes", "no",
-                                             "on", "off", "bool", "",     nullptr};
+        static const char *const kBools[] = {"",   "1",  "0",   "true", "false", "yes",
+                                             "no", "on", "off", "bool", "",      nullptr};
         PetscCheck(IsChoice(value, kBools), comm, PETSC_ERR_USER_INPUT,
                    "option %s: '%s' is not true or false", option.name, value);
         break;

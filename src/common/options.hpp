@@ -14,8 +14,8 @@ namespace softbody {
 
 struct OptionSyntax {
   enum Kind { kReal, kRealList, kInteger, kChoice, kBool } kind;  // kRealList: comma-separated
-  const char *name;                       // "-dt"
-  const char *const *choices = nullptr;   // kChoice: PetscOptionsEnum-style list
+  const char *name;                                               // "-dt"
+  const char *const *choices = nullptr;  // kChoice: PetscOptionsEnum-style list
 };
 
 // Collective. Fails with PETSC_ERR_USER_INPUT "option -dt: 'abc' is not a

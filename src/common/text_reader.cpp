@@ -71,8 +71,10 @@ bool TextReader::NextLine(std::vector<std::string_view> *tokens) {
 
 double TextReader::ParseReal(std::string_view token, const char *what) const {
   double value = 0;
-  if (!ParseNumber(token, &value)) Fail(std::string(what) + ": '" + std::string(token) + "' is not a number");
-  if (!std::isfinite(value)) Fail(std::string(what) + ": '" + std::string(token) + "' is not finite");
+  if (!ParseNumber(token, &value))
+    Fail(std::string(what) + ": '" + std::string(token) + "' is not a number");
+  if (!std::isfinite(value))
+    Fail(std::string(what) + ": '" + std::string(token) + "' is not finite");
   return value;
 }
 

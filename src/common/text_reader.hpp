@@ -55,8 +55,8 @@ class TextReader {
   std::string path_;
   std::string text_;
   size_t pos_ = 0;
-  long line_ = 1;             // line of the reading position
-  long token_line_ = 1;       // line of the token returned last
+  long line_ = 1;        // line of the reading position
+  long token_line_ = 1;  // line of the token returned last
 };
 
 }  // namespace softbody

@@ -24,43 +24,48 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
   PetscReal bounds[2] = {o->edge_lower, o->edge_upper};
   PetscInt nbounds = 2;
   PetscOptionsBegin(comm, nullptr, "Collisions and constraints", nullptr);
-  PetscCall(PetscOptionsReal("-ground", "Ground plane height y0 (m): vertices stay at y >= y0 (off if unset)",
+  PetscCall(PetscOptionsReal("-ground",
+                             "Ground plane height y0 (m): vertices stay at y >= y0 (off if unset)",
                              nullptr, o->ground_y, &o->ground_y, &o->ground));
-  PetscCall(PetscOptionsReal("-restitution",
-                             "Coefficient of restitution e of collisions, 0 (no bounce) to 1 (elastic)",
-                             nullptr, o->restitution, &o->restitution, nullptr));
-  PetscCall(PetscOptionsReal("-friction",
-                             "Coulomb friction coefficient mu of collisions (0: frictionless, as the "
-                             "coursework)",
-                             nullptr, o->friction, &o->friction, nullptr));
-  PetscCall(PetscOptionsBool("-sharp_edges",
-                             "Fixed bodies' sharp edges and corners push free bodies' faces (not only free "
-                             "vertices against fixed faces)",
-                             nullptr, o->sharp_edges, &o->sharp_edges, nullptr));
-  PetscCall(PetscOptionsBool("-impulse_spreading",
-                             "Share each collision impulse among all vertices of the body, by inverse "
-                             "squared distance",
-                             nullptr, o->impulse_spreading, &o->impulse_spreading, nullptr));
+  PetscCall(PetscOptionsReal(
+      "-restitution", "Coefficient of restitution e of collisions, 0 (no bounce) to 1 (elastic)",
+      nullptr, o->restitution, &o->restitution, nullptr));
+  PetscCall(
+      PetscOptionsReal("-friction",
+                       "Coulomb friction coefficient mu of collisions (0: frictionless, as the "
+                       "coursework)",
+                       nullptr, o->friction, &o->friction, nullptr));
+  PetscCall(PetscOptionsBool(
+      "-sharp_edges",
+      "Fixed bodies' sharp edges and corners push free bodies' faces (not only free "
+      "vertices against fixed faces)",
+      nullptr, o->sharp_edges, &o->sharp_edges, nullptr));
+  PetscCall(
+      PetscOptionsBool("-impulse_spreading",
+                       "Share each collision impulse among all vertices of the body, by inverse "
+                       "squared distance",
+                       nullptr, o->impulse_spreading, &o->impulse_spreading, nullptr));
   PetscCall(PetscOptionsString("-constraints",
                                "Distance constraints file: n, then 'm1 v1 m2 v2 [lo hi]' per line",
                                nullptr, path, path, sizeof(path), nullptr));
-  PetscCall(PetscOptionsRealArray("-edge_bounds",
-                                  "Keep every boundary edge of the free bodies within lo,hi x its rest "
-                                  "length (off if unset)",
-                                  nullptr, bounds, &nbounds, &o->edge_bounds));
+  PetscCall(
+      PetscOptionsRealArray("-edge_bounds",
+                            "Keep every boundary edge of the free bodies within lo,hi x its rest "
+                            "length (off if unset)",
+                            nullptr, bounds, &nbounds, &o->edge_bounds));
   PetscOptionsEnd();
   o->constraints_path = path;
-  PetscCheck(o->friction >= 0, comm, PETSC_ERR_USER_INPUT, "option -friction: must be >= 0 (got %g)",
-             (double)o->friction);
+  PetscCheck(o->friction >= 0, comm, PETSC_ERR_USER_INPUT,
+             "option -friction: must be >= 0 (got %g)", (double)o->friction);
   PetscCheck(o->restitution >= 0 && o->restitution <= 1, comm, PETSC_ERR_USER_INPUT,
              "option -restitution: must lie in [0, 1] (got %g)", (double)o->restitution);
   if (o->edge_bounds) {
     PetscCheck(nbounds == 2, comm, PETSC_ERR_USER_INPUT, "option -edge_bounds: expected lo,hi");
     o->edge_lower = bounds[0];
     o->edge_upper = bounds[1];
-    PetscCheck(o->edge_lower > 0 && o->edge_lower <= 1 && o->edge_upper >= 1, comm, PETSC_ERR_USER_INPUT,
-               "option -edge_bounds: need 0 < lo <= 1 <= hi (got %g,%g)", (double)o->edge_lower,
-               (double)o->edge_upper);
+    PetscCheck(o->edge_lower > 0 && o->edge_lower <= 1 && o->edge_upper >= 1, comm,
+               PETSC_ERR_USER_INPUT, "option -edge_bounds: need 0 < lo <= 1 <= hi (got %g,%g)",
+               (double)o->edge_lower, (double)o->edge_upper);
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -90,8 +95,8 @@ std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const S
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(n) + " constraint lines, found " + std::to_string(i));
     if (fields.size() != 4 && fields.size() != 6)
-      in.Fail("expected 'm1 v1 m2 v2' or 'm1 v1 m2 v2 lo hi', found " + std::to_string(fields.size()) +
-              " fields");
+      in.Fail("expected 'm1 v1 m2 v2' or 'm1 v1 m2 v2 lo hi', found " +
+              std::to_string(fields.size()) + " fields");
     const auto [a, xa] = vertex(fields[0], fields[1]);
     const auto [b, xb] = vertex(fields[2], fields[3]);
     const double rest = (xb - xa).norm();
@@ -171,14 +176,18 @@ std::vector<FeatureCandidate> FeaturePoints(const TetMesh &mesh, double spacing)
   for (const auto &[edge, normals] : faces_of_edge) {
     if (normals.size() == 2 && normals[0].dot(normals[1]) >= std::cos(kFeatureAngle)) continue;
     std::vector<std::pair<Point, Point>> pairs;
-    if (normals.size() == 2) pairs.emplace_back(normals[0], normals[1]);
-    else for (const Point &n : normals) pairs.emplace_back(n, n);
-    for (const int32_t v : {edge.first, edge.second}) corners[v].insert(corners[v].end(), pairs.begin(), pairs.end());
+    if (normals.size() == 2)
+      pairs.emplace_back(normals[0], normals[1]);
+    else
+      for (const Point &n : normals) pairs.emplace_back(n, n);
+    for (const int32_t v : {edge.first, edge.second})
+      corners[v].insert(corners[v].end(), pairs.begin(), pairs.end());
     const Point a = mesh.vertices.row(edge.first), b = mesh.vertices.row(edge.second);
     const int pieces = static_cast<int>(std::ceil((b - a).norm() / spacing));
     for (int k = 1; k < pieces; ++k) points.push_back({a + (b - a) * (double(k) / pieces), pairs});
   }
-  for (const auto &[v, pairs] : corners) points.push_back({mesh.vertices.row(v).transpose(), pairs});
+  for (const auto &[v, pairs] : corners)
+    points.push_back({mesh.vertices.row(v).transpose(), pairs});
   return points;
 }
 
@@ -222,11 +231,13 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     const Body &body = scene.bodies[b];
     for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
       body_of_[body.first_vertex + v] = static_cast<int32_t>(b);
-      for (int c = 0; c < 3; ++c) world_x_[3 * (body.first_vertex + v) + c] = body.mesh.vertices(v, c);
+      for (int c = 0; c < 3; ++c)
+        world_x_[3 * (body.first_vertex + v) + c] = body.mesh.vertices(v, c);
     }
     double length = 0;
     const auto edges = BoundaryEdges(body.mesh);
-    for (const auto &[a, c] : edges) length += (body.mesh.vertices.row(c) - body.mesh.vertices.row(a)).norm();
+    for (const auto &[a, c] : edges)
+      length += (body.mesh.vertices.row(c) - body.mesh.vertices.row(a)).norm();
     body_edge_[b] = edges.empty() ? 1.0 : length / edges.size();
   }
   // The fixed bodies' sharp features, sampled at half the finest free body's
@@ -237,16 +248,19 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     for (size_t b = 0; b < scene.bodies.size(); ++b)
       if (!scene.bodies[b].fixed) spacing = std::min(spacing, 0.5 * body_edge_[b]);
     for (size_t b = 0; b < scene.bodies.size(); ++b)
-      if (scene.bodies[b].fixed) feature_candidates[b] = FeaturePoints(scene.bodies[b].mesh, spacing);
+      if (scene.bodies[b].fixed)
+        feature_candidates[b] = FeaturePoints(scene.bodies[b].mesh, spacing);
   }
   track_free_ = free_obstacles_ || !feature_candidates.empty();
-  gather_always_ = free_obstacles_ || !constraints_.empty() || (options.impulse_spreading && active());
+  gather_always_ =
+      free_obstacles_ || !constraints_.empty() || (options.impulse_spreading && active());
   gather_ = gather_always_ || track_free_;
 
   owned_natural_.resize(layout.local_count());
   for (PetscInt f = 0; f < layout.num_free(); ++f) {
     const PetscInt p = layout.petsc_of_free[f] - layout.local_begin();
-    if (p >= 0 && p < layout.local_count()) owned_natural_[p] = static_cast<int32_t>(layout.natural_of_free[f]);
+    if (p >= 0 && p < layout.local_count())
+      owned_natural_[p] = static_cast<int32_t>(layout.natural_of_free[f]);
   }
 
   // Inverse masses on every rank (natural order): fixed and stray vertices 0.
@@ -266,17 +280,19 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
     PetscCall(VecGetArrayRead(lumped_mass, &mass));
     for (PetscInt f = 0; f < layout.num_free(); ++f) {
       const PetscInt p = layout.petsc_of_free[f] - layout.local_begin();
-      if (p >= 0 && p < layout.local_count()) inverse_mass_[layout.natural_of_free[f]] = 1.0 / mass[3 * p];
+      if (p >= 0 && p < layout.local_count())
+        inverse_mass_[layout.natural_of_free[f]] = 1.0 / mass[3 * p];
     }
     PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
   }
 
   // Body masses: the owned vertices' lumped masses, summed over ranks.
   std::vector<double> owned_mass(scene.bodies.size(), 0.0);
-  for (const int32_t natural : owned_natural_) owned_mass[body_of_[natural]] += 1.0 / inverse_mass_[natural];
+  for (const int32_t natural : owned_natural_)
+    owned_mass[body_of_[natural]] += 1.0 / inverse_mass_[natural];
   body_mass_.resize(scene.bodies.size());
-  PetscCallMPI(MPI_Allreduce(owned_mass.data(), body_mass_.data(), static_cast<int>(owned_mass.size()),
-                             MPI_DOUBLE, MPI_SUM, comm));
+  PetscCallMPI(MPI_Allreduce(owned_mass.data(), body_mass_.data(),
+                             static_cast<int>(owned_mass.size()), MPI_DOUBLE, MPI_SUM, comm));
 
   if (obstacles_) {
     for (size_t b = 0; b < scene.bodies.size(); ++b) {
@@ -294,15 +310,17 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
       auto &tets = body.fixed ? fixed_tets_ : free_tets_;
       auto &triangles = body.fixed ? fixed_triangles_ : free_triangles_;
       for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-        tets.push_back({body.first_vertex + body.mesh.tets(t, 0), body.first_vertex + body.mesh.tets(t, 1),
-                        body.first_vertex + body.mesh.tets(t, 2), body.first_vertex + body.mesh.tets(t, 3),
-                        static_cast<int32_t>(b)});
+        tets.push_back({body.first_vertex + body.mesh.tets(t, 0),
+                        body.first_vertex + body.mesh.tets(t, 1),
+                        body.first_vertex + body.mesh.tets(t, 2),
+                        body.first_vertex + body.mesh.tets(t, 3), static_cast<int32_t>(b)});
       for (Eigen::Index f = 0; f < boundary.rows(); ++f)
         triangles.push_back({body.first_vertex + boundary(f, 0), body.first_vertex + boundary(f, 1),
                              body.first_vertex + boundary(f, 2), static_cast<int32_t>(b)});
     }
     std::sort(query_vertices_.begin(), query_vertices_.end());
-    query_vertices_.erase(std::unique(query_vertices_.begin(), query_vertices_.end()), query_vertices_.end());
+    query_vertices_.erase(std::unique(query_vertices_.begin(), query_vertices_.end()),
+                          query_vertices_.end());
     BuildObstacleGrids(true);
     // A feature point is kept while one of its edges is a real edge of the
     // fixed bodies together: both of its faces free of other fixed bodies
@@ -318,9 +336,11 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
         return false;
       };
       for (const FeatureCandidate &candidate : feature_candidates[b]) {
-        const bool real = std::any_of(candidate.edges.begin(), candidate.edges.end(), [&](const auto &faces) {
-          return !covered(candidate.point + probe * faces.first) && !covered(candidate.point + probe * faces.second);
-        });
+        const bool real =
+            std::any_of(candidate.edges.begin(), candidate.edges.end(), [&](const auto &faces) {
+              return !covered(candidate.point + probe * faces.first) &&
+                     !covered(candidate.point + probe * faces.second);
+            });
         if (real) feature_point_.push_back(candidate.point);
       }
       feature_begin_.push_back(static_cast<int32_t>(feature_point_.size()));
@@ -337,13 +357,16 @@ std::string ContactSolver::Description() const {
     std::snprintf(buffer, sizeof(buffer), "ground at y = %g m", options_.ground_y);
     add(buffer);
   }
-  if (obstacles_) add(std::to_string(fixed_tets_.size()) + " fixed and " + std::to_string(free_tets_.size()) +
-                      " moving obstacle tets in uniform grids");
-  if (!feature_point_.empty()) add(std::to_string(feature_point_.size()) + " points on fixed bodies' sharp edges");
+  if (obstacles_)
+    add(std::to_string(fixed_tets_.size()) + " fixed and " + std::to_string(free_tets_.size()) +
+        " moving obstacle tets in uniform grids");
+  if (!feature_point_.empty())
+    add(std::to_string(feature_point_.size()) + " points on fixed bodies' sharp edges");
   if (!constraints_.empty()) add(std::to_string(constraints_.size()) + " distance constraints");
   if (active() && options_.impulse_spreading) add("impulse spreading");
   if (active() && (ground_ || obstacles_)) {
-    std::snprintf(buffer, sizeof(buffer), "restitution %g, friction %g", options_.restitution, options_.friction);
+    std::snprintf(buffer, sizeof(buffer), "restitution %g, friction %g", options_.restitution,
+                  options_.friction);
     add(buffer);
   }
   return text;
@@ -357,7 +380,8 @@ void ContactSolver::BuildObstacleGrids(bool fixed_part) {
     const Body &body = scene_->bodies[b];
     if (body.fixed != fixed_part) continue;
     body_box_[b] = Box();
-    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) body_box_[b].Extend(WorldPoint(body.first_vertex + v));
+    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
+      body_box_[b].Extend(WorldPoint(body.first_vertex + v));
   }
   if (!fixed_part) {
     free_grids_current_ = false;
@@ -367,8 +391,9 @@ void ContactSolver::BuildObstacleGrids(bool fixed_part) {
 }
 
 void ContactSolver::BuildGrids(const std::vector<std::array<int32_t, 5>> &tets,
-                               const std::vector<std::array<int32_t, 4>> &triangles, std::vector<Box> *tet_boxes,
-                               UniformGrid *tet_grid, UniformGrid *triangle_grid) const {
+                               const std::vector<std::array<int32_t, 4>> &triangles,
+                               std::vector<Box> *tet_boxes, UniformGrid *tet_grid,
+                               UniformGrid *triangle_grid) const {
   tet_boxes->assign(tets.size(), Box());
   for (size_t t = 0; t < tets.size(); ++t)
     for (int a = 0; a < 4; ++a) (*tet_boxes)[t].Extend(WorldPoint(tets[t][a]));
@@ -410,8 +435,8 @@ PetscErrorCode ContactSolver::Refresh(Vec x, Vec v, PetscReal dt, bool features)
     PetscCall(VecRestoreArrayRead(v, &av));
     for (const auto &[local, contact] : resting_)
       if (contact.feature >= 0) bounds[6 * bodies] = 1;
-    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bounds.data(), static_cast<int>(bounds.size()), MPI_DOUBLE, MPI_MAX,
-                               comm_));
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bounds.data(), static_cast<int>(bounds.size()),
+                               MPI_DOUBLE, MPI_MAX, comm_));
     features_near_ = bounds[6 * bodies] > 0;
     for (size_t b = 0; b < bodies && !features_near_; ++b) {
       if (scene_->bodies[b].fixed) continue;
@@ -452,7 +477,13 @@ PetscErrorCode ContactSolver::Gather(Vec x, Vec v, PetscReal dt) {
 
 bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
   if (obstacle < 0) {  // the ground
-    *hit = {Point(p[0], options_.ground_y, p[2]), Point(0, 1, 0), Point::Zero(), 0.0, -1, -1, Eigen::Vector3d::Zero()};
+    *hit = {Point(p[0], options_.ground_y, p[2]),
+            Point(0, 1, 0),
+            Point::Zero(),
+            0.0,
+            -1,
+            -1,
+            Eigen::Vector3d::Zero()};
     return true;
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
@@ -460,8 +491,8 @@ bool ContactSolver::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *
   const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
   const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
   if (grid.empty()) return false;
-  const double limit = (grid.bounds().upper - grid.bounds().lower).norm() + (grid.bounds().upper - p).norm() +
-                       (grid.bounds().lower - p).norm();
+  const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
+                       (grid.bounds().upper - p).norm() + (grid.bounds().lower - p).norm();
   double best = 1e300;
   // Growing neighbourhoods until the closest point found lies within the searched one.
   for (double radius = grid.cell_size(); best > radius && radius < 2 * limit; radius *= 2)
@@ -497,20 +528,22 @@ bool ContactSolver::InsideBody(const Point &p, int32_t obstacle) const {
   (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
     const auto &tet = tets[t];
     if (inside || tet[4] != obstacle || !tet_boxes[t].Contains(p, 1e-12)) return;
-    inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]))
+    inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                         WorldPoint(tet[3]))
                  .minCoeff() >= -1e-12;
   });
   return inside;
 }
 
-bool ContactSolver::LocateInFreeBody(const Point &p, int32_t body, double margin, Point *velocity) const {
+bool ContactSolver::LocateInFreeBody(const Point &p, int32_t body, double margin,
+                                     Point *velocity) const {
   EnsureFreeGrids();
   bool found = false;
   free_tet_grid_.ForEachNear(p, 0.0, [&](int32_t t) {
     const auto &tet = free_tets_[t];
     if (found || tet[4] != body || !free_tet_box_[t].Contains(p, 1e-12)) return;
-    const Eigen::Vector4d w =
-        Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]));
+    const Eigen::Vector4d w = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]),
+                                          WorldPoint(tet[2]), WorldPoint(tet[3]));
     if (!(w.minCoeff() > margin)) return;
     found = true;
     *velocity = Point::Zero();
@@ -519,7 +552,8 @@ bool ContactSolver::LocateInFreeBody(const Point &p, int32_t body, double margin
   return found;
 }
 
-bool ContactSolver::EntryOnBody(const Point &start, const Point &end, int32_t obstacle, SurfaceHit *hit) const {
+bool ContactSolver::EntryOnBody(const Point &start, const Point &end, int32_t obstacle,
+                                SurfaceHit *hit) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
   const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
@@ -533,14 +567,16 @@ bool ContactSolver::EntryOnBody(const Point &start, const Point &end, int32_t ob
     const Point normal = (b - a).cross(c - a);
     double along;
     Eigen::Vector3d w;
-    if (normal.dot(direction) >= 0 || !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) || along >= first)
+    if (normal.dot(direction) >= 0 || !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) ||
+        along >= first)
       return;
     first = along;
     hit->point = start + along * direction;
     hit->normal = normal.normalized();
     hit->velocity = w[0] * Point(&world_v_[3 * tri[0]]) + w[1] * Point(&world_v_[3 * tri[1]]) +
                     w[2] * Point(&world_v_[3 * tri[2]]);
-    hit->inverse_mass = w[0] * inverse_mass_[tri[0]] + w[1] * inverse_mass_[tri[1]] + w[2] * inverse_mass_[tri[2]];
+    hit->inverse_mass =
+        w[0] * inverse_mass_[tri[0]] + w[1] * inverse_mass_[tri[1]] + w[2] * inverse_mass_[tri[2]];
     hit->body = obstacle;
     hit->triangle = t;
     hit->weights = w;
@@ -565,8 +601,10 @@ bool ContactSolver::FindPenetration(const Point &p, int32_t body, const VertexOb
     int32_t inside = -1;
     (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
       const auto &tet = tets[t];
-      if (inside >= 0 || tet[4] == body || skip.Has(tet[4]) || !tet_boxes[t].Contains(p, 1e-12)) return;
-      if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]), WorldPoint(tet[3]))
+      if (inside >= 0 || tet[4] == body || skip.Has(tet[4]) || !tet_boxes[t].Contains(p, 1e-12))
+        return;
+      if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                      WorldPoint(tet[3]))
               .minCoeff() >= -1e-12)  // faces count: p may lie on one shared by two tets
         inside = tet[4];
     });
@@ -575,8 +613,9 @@ bool ContactSolver::FindPenetration(const Point &p, int32_t body, const VertexOb
   return false;
 }
 
-void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0, const Point &predicted,
-                              const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh) {
+void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0,
+                              const Point &predicted, const Point &velocity, PetscReal dt,
+                              const SurfaceHit &hit, bool fresh) {
   const Point &n = hit.normal;
   const double w = inverse_mass_[natural], w_obstacle = hit.inverse_mass;
   const double share = w / (w + w_obstacle);  // 1 against a fixed obstacle
@@ -591,8 +630,8 @@ void ContactSolver::Constrain(PetscInt local, int32_t natural, const Point &x0, 
   // without separating them (the fertility scene's statues: 5.8e12 J to 2e13 J
   // in 4 s, overlap growing).
   const double edge = body_edge_[body_of_[natural]];
-  const bool deep_in_free_body = hit.body >= 0 && !scene_->bodies[hit.body].fixed &&
-                                 n.dot(hit.point - x0) > 0.1 * edge;
+  const bool deep_in_free_body =
+      hit.body >= 0 && !scene_->bodies[hit.body].fixed && n.dot(hit.point - x0) > 0.1 * edge;
   const double recovery = n.dot(hit.velocity) + (deep_in_free_body ? 0.0 : 0.1 * edge / dt);
   double normal_velocity = n.dot(target - x0) / dt;
   if (n.dot(hit.point - x0) > 0) normal_velocity = std::min(normal_velocity, recovery);
@@ -608,8 +647,8 @@ PetscInt ContactSolver::LocalOf(int32_t natural) const {
   return local >= 0 && local < layout_->local_count() ? local : -1;
 }
 
-PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh,
-                                         bool limit) {
+PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt,
+                                         bool fresh, bool limit) {
   const Point m = -hit.normal;
   const auto &triangle = free_triangles_[hit.triangle];
   const int32_t obstacle = FeatureBody(feature);
@@ -623,7 +662,8 @@ PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit,
   // a fixed surface alone pushed the others by up to d / w_k: the edge sank
   // deeper into the stairway's bunny.)
   std::array<bool, 3> moves;
-  for (int k = 0; k < 3; ++k) moves[k] = hit.weights[k] >= 1e-3 && !OnFixedSurface(WorldPoint(triangle[k]), m);
+  for (int k = 0; k < 3; ++k)
+    moves[k] = hit.weights[k] >= 1e-3 && !OnFixedSurface(WorldPoint(triangle[k]), m);
   if (std::none_of(moves.begin(), moves.end(), [](bool b) { return b; }))
     for (int k = 0; k < 3; ++k) moves[k] = hit.weights[k] >= 1e-3;
   double squares = 0;
@@ -637,7 +677,8 @@ PetscInt ContactSolver::ConstrainFeature(int32_t feature, const SurfaceHit &hit,
     const Point velocity(&world_v_[3 * natural]);
     const double push = hit.weights[k] * depth / squares / dt;  // d_k / dt
     const VelocityConstraint constraint{local, m, m.dot(velocity) + push, true};
-    const Contact contact{natural, obstacle, 0.0, fresh && m.dot(velocity) < -bounce_speed_, feature};
+    const Contact contact{natural, obstacle, 0.0, fresh && m.dot(velocity) < -bounce_speed_,
+                          feature};
     ptrdiff_t &slot = feature_contact_[local];
     if (slot >= 0) {  // the vertex's larger push stays
       const VelocityConstraint &held = velocity_constraints_[slot];
@@ -676,18 +717,23 @@ PetscInt ContactSolver::AddFeaturePenetrations(PetscReal dt) {
     const int32_t body = static_cast<int32_t>(b);
     for (size_t f = 0; f + 1 < feature_begin_.size(); ++f) {
       // Broad phase: the fixed body's box meets the free one's.
-      if (feature_begin_[f] == feature_begin_[f + 1] || !body_box_[f].Overlaps(body_box_[b])) continue;
+      if (feature_begin_[f] == feature_begin_[f + 1] || !body_box_[f].Overlaps(body_box_[b]))
+        continue;
       for (int32_t i = feature_begin_[f]; i < feature_begin_[f + 1]; ++i) {
         const Point &p = feature_point_[i];
         Point velocity;
-        if (feature_held_[i] || !body_box_[b].Contains(p) || !LocateInFreeBody(p, body, 1e-6, &velocity)) continue;
+        if (feature_held_[i] || !body_box_[b].Contains(p) ||
+            !LocateInFreeBody(p, body, 1e-6, &velocity))
+          continue;
         // Touching (within kFeatureTolerance edge lengths of the surface, e.g.
         // a fixed edge flush with a free face) is no penetration. Else p
         // pushes the triangle it entered through, on its path relative to the
         // body (p + dt v -> p, v the body's velocity at p); if it was inside
         // already, the closest one, and it comes out gradually.
         SurfaceHit hit;
-        if (!ClosestOnBody(p, body, &hit) || (hit.point - p).norm() < kFeatureTolerance * body_edge_[b]) continue;
+        if (!ClosestOnBody(p, body, &hit) ||
+            (hit.point - p).norm() < kFeatureTolerance * body_edge_[b])
+          continue;
         const bool entered = EntryOnBody(p + dt * velocity, p, body, &hit);
         feature_held_[i] = 1;
         found += ConstrainFeature(i, hit, dt, true, !entered);
@@ -731,7 +777,9 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
           !ClosestOnBody(feature_point_[contact.feature], body_of_[contact.natural], &hit))
         continue;
       const auto &triangle = free_triangles_[hit.triangle];
-      if (std::find(triangle.begin(), triangle.begin() + 3, contact.natural) == triangle.begin() + 3) continue;
+      if (std::find(triangle.begin(), triangle.begin() + 3, contact.natural) ==
+          triangle.begin() + 3)
+        continue;
       feature_held_[contact.feature] = 1;
       const bool unconstrained = feature_contact_[local] < 0;
       ConstrainFeature(contact.feature, hit, dt, false, true);
@@ -740,9 +788,11 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
       fixed_side.normal = -hit.normal;
       fixed_side.velocity = Point::Zero();
       fixed_side.inverse_mass = 0;
-      if (appended && options_.friction > 0) Stick(local, velocity, fixed_side, feature_contact_[local]);
+      if (appended && options_.friction > 0)
+        Stick(local, velocity, fixed_side, feature_contact_[local]);
     } else if (ClosestOnBody(position + dt * velocity, contact.body, &hit)) {
-      Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt, hit, false);
+      Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt, hit,
+                false);
       if (options_.friction > 0) Stick(local, velocity, hit, contacts_.size() - 1);
     }
   }
@@ -752,19 +802,22 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-void ContactSolver::Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit, size_t contact) {
+void ContactSolver::Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit,
+                          size_t contact) {
   const Point &n = hit.normal;
   const Point relative = velocity - hit.velocity;
   // The friction response of a sticking step leaves exactly no tangential
   // relative velocity (up to round-off).
-  if ((relative - n.dot(relative) * n).norm() > 1e-9 * (velocity.norm() + hit.velocity.norm())) return;
+  if ((relative - n.dot(relative) * n).norm() > 1e-9 * (velocity.norm() + hit.velocity.norm()))
+    return;
   const Point t1 = n.unitOrthogonal(), t2 = n.cross(t1);
   tangent_constraints_.push_back({local, t1, t1.dot(hit.velocity), hit.inverse_mass == 0});
   tangent_constraints_.push_back({local, t2, t2.dot(hit.velocity), hit.inverse_mass == 0});
   sticking_contact_.push_back(contact);
 }
 
-PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released) {
+PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs,
+                                              bool *released) {
   PetscFunctionBeginUser;
   Timing timing(this);
   friction_in_solve_.resize(contacts_.size(), 0);
@@ -778,7 +831,8 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
   for (Slip &slip : slips_) {
     const double limit = options_.friction * std::max(reactions[slip.contact], 0.0);
     if (std::abs(limit - slip.magnitude) <= 1e-6 * std::max(limit, slip.magnitude)) continue;
-    for (int c = 0; c < 3; ++c) b[3 * slip.vertex + c] += (limit - slip.magnitude) * slip.direction[c];
+    for (int c = 0; c < 3; ++c)
+      b[3 * slip.vertex + c] += (limit - slip.magnitude) * slip.direction[c];
     slip.magnitude = limit;
     ++local_released;
   }
@@ -812,7 +866,8 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
 PetscErrorCode ContactSolver::CountConstraints() {
   PetscFunctionBeginUser;
   solve_constraints_ = velocity_constraints_;
-  solve_constraints_.insert(solve_constraints_.end(), tangent_constraints_.begin(), tangent_constraints_.end());
+  solve_constraints_.insert(solve_constraints_.end(), tangent_constraints_.begin(),
+                            tangent_constraints_.end());
   const PetscInt local = static_cast<PetscInt>(solve_constraints_.size());
   PetscCallMPI(MPIU_Allreduce(&local, &global_constraints_, 1, MPIU_INT, MPI_SUM, comm_));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -844,7 +899,8 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
     // instead of 4.5e-3: the closest point stays.)
     if (hit.body >= 0 && scene_->bodies[hit.body].fixed) {
       SurfaceHit entry;
-      if (!InsideBody(start, hit.body) && EntryOnBody(start, predicted, hit.body, &entry)) hit = entry;
+      if (!InsideBody(start, hit.body) && EntryOnBody(start, predicted, hit.body, &entry))
+        hit = entry;
     }
     Constrain(local, natural, start, predicted, velocity, dt, hit, true);
     ++found;
@@ -867,7 +923,8 @@ PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool 
 }
 
 // Last resort: vertices still inside an obstacle after the step go to its surface.
-PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions) {
+PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v,
+                                               std::vector<Collision> *collisions) {
   PetscFunctionBeginUser;
   PetscInt projected = 0;
   auto project = [&](PetscInt local, int32_t natural) {
@@ -883,13 +940,15 @@ PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, s
     // would change the momentum of the pair).
     const double depth = (hit.point - position).norm(), edge = body_edge_[body_of_[natural]];
     const bool immobile = hit.body < 0 || scene_->bodies[hit.body].fixed;
-    if (depth > 0.1 * edge || (constrained_[local].count && (depth < 1e-6 * edge || !immobile))) return;
+    if (depth > 0.1 * edge || (constrained_[local].count && (depth < 1e-6 * edge || !immobile)))
+      return;
     const Point velocity(&v[3 * local]);
     const double approach = hit.normal.dot(velocity - hit.velocity);
     const Point target = hit.point + 1e-9 * body_edge_[body_of_[natural]] * hit.normal;
     for (int c = 0; c < 3; ++c) x[3 * local + c] = target[c];
-    if (approach < 0) collisions->push_back({natural, body_of_[natural], target,
-                                             -(1 + options_.restitution) * approach * hit.normal});
+    if (approach < 0)
+      collisions->push_back({natural, body_of_[natural], target,
+                             -(1 + options_.restitution) * approach * hit.normal});
     ++projected;
   };
   if (obstacles_)
@@ -901,7 +960,8 @@ PetscErrorCode ContactSolver::ProjectRemaining(PetscScalar *x, PetscScalar *v, s
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions, bool *changed) {
+PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions,
+                                      bool *changed) {
   PetscFunctionBeginUser;
   Timing timing(this);
   *changed = false;
@@ -918,7 +978,8 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
     // Sticking contacts: where their tangent pair's reactions sit.
     std::vector<ptrdiff_t> tangent_reaction(contacts_.size(), -1);
     for (size_t k = 0; k < sticking_contact_.size(); ++k)
-      tangent_reaction[sticking_contact_[k]] = static_cast<ptrdiff_t>(velocity_constraints_.size() + 2 * k);
+      tangent_reaction[sticking_contact_[k]] =
+          static_cast<ptrdiff_t>(velocity_constraints_.size() + 2 * k);
     for (size_t i = 0; i < contacts_.size(); ++i) {
       const Contact &contact = contacts_[i];
       const VelocityConstraint &constraint = velocity_constraints_[i];
@@ -930,14 +991,17 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
       // mu lambda / m of its tangential velocity relative to the obstacle here.
       SurfaceHit hit;
       const double limit = options_.friction * std::max(reactions[i], 0.0);
-      const bool in_solve = tangent_reaction[i] >= 0 || (i < friction_in_solve_.size() && friction_in_solve_[i]);
-      if (!in_solve && options_.friction > 0 && ClosestOnBody(Point(&lx[3 * constraint.vertex]), contact.body, &hit)) {
+      const bool in_solve =
+          tangent_reaction[i] >= 0 || (i < friction_in_solve_.size() && friction_in_solve_[i]);
+      if (!in_solve && options_.friction > 0 &&
+          ClosestOnBody(Point(&lx[3 * constraint.vertex]), contact.body, &hit)) {
         const Point relative = velocity - hit.velocity;
         const Point tangential = relative - n.dot(relative) * n;
         const double slip = tangential.norm(), grip = limit * inverse_mass_[contact.natural];
         if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
       }
-      collisions.push_back({contact.natural, body_of_[contact.natural], Point(&lx[3 * constraint.vertex]), dv});
+      collisions.push_back(
+          {contact.natural, body_of_[contact.natural], Point(&lx[3 * constraint.vertex]), dv});
       // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
       if (reactions[i] >= 0 && !(options_.restitution > 0 && contact.impact))
         resting_.push_back({constraint.vertex, contact});
@@ -945,7 +1009,8 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
     PetscCall(ProjectRemaining(lx, lv, &collisions));
     if (!options_.impulse_spreading)
       for (const Collision &c : collisions) {
-        const PetscInt local = layout_->petsc_of_free[layout_->free_of_natural[c.vertex]] - layout_->local_begin();
+        const PetscInt local =
+            layout_->petsc_of_free[layout_->free_of_natural[c.vertex]] - layout_->local_begin();
         for (int k = 0; k < 3; ++k) lv[3 * local + k] += c.dv[k];
       }
     PetscCall(VecRestoreArray(x, &lx));
@@ -983,15 +1048,17 @@ PetscErrorCode ContactSolver::Bounce(const std::vector<PetscReal> &reactions, Ve
   for (size_t i = 0; i < contacts_.size(); ++i) {
     if (!contacts_[i].impact || reactions[i] <= 0) continue;
     const int32_t body = body_of_[contacts_[i].natural];
-    for (int k = 0; k < 3; ++k) local[3 * body + k] += reactions[i] * velocity_constraints_[i].normal[k];
+    for (int k = 0; k < 3; ++k)
+      local[3 * body + k] += reactions[i] * velocity_constraints_[i].normal[k];
   }
-  PetscCallMPI(MPI_Allreduce(local.data(), impulse.data(), static_cast<int>(local.size()), MPI_DOUBLE,
-                             MPI_SUM, comm_));
+  PetscCallMPI(MPI_Allreduce(local.data(), impulse.data(), static_cast<int>(local.size()),
+                             MPI_DOUBLE, MPI_SUM, comm_));
   PetscScalar *lv;
   PetscCall(VecGetArray(v, &lv));
   for (PetscInt p = 0; p < static_cast<PetscInt>(owned_natural_.size()); ++p) {
     const int32_t body = body_of_[owned_natural_[p]];
-    for (int k = 0; k < 3; ++k) lv[3 * p + k] += options_.restitution * impulse[3 * body + k] / body_mass_[body];
+    for (int k = 0; k < 3; ++k)
+      lv[3 * p + k] += options_.restitution * impulse[3 * body + k] / body_mass_[body];
   }
   PetscCall(VecRestoreArray(v, &lv));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -1012,8 +1079,8 @@ PetscErrorCode ContactSolver::SpreadImpulses(const std::vector<Collision> &local
   PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_));
   for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + counts[r];
   std::vector<double> all(offsets[size]);
-  PetscCallMPI(MPI_Allgatherv(packed.data(), count, MPI_DOUBLE, all.data(), counts.data(), offsets.data(),
-                              MPI_DOUBLE, comm_));
+  PetscCallMPI(MPI_Allgatherv(packed.data(), count, MPI_DOUBLE, all.data(), counts.data(),
+                              offsets.data(), MPI_DOUBLE, comm_));
   PetscScalar *lv;
   PetscCall(VecGetArray(v, &lv));
   for (size_t i = 0; i < all.size(); i += 8) {
@@ -1025,7 +1092,8 @@ PetscErrorCode ContactSolver::SpreadImpulses(const std::vector<Collision> &local
     double total = 0;
     for (int32_t k = 0; k < b.mesh.num_vertices(); ++k) {
       const int32_t n = b.first_vertex + k;
-      if (inverse_mass_[n] > 0 || n == vertex) total += 1 / std::pow(l + (WorldPoint(n) - at).norm(), 2);
+      if (inverse_mass_[n] > 0 || n == vertex)
+        total += 1 / std::pow(l + (WorldPoint(n) - at).norm(), 2);
     }
     const Point impulse = dv / inverse_mass_[vertex];
     for (PetscInt p = 0; p < static_cast<PetscInt>(owned_natural_.size()); ++p) {
@@ -1074,11 +1142,14 @@ double ContactSolver::ResolveConstraints() {
   return violation;
 }
 
-PetscErrorCode ContactSolver::GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const {
+PetscErrorCode ContactSolver::GatherRestingContacts(
+    std::vector<std::array<int32_t, 2>> *all) const {
   PetscFunctionBeginUser;
   std::vector<int32_t> local;
-  for (const auto &[vertex, contact] : resting_)  // a feature contact's obstacle is written -2 - feature
-    local.insert(local.end(), {contact.natural, contact.feature >= 0 ? -2 - contact.feature : contact.body});
+  for (const auto &[vertex, contact] :
+       resting_)  // a feature contact's obstacle is written -2 - feature
+    local.insert(local.end(),
+                 {contact.natural, contact.feature >= 0 ? -2 - contact.feature : contact.body});
   PetscMPIInt rank, size, count = static_cast<PetscMPIInt>(local.size());
   PetscCallMPI(MPI_Comm_rank(comm_, &rank));
   PetscCallMPI(MPI_Comm_size(comm_, &size));
@@ -1086,8 +1157,8 @@ PetscErrorCode ContactSolver::GatherRestingContacts(std::vector<std::array<int32
   PetscCallMPI(MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_));
   for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + (rank == 0 ? counts[r] : 0);
   std::vector<int32_t> gathered(offsets[size]);
-  PetscCallMPI(MPI_Gatherv(local.data(), count, MPI_INT32_T, gathered.data(), counts.data(), offsets.data(),
-                           MPI_INT32_T, 0, comm_));
+  PetscCallMPI(MPI_Gatherv(local.data(), count, MPI_INT32_T, gathered.data(), counts.data(),
+                           offsets.data(), MPI_INT32_T, 0, comm_));
   all->resize(gathered.size() / 2);
   for (size_t i = 0; i < all->size(); ++i) (*all)[i] = {gathered[2 * i], gathered[2 * i + 1]};
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -1097,13 +1168,15 @@ void ContactSolver::RestoreRestingContacts(const std::vector<std::array<int32_t,
   resting_.clear();
   for (const auto &[natural, entry] : all) {
     const int32_t feature = entry <= -2 ? -2 - entry : -1;
-    if (feature >= 0 ? static_cast<size_t>(feature) >= feature_point_.size()
-                     : entry == -1 ? !ground_ : !obstacles_ || static_cast<size_t>(entry) >= scene_->bodies.size())
+    if (feature >= 0  ? static_cast<size_t>(feature) >= feature_point_.size()
+        : entry == -1 ? !ground_
+                      : !obstacles_ || static_cast<size_t>(entry) >= scene_->bodies.size())
       continue;
     if (natural < 0 || static_cast<size_t>(natural) >= layout_->free_of_natural.size()) continue;
     const PetscInt local = LocalOf(natural);
     if (local < 0) continue;
-    resting_.push_back({local, Contact{natural, feature >= 0 ? FeatureBody(feature) : entry, 0.0, false, feature}});
+    resting_.push_back({local, Contact{natural, feature >= 0 ? FeatureBody(feature) : entry, 0.0,
+                                       false, feature}});
   }
 }
 

@@ -31,8 +31,8 @@
 // times the normal impulse J they received, as the uniform velocity change
 // e J / M (M the body's mass): a bounce that never adds energy. (A soft body's
 // impact lasts several steps and damps part of it: the rebound is below a rigid
-// body's e^2 of the fall height.) Whatever still ends inside an obstacle is projected to its surface as a
-// last resort.
+// body's e^2 of the fall height.) Whatever still ends inside an obstacle is projected to its
+// surface as a last resort.
 //
 // Sharp edges (-sharp_edges, default on): a free vertex cannot enter a fixed
 // face, but a fixed body's edge or corner can cut into a free body between its
@@ -81,26 +81,27 @@
 #include <vector>
 
 #include "contact/geometry.hpp"
-#include "solvers/projected_solve.hpp"
 #include "fem/partition.hpp"
 #include "io/scene.hpp"
+#include "solvers/projected_solve.hpp"
 
 namespace softbody {
 
 struct ContactOptions {
   PetscBool ground = PETSC_FALSE;
-  PetscReal ground_y = 0;             // m
-  PetscReal restitution = 0;          // e in [0, 1]
-  PetscReal friction = 0;             // Coulomb coefficient mu >= 0
-  PetscReal gravity = 0;              // |g| (m/s^2), set by the caller: no bounce below 2 |g| dt
+  PetscReal ground_y = 0;     // m
+  PetscReal restitution = 0;  // e in [0, 1]
+  PetscReal friction = 0;     // Coulomb coefficient mu >= 0
+  PetscReal gravity = 0;      // |g| (m/s^2), set by the caller: no bounce below 2 |g| dt
   PetscBool impulse_spreading = PETSC_FALSE;
-  PetscBool sharp_edges = PETSC_TRUE;   // fixed bodies' edges and corners against free faces
-  std::string constraints_path;       // "" = none
+  PetscBool sharp_edges = PETSC_TRUE;  // fixed bodies' edges and corners against free faces
+  std::string constraints_path;        // "" = none
   PetscBool edge_bounds = PETSC_FALSE;
   PetscReal edge_lower = 1, edge_upper = 1;  // x rest length
 };
 
-// Collective. Reads -ground -restitution -friction -sharp_edges -impulse_spreading -constraints -edge_bounds.
+// Collective. Reads -ground -restitution -friction -sharp_edges -impulse_spreading -constraints
+// -edge_bounds.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
 // A distance constraint between natural vertices a and b: lower <= |x_b - x_a| <= upper (m).
@@ -115,12 +116,13 @@ struct DistanceConstraint {
 std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene);
 
 struct ContactStatistics {
-  PetscInt collisions = 0;          // new vertex contacts, all steps, all ranks
-  PetscInt gathers = 0;             // times the free state was gathered on every rank
-  PetscInt feature_contacts = 0;    // vertex constraints from fixed bodies' sharp edges entering free faces
-  PetscInt projections = 0;         // last-resort projections, all steps, all ranks
-  PetscLogDouble seconds = 0;       // wall time in contact detection and response
-  PetscInt constraint_sweeps = 0;   // Gauss-Seidel sweeps, all steps
+  PetscInt collisions = 0;  // new vertex contacts, all steps, all ranks
+  PetscInt gathers = 0;     // times the free state was gathered on every rank
+  PetscInt feature_contacts =
+      0;  // vertex constraints from fixed bodies' sharp edges entering free faces
+  PetscInt projections = 0;        // last-resort projections, all steps, all ranks
+  PetscLogDouble seconds = 0;      // wall time in contact detection and response
+  PetscInt constraint_sweeps = 0;  // Gauss-Seidel sweeps, all steps
   PetscInt max_constraint_sweeps = 0;
   PetscReal max_constraint_violation = 0;  // relative, after resolution
 };
@@ -133,8 +135,8 @@ class ContactSolver {
   ~ContactSolver();
 
   // Collective. Builds only what the scene and options need.
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                       Vec lumped_mass, const ContactOptions &options);
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
+                       const ContactOptions &options);
   // Anything to resolve at all.
   bool active() const { return ground_ || obstacles_ || !constraints_.empty(); }
 
@@ -187,16 +189,16 @@ class ContactSolver {
     Point point, normal, velocity;
     double inverse_mass;
     int32_t body;
-    int32_t triangle = -1;          // index into the obstacle's triangle list (-1: the ground)
+    int32_t triangle = -1;  // index into the obstacle's triangle list (-1: the ground)
     Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric coordinates of point in it
   };
   // A constrained vertex (parallel to velocity_constraints_).
   struct Contact {
     int32_t natural;
-    int32_t body;              // obstacle, -1 for the ground
-    double normal_velocity;    // n . v after the step's velocity response
-    bool impact;               // new this step and closing faster than bounce_speed_
-    int32_t feature = -1;      // a fixed body's feature point pressing on the vertex's face
+    int32_t body;            // obstacle, -1 for the ground
+    double normal_velocity;  // n . v after the step's velocity response
+    bool impact;             // new this step and closing faster than bounce_speed_
+    int32_t feature = -1;    // a fixed body's feature point pressing on the vertex's face
   };
   struct Collision {  // a velocity response, for impulse spreading
     int32_t vertex;
@@ -215,17 +217,23 @@ class ContactSolver {
   void BuildObstacleGrids(bool fixed_part);
   void EnsureFreeGrids() const;
   // Each tet's box, and the tets' and triangles' grids, at the world positions.
-  void BuildGrids(const std::vector<std::array<int32_t, 5>> &tets, const std::vector<std::array<int32_t, 4>> &triangles,
-                  std::vector<Box> *tet_boxes, UniformGrid *tet_grid, UniformGrid *triangle_grid) const;
-  Point WorldPoint(int32_t n) const { return Point(world_x_[3 * n], world_x_[3 * n + 1], world_x_[3 * n + 2]); }
+  void BuildGrids(const std::vector<std::array<int32_t, 5>> &tets,
+                  const std::vector<std::array<int32_t, 4>> &triangles, std::vector<Box> *tet_boxes,
+                  UniformGrid *tet_grid, UniformGrid *triangle_grid) const;
+  Point WorldPoint(int32_t n) const {
+    return Point(world_x_[3 * n], world_x_[3 * n + 1], world_x_[3 * n + 2]);
+  }
   // Per local vertex, the obstacles constraining it this step (-1: the ground).
   struct VertexObstacles {
     int count = 0;
     int32_t obstacle[3];
-    bool Has(int32_t o) const { return std::find(obstacle, obstacle + count, o) != obstacle + count; }
+    bool Has(int32_t o) const {
+      return std::find(obstacle, obstacle + count, o) != obstacle + count;
+    }
   };
   // The first obstacle other than `body` and those in `skip` that contains p.
-  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip, SurfaceHit *hit) const;
+  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
+                       SurfaceHit *hit) const;
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
   // Whether p lies in one of the obstacle body's tets (faces included).
   bool InsideBody(const Point &p, int32_t obstacle) const;
@@ -251,7 +259,8 @@ class ContactSolver {
   // displacement that moves the triangle's point under p by d. One feature
   // constraint per vertex (the larger d_k). Constrains this rank's vertices
   // of the triangle; returns how many constraints it added or changed.
-  PetscInt ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh, bool limit);
+  PetscInt ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh,
+                            bool limit);
   // After a solve: the feature points each free body's predicted surface passes
   // over; returns the constraints added or changed on this rank.
   PetscInt AddFeaturePenetrations(PetscReal dt);
@@ -259,13 +268,15 @@ class ContactSolver {
   PetscInt LocalOf(int32_t natural) const;
   // The fixed body that feature point `feature` lies on.
   int32_t FeatureBody(int32_t feature) const {
-    return static_cast<int32_t>(std::upper_bound(feature_begin_.begin(), feature_begin_.end(), feature) -
-                                feature_begin_.begin() - 1);
+    return static_cast<int32_t>(
+        std::upper_bound(feature_begin_.begin(), feature_begin_.end(), feature) -
+        feature_begin_.begin() - 1);
   }
   // Whether x lies in or on a fixed body (or the ground) whose surface there
   // faces within kFeatureAngle of direction.
   bool OnFixedSurface(const Point &x, const Point &direction) const;
-  PetscErrorCode ProjectRemaining(PetscScalar *x, PetscScalar *v, std::vector<Collision> *collisions);
+  PetscErrorCode ProjectRemaining(PetscScalar *x, PetscScalar *v,
+                                  std::vector<Collision> *collisions);
   PetscErrorCode SpreadImpulses(const std::vector<Collision> &local, Vec v);
   double ResolveConstraints();
 
@@ -298,22 +309,24 @@ class ContactSolver {
   mutable UniformGrid free_tet_grid_, free_triangle_grid_;
   mutable bool free_grids_current_ = false;
   mutable PetscInt free_grid_builds_ = 0;
-  std::vector<Box> body_box_;              // broad phase: each obstacle body's bounding box
-  std::vector<Box> fixed_tet_box_;         // each obstacle tet's box (cheap rejection)
+  std::vector<Box> body_box_;       // broad phase: each obstacle body's bounding box
+  std::vector<Box> fixed_tet_box_;  // each obstacle tet's box (cheap rejection)
   mutable std::vector<Box> free_tet_box_;
-  std::vector<std::pair<PetscInt, int32_t>> query_vertices_;  // owned free-body vertices: (local, natural)
+  std::vector<std::pair<PetscInt, int32_t>>
+      query_vertices_;  // owned free-body vertices: (local, natural)
   // Sharp features of the fixed bodies as points (world), grouped by body:
   // body b's are [feature_begin_[b], feature_begin_[b + 1]).
   std::vector<Point> feature_point_;
   std::vector<int32_t> feature_begin_;
-  std::vector<char> feature_held_;          // per feature point: constrained this step
-  std::vector<ptrdiff_t> feature_contact_;  // per local vertex: its feature contact this step (-1: none)
-  bool track_free_ = false;                 // the free bodies' grids are needed (free or feature obstacles)
-  bool gather_always_ = false;              // every call gathers (free obstacles, constraints, spreading)
-  bool features_near_ = false;              // this call's sharp-edge contacts need the free state
-  std::vector<double> body_edge_;          // mean boundary edge length per body
-  std::vector<double> body_mass_;          // total lumped mass per body (kg)
-  double bounce_speed_ = 0;                // slower impacts do not bounce (m/s)
+  std::vector<char> feature_held_;  // per feature point: constrained this step
+  std::vector<ptrdiff_t>
+      feature_contact_;            // per local vertex: its feature contact this step (-1: none)
+  bool track_free_ = false;        // the free bodies' grids are needed (free or feature obstacles)
+  bool gather_always_ = false;     // every call gathers (free obstacles, constraints, spreading)
+  bool features_near_ = false;     // this call's sharp-edge contacts need the free state
+  std::vector<double> body_edge_;  // mean boundary edge length per body
+  std::vector<double> body_mass_;  // total lumped mass per body (kg)
+  double bounce_speed_ = 0;        // slower impacts do not bounce (m/s)
   PetscErrorCode Bounce(const std::vector<PetscReal> &reactions, Vec v);
   std::vector<VelocityConstraint> velocity_constraints_;  // normals, parallel to contacts_
   // Static friction: tangent pairs (t1, t2) of sticking contacts, and the contact of each pair.
@@ -335,7 +348,7 @@ class ContactSolver {
   // last step).
   void Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit, size_t contact);
   std::vector<Contact> contacts_;
-  std::vector<VertexObstacles> constrained_;  // per local vertex
+  std::vector<VertexObstacles> constrained_;           // per local vertex
   std::vector<std::pair<PetscInt, Contact>> resting_;  // kept for the next step
   std::vector<DistanceConstraint> constraints_;
   ContactStatistics stats_;

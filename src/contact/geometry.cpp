@@ -49,8 +49,8 @@ Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, con
   return *w = {1 - v - u, v, u}, a + v * ab + u * ac;
 }
 
-bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b, const Point &c,
-                            double *t, Eigen::Vector3d *w) {
+bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b,
+                            const Point &c, double *t, Eigen::Vector3d *w) {
   // p + t (q - p) = a + u (b - a) + v (c - a), solved by Cramer's rule.
   const Point d = q - p, ab = b - a, ac = c - a;
   const Point h = d.cross(ac);
@@ -94,13 +94,16 @@ void UniformGrid::Build(const std::vector<Box> &boxes) {
       next.assign(cell_start_.begin(), cell_start_.end() - 1);
     }
     for (size_t item = 0; item < boxes.size(); ++item) {
-      const Eigen::Array3i lo = CellOf(boxes[item].lower.array()), hi = CellOf(boxes[item].upper.array());
+      const Eigen::Array3i lo = CellOf(boxes[item].lower.array()),
+                           hi = CellOf(boxes[item].upper.array());
       for (int k = lo[2]; k <= hi[2]; ++k)
         for (int j = lo[1]; j <= hi[1]; ++j)
           for (int i = lo[0]; i <= hi[0]; ++i) {
             const int64_t cell = Index(i, j, k);
-            if (pass == 0) ++cell_start_[cell + 1];
-            else items_[next[cell]++] = static_cast<int32_t>(item);
+            if (pass == 0)
+              ++cell_start_[cell + 1];
+            else
+              items_[next[cell]++] = static_cast<int32_t>(item);
           }
     }
   }

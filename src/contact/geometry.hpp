@@ -21,7 +21,8 @@ struct Box {
     upper = upper.cwiseMax(b.upper);
   }
   bool Contains(const Point &p, double margin = 0) const {
-    return (p.array() >= lower.array() - margin).all() && (p.array() <= upper.array() + margin).all();
+    return (p.array() >= lower.array() - margin).all() &&
+           (p.array() <= upper.array() + margin).all();
   }
   bool Empty() const { return (lower.array() > upper.array()).any(); }
   bool Overlaps(const Box &b) const {
@@ -42,8 +43,8 @@ Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, con
 // Where the segment p -> q crosses the triangle (a, b, c) (Moeller & Trumbore
 // 1997): *t in [0, 1] the fraction of the segment and *weights the barycentric
 // coordinates of the crossing. False when it misses or runs parallel to the plane.
-bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b, const Point &c,
-                            double *t, Eigen::Vector3d *weights);
+bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b,
+                            const Point &c, double *t, Eigen::Vector3d *weights);
 
 // Uniform grid over the boxes of a set of items (tets or triangles): each item is
 // listed in every cell its box overlaps. Cell size h: the mean box edge, so an

@@ -47,8 +47,8 @@ PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
                                    Mat *matrix) {
   PetscFunctionBeginUser;
   const PetscInt local_dofs = 3 * layout.local_count(), dof_begin = 3 * layout.local_begin();
-  const PetscCount entries = 144 * static_cast<PetscCount>(elements.size()) +
-                             (with_diagonal ? local_dofs : 0);
+  const PetscCount entries =
+      144 * static_cast<PetscCount>(elements.size()) + (with_diagonal ? local_dofs : 0);
   std::vector<PetscInt> rows, cols;
   rows.reserve(entries);
   cols.reserve(entries);
@@ -77,8 +77,8 @@ void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
                            double stiffness_scale, CooValues *values) {
   PetscScalar *out = values->data();
   for (size_t e = 0; e < elements.size(); ++e) {
-    const Mat12 K = ElementStiffness(elements.gradients[e], elements.volumes[e], elements.lame[e],
-                                     shear_scale);
+    const Mat12 K =
+        ElementStiffness(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale);
     // Row-major, as the pattern: entry (3a+ca, 3b+cb).
     for (int i = 0; i < 12; ++i)
       for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
@@ -86,7 +86,8 @@ void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
 }
 
 // Positions of element e's vertices from a touched-vertex array.
-static TetPositions ElementPositions(const LocalElements &elements, size_t e, const PetscScalar *touched) {
+static TetPositions ElementPositions(const LocalElements &elements, size_t e,
+                                     const PetscScalar *touched) {
   TetPositions x;
   for (int a = 0; a < 4; ++a)
     for (int c = 0; c < 3; ++c) x(a, c) = touched[3 * elements.touched_index[e][a] + c];
@@ -107,24 +108,27 @@ double CorotatedStiffnessValues(const LocalElements &elements, double shear_scal
   PetscScalar *out = values->data();
   double energy = 0;
   for (size_t e = 0; e < elements.size(); ++e) {
-    const TetPositions x = ElementPositions(elements, e, x_touched), X = ElementPositions(elements, e, X_touched);
+    const TetPositions x = ElementPositions(elements, e, x_touched),
+                       X = ElementPositions(elements, e, X_touched);
     TetPositions force;
     Mat12 K;
     double element_energy;
-    const Mat3 R = CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
-                                    x, X, &force, &element_energy, &K);
+    const Mat3 R = CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e],
+                                    shear_scale, x, X, &force, &element_energy, &K);
     energy += element_energy;
     for (int a = 0; a < 4; ++a)
-      for (int c = 0; c < 3; ++c) force_touched[3 * elements.touched_index[e][a] + c] += force(a, c);
+      for (int c = 0; c < 3; ++c)
+        force_touched[3 * elements.touched_index[e][a] + c] += force(a, c);
     if (damping) {
       Eigen::Map<Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y(damping->current->data() + 12 * e);
       y = x * R - X;  // rows R^T x_a - X_a
       if (damping->start) {
-        const Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y_start(damping->start + 12 * e);
+        const Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y_start(
+            damping->start + 12 * e);
         TetPositions increment_force;
         double increment_energy;
-        ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
-                              y - y_start, &increment_force, &increment_energy);
+        ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e],
+                              shear_scale, y - y_start, &increment_force, &increment_energy);
         damping->energy += increment_energy;
         increment_force = increment_force * R.transpose();
         for (int a = 0; a < 4; ++a)
@@ -144,9 +148,10 @@ double LinearStrainEnergy(const LocalElements &elements, double shear_scale,
   for (size_t e = 0; e < elements.size(); ++e) {
     TetPositions force;
     double element_energy;
-    ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
-                          ElementPositions(elements, e, x_touched) - ElementPositions(elements, e, X_touched),
-                          &force, &element_energy);
+    ElasticForceAndEnergy(
+        elements.gradients[e], elements.volumes[e], elements.lame[e], shear_scale,
+        ElementPositions(elements, e, x_touched) - ElementPositions(elements, e, X_touched), &force,
+        &element_energy);
     energy += element_energy;
   }
   return energy;

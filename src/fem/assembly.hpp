@@ -25,10 +25,10 @@ struct LocalElements {
   // index, and each element's vertices as positions in that list.
   std::vector<PetscInt> touched_vertices;
   std::vector<std::array<PetscInt, 4>> touched_index;
-  std::vector<ShapeGradients> gradients;          // rest shape-function gradients (1/m)
-  std::vector<double> volumes;                    // rest volumes |V| (m^3)
-  std::vector<Lame> lame;                         // Pa
-  std::vector<double> densities;                  // kg/m^3
+  std::vector<ShapeGradients> gradients;  // rest shape-function gradients (1/m)
+  std::vector<double> volumes;            // rest volumes |V| (m^3)
+  std::vector<Lame> lame;                 // Pa
+  std::vector<double> densities;          // kg/m^3
 
   size_t size() const { return vertices.size(); }
 };
@@ -40,7 +40,8 @@ LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout);
 // elements' 12 x 12 blocks, plus, when with_diagonal, every local diagonal entry
 // (for the mass term of A).
 PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
-                                   const LocalElements &elements, PetscBool with_diagonal, Mat *matrix);
+                                   const LocalElements &elements, PetscBool with_diagonal,
+                                   Mat *matrix);
 
 // Collective. The rest stiffness K (N/m): CreateElasticMatrix without diagonal
 // part, filled with the linear element stiffness.

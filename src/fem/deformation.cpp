@@ -64,8 +64,8 @@ PetscErrorCode ParseDeformations(MPI_Comm comm, const std::string &text, const S
                scene.bodies.size() - 1);
     PetscCheck(!scene.bodies[d.body].fixed, comm, PETSC_ERR_USER_INPUT,
                "option -deform: body %" PetscInt_FMT " is fixed and cannot be deformed", d.body);
-    PetscCheck(d.time >= 0, comm, PETSC_ERR_USER_INPUT, "option -deform: time must be >= 0 (got %g)",
-               (double)d.time);
+    PetscCheck(d.time >= 0, comm, PETSC_ERR_USER_INPUT,
+               "option -deform: time must be >= 0 (got %g)", (double)d.time);
     PetscCheck((d.scale.array() != 0).all(), comm, PETSC_ERR_USER_INPUT,
                "option -deform: scale factors must be non-zero");
     deformations->push_back(d);

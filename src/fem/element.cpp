@@ -17,7 +17,9 @@ static Mat3 EdgeMatrix(const TetPositions &X) {
   return Dm;
 }
 
-double SignedVolume(const TetPositions &X) { return EdgeMatrix(X).determinant() / 6.0; }
+double SignedVolume(const TetPositions &X) {
+  return EdgeMatrix(X).determinant() / 6.0;
+}
 
 double LongestEdge(const TetPositions &X) {
   double longest = 0;
@@ -101,7 +103,7 @@ bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
   double x[3][3], c[3][3];  // x[j]: column j of X; c[j]: column j of C
   for (int j = 0; j < 3; ++j)
     for (int i = 0; i < 3; ++i) x[j][i] = F(i, j);
-  const auto cofactor = [](const double (*m)[3], double (*out)[3]) {
+  const auto cofactor = [](const double(*m)[3], double(*out)[3]) {
     for (int j = 0; j < 3; ++j) {
       const double *u = m[(j + 1) % 3], *v = m[(j + 2) % 3];
       out[j][0] = u[1] * v[2] - u[2] * v[1];
@@ -127,8 +129,10 @@ bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
       for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) c2 += c[j][i] * c[j][i];
       const double z2 = std::sqrt(c2 / x2) * inverse_det;  // |X^-1|_F / |X|_F
-      if (std::abs(z2 - 1.0) > 1e-2) z = std::sqrt(z2);
-      else scaled = false;
+      if (std::abs(z2 - 1.0) > 1e-2)
+        z = std::sqrt(z2);
+      else
+        scaled = false;
     }
     const double a = 0.5 * z, b = 0.5 * inverse_det / z;
     if (last) {
@@ -245,7 +249,8 @@ Mat3 CorotatedElement(const ShapeGradients &grad, double volume, const Lame &lam
     *stiffness = ElementStiffness(grad, volume, lame, shear_scale);
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b)
-        stiffness->block<3, 3>(3 * a, 3 * b) = R * stiffness->block<3, 3>(3 * a, 3 * b) * R.transpose();
+        stiffness->block<3, 3>(3 * a, 3 * b) =
+            R * stiffness->block<3, 3>(3 * a, 3 * b) * R.transpose();
   }
   return R;
 }

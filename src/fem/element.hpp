@@ -18,8 +18,8 @@ namespace softbody {
 
 using Vec3 = Eigen::Vector3d;
 using Mat3 = Eigen::Matrix3d;
-using TetPositions = Eigen::Matrix<double, 4, 3>;  // rows: vertex positions (m)
-using ShapeGradients = Eigen::Matrix<double, 4, 3>; // rows: grad N_i (1/m)
+using TetPositions = Eigen::Matrix<double, 4, 3>;    // rows: vertex positions (m)
+using ShapeGradients = Eigen::Matrix<double, 4, 3>;  // rows: grad N_i (1/m)
 using Mat12 = Eigen::Matrix<double, 12, 12>;
 using Vec12 = Eigen::Matrix<double, 12, 1>;
 
@@ -57,7 +57,9 @@ Mat12 ElementStiffnessReference(const ShapeGradients &grad, double volume, const
                                 double shear_scale);
 
 // Lumped mass per vertex (kg): density (kg/m^3) x |volume| / 4.
-inline double LumpedVertexMass(double density, double volume) { return density * volume / 4.0; }
+inline double LumpedVertexMass(double density, double volume) {
+  return density * volume / 4.0;
+}
 
 // Elastic force term and strain energy of displacements u (rows u_a, m), without
 // forming K_e: H = sum_a u_a g_a^T, engineering strain from H, stress

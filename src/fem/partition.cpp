@@ -23,7 +23,8 @@ PetscErrorCode PartitionFreeVertices(const Scene &scene, const DofLayout &layout
         for (int b = 0; b < 4; ++b)
           if (a != b)
             neighbours[layout.free_of_natural[body.first_vertex + body.mesh.tets(t, a)]].push_back(
-                static_cast<idx_t>(layout.free_of_natural[body.first_vertex + body.mesh.tets(t, b)]));
+                static_cast<idx_t>(
+                    layout.free_of_natural[body.first_vertex + body.mesh.tets(t, b)]));
   }
   std::vector<idx_t> xadj(n + 1, 0), adjncy;
   for (PetscInt v = 0; v < n; ++v) {
@@ -39,9 +40,9 @@ PetscErrorCode PartitionFreeVertices(const Scene &scene, const DofLayout &layout
   METIS_SetDefaultOptions(options);
   options[METIS_OPTION_SEED] = 1;  // reproducible partitions
   part->assign(n, 0);
-  const int status = METIS_PartGraphKway(&nvtxs, &ncon, xadj.data(), adjncy.data(), nullptr, nullptr,
-                                         nullptr, &nparts, nullptr, nullptr, options, &objval,
-                                         part->data());
+  const int status =
+      METIS_PartGraphKway(&nvtxs, &ncon, xadj.data(), adjncy.data(), nullptr, nullptr, nullptr,
+                          &nparts, nullptr, nullptr, options, &objval, part->data());
   PetscCheck(status == METIS_OK, PETSC_COMM_SELF, PETSC_ERR_LIB, "METIS_PartGraphKway failed (%d)",
              status);
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -60,7 +61,8 @@ int MarkBodiesAtRest(const MotionSources &sources, Scene *scene) {
     } else {
       if (b < sources.deformed.size() && sources.deformed[b]) return 0;
       for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
-        if (scene->initial_velocities.row(body.first_vertex + v).squaredNorm() != 0) return 0;  // it moves
+        if (scene->initial_velocities.row(body.first_vertex + v).squaredNorm() != 0)
+          return 0;  // it moves
     }
     lo[b] = body.mesh.vertices.colwise().minCoeff().transpose();
     hi[b] = body.mesh.vertices.colwise().maxCoeff().transpose();
@@ -69,8 +71,10 @@ int MarkBodiesAtRest(const MotionSources &sources, Scene *scene) {
   std::vector<bool> alone(n, true);
   for (size_t a = 0; a < n; ++a)
     for (size_t b = a + 1; b < n; ++b) {
-      if (scene->bodies[a].mesh.num_vertices() == 0 || scene->bodies[b].mesh.num_vertices() == 0) continue;
-      if ((lo[a].array() <= hi[b].array()).all() && (lo[b].array() <= hi[a].array()).all()) alone[a] = alone[b] = false;
+      if (scene->bodies[a].mesh.num_vertices() == 0 || scene->bodies[b].mesh.num_vertices() == 0)
+        continue;
+      if ((lo[a].array() <= hi[b].array()).all() && (lo[b].array() <= hi[a].array()).all())
+        alone[a] = alone[b] = false;
     }
   int marked = 0;
   for (size_t b = 0; b < n; ++b) {
@@ -124,12 +128,13 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layo
 std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout) {
   std::vector<int32_t> body_of_natural(scene.num_vertices());
   for (size_t b = 0; b < scene.bodies.size(); ++b)
-    std::fill_n(body_of_natural.begin() + scene.bodies[b].first_vertex, scene.bodies[b].mesh.num_vertices(),
-                static_cast<int32_t>(b));
+    std::fill_n(body_of_natural.begin() + scene.bodies[b].first_vertex,
+                scene.bodies[b].mesh.num_vertices(), static_cast<int32_t>(b));
   std::vector<int32_t> owned(layout.local_count());
   for (PetscInt f = 0; f < layout.num_free(); ++f) {
     const PetscInt local = layout.petsc_of_free[f] - layout.local_begin();
-    if (local >= 0 && local < layout.local_count()) owned[local] = body_of_natural[layout.natural_of_free[f]];
+    if (local >= 0 && local < layout.local_count())
+      owned[local] = body_of_natural[layout.natural_of_free[f]];
   }
   return owned;
 }

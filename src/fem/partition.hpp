@@ -19,10 +19,10 @@
 namespace softbody {
 
 struct DofLayout {
-  std::vector<PetscInt> free_of_natural;     // natural vertex -> free index, or -1
-  std::vector<PetscInt> natural_of_free;     // free index -> natural vertex
-  std::vector<PetscInt> petsc_of_free;       // free index -> PETSc vertex
-  std::vector<PetscInt> vertex_start;        // size ranks + 1: ownership of PETSc vertices
+  std::vector<PetscInt> free_of_natural;  // natural vertex -> free index, or -1
+  std::vector<PetscInt> natural_of_free;  // free index -> natural vertex
+  std::vector<PetscInt> petsc_of_free;    // free index -> PETSc vertex
+  std::vector<PetscInt> vertex_start;     // size ranks + 1: ownership of PETSc vertices
   PetscMPIInt rank = 0, size = 1;
 
   PetscInt num_free() const { return static_cast<PetscInt>(natural_of_free.size()); }
@@ -61,10 +61,10 @@ std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layo
 
 // What could set a body in motion besides its initial velocities.
 struct MotionSources {
-  bool gravity = false;               // g != 0
-  bool ground = false;                // a ground plane (a body inside it is pushed out)
-  bool constraints = false;           // distance constraints or edge bounds
-  std::vector<bool> deformed;         // per body: named by a -deform
+  bool gravity = false;        // g != 0
+  bool ground = false;         // a ground plane (a body inside it is pushed out)
+  bool constraints = false;    // distance constraints or edge bounds
+  std::vector<bool> deformed;  // per body: named by a -deform
 };
 
 // Not collective. Bodies that nothing can set in motion become immobile like

@@ -38,7 +38,8 @@ PetscErrorCode RowAssembler::Setup(MPI_Comm comm, const Scene &scene, const DofL
       std::array<PetscInt, 4> p;
       uint32_t owned = 0;
       for (int a = 0; a < 4; ++a) {
-        p[a] = layout.petsc_of_free[layout.free_of_natural[body.first_vertex + body.mesh.tets(t, a)]];
+        p[a] =
+            layout.petsc_of_free[layout.free_of_natural[body.first_vertex + body.mesh.tets(t, a)]];
         if (p[a] >= begin_ && p[a] < end) owned |= 1u << a;
       }
       if (!owned) continue;
@@ -69,12 +70,14 @@ PetscErrorCode RowAssembler::Setup(MPI_Comm comm, const Scene &scene, const DofL
   halo_vertices_.reserve(4 * vertices.size());
   for (const auto &p : vertices) halo_vertices_.insert(halo_vertices_.end(), p.begin(), p.end());
   std::sort(halo_vertices_.begin(), halo_vertices_.end());
-  halo_vertices_.erase(std::unique(halo_vertices_.begin(), halo_vertices_.end()), halo_vertices_.end());
+  halo_vertices_.erase(std::unique(halo_vertices_.begin(), halo_vertices_.end()),
+                       halo_vertices_.end());
   PetscCheck(halo_vertices_.size() < (size_t(1) << 31) / 3, PETSC_COMM_SELF, PETSC_ERR_SUP,
              "too many vertices on one rank for 32-bit halo indices");
   // The owned vertices are one contiguous run of the (increasing) halo.
-  first_owned_halo_ = static_cast<int32_t>(std::lower_bound(halo_vertices_.begin(), halo_vertices_.end(), begin_) -
-                                           halo_vertices_.begin());
+  first_owned_halo_ =
+      static_cast<int32_t>(std::lower_bound(halo_vertices_.begin(), halo_vertices_.end(), begin_) -
+                           halo_vertices_.begin());
   for (size_t e = 0; e < elements_.size(); ++e)
     for (int a = 0; a < 4; ++a)
       elements_[e].vertex[a] = static_cast<int32_t>(
@@ -84,11 +87,13 @@ PetscErrorCode RowAssembler::Setup(MPI_Comm comm, const Scene &scene, const DofL
   // Gather plan for the positions of the halo vertices.
   const PetscInt halo = static_cast<PetscInt>(halo_vertices_.size());
   IS from;
-  PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, halo, halo_vertices_.data(), PETSC_COPY_VALUES, &from));
+  PetscCall(
+      ISCreateBlock(PETSC_COMM_SELF, 3, halo, halo_vertices_.data(), PETSC_COPY_VALUES, &from));
   PetscCall(VecCreateSeq(PETSC_COMM_SELF, 3 * halo, &x_halo_));
   PetscCall(VecScatterCreate(rest_positions, from, x_halo_, nullptr, &halo_scatter_));
   PetscCall(ISDestroy(&from));
-  PetscCall(VecScatterBegin(halo_scatter_, rest_positions, x_halo_, INSERT_VALUES, SCATTER_FORWARD));
+  PetscCall(
+      VecScatterBegin(halo_scatter_, rest_positions, x_halo_, INSERT_VALUES, SCATTER_FORWARD));
   PetscCall(VecScatterEnd(halo_scatter_, rest_positions, x_halo_, INSERT_VALUES, SCATTER_FORWARD));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -125,15 +130,18 @@ PetscErrorCode RowAssembler::CreateMatrix(Mat *matrix, bool plain_products) {
   for (PetscInt v = 0; v < count_; ++v)
     for (int c = 0; c < 3; ++c)
       for (PetscInt k = 0; k < degree[v]; ++k)
-        for (int d = 0; d < 3; ++d) columns.push_back(3 * halo_vertices_[neighbours[start[v] + k]] + d);
+        for (int d = 0; d < 3; ++d)
+          columns.push_back(3 * halo_vertices_[neighbours[start[v] + k]] + d);
   {
     std::vector<PetscScalar> zeros(columns.size(), 0.0);
     PetscCall(MatCreate(comm_, matrix));
     PetscCall(MatSetSizes(*matrix, 3 * count_, 3 * count_, PETSC_DETERMINE, PETSC_DETERMINE));
     PetscCall(MatSetBlockSize(*matrix, 3));
     PetscCall(MatSetType(*matrix, MATAIJ));
-    PetscCall(MatSeqAIJSetPreallocationCSR(*matrix, row_start.data(), columns.data(), zeros.data()));
-    PetscCall(MatMPIAIJSetPreallocationCSR(*matrix, row_start.data(), columns.data(), zeros.data()));
+    PetscCall(
+        MatSeqAIJSetPreallocationCSR(*matrix, row_start.data(), columns.data(), zeros.data()));
+    PetscCall(
+        MatMPIAIJSetPreallocationCSR(*matrix, row_start.data(), columns.data(), zeros.data()));
     if (plain_products) {  // the option takes effect at the next assembly
       PetscCall(MatSetOption(*matrix, MAT_USE_INODES, PETSC_FALSE));
       PetscCall(MatAssemblyBegin(*matrix, MAT_FINAL_ASSEMBLY));
@@ -156,7 +164,8 @@ PetscErrorCode RowAssembler::CreateMatrix(Mat *matrix, bool plain_products) {
   const PetscInt *di, *dj, *oi = nullptr, *oj = nullptr;
   PetscBool done;
   PetscCall(MatGetRowIJ(diagonal_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &di, &dj, &done));
-  PetscCheck(done && rows == 3 * count_, PETSC_COMM_SELF, PETSC_ERR_PLIB, "no CSR access to the matrix");
+  PetscCheck(done && rows == 3 * count_, PETSC_COMM_SELF, PETSC_ERR_PLIB,
+             "no CSR access to the matrix");
   PetscInt off_columns = 0;
   if (off_part) {
     PetscCall(MatGetRowIJ(off_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &oi, &oj, &done));
@@ -165,8 +174,8 @@ PetscErrorCode RowAssembler::CreateMatrix(Mat *matrix, bool plain_products) {
   }
   pattern_nonzeros_diagonal_ = di[3 * count_];
   pattern_nonzeros_off_ = oi ? oi[3 * count_] : 0;
-  PetscCheck(pattern_nonzeros_diagonal_ < INT32_MAX && pattern_nonzeros_off_ < INT32_MAX, PETSC_COMM_SELF,
-             PETSC_ERR_SUP, "more than 2^31 matrix entries on one rank");
+  PetscCheck(pattern_nonzeros_diagonal_ < INT32_MAX && pattern_nonzeros_off_ < INT32_MAX,
+             PETSC_COMM_SELF, PETSC_ERR_SUP, "more than 2^31 matrix entries on one rank");
   row_length_diagonal_.resize(count_);
   row_length_off_.resize(count_);
   for (PetscInt v = 0; v < count_; ++v) {
@@ -203,8 +212,10 @@ PetscErrorCode RowAssembler::CreateMatrix(Mat *matrix, bool plain_products) {
     complete = complete && diagonal_offset_[i] >= 0;
   }
   PetscCall(MatRestoreRowIJ(diagonal_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &di, &dj, &done));
-  if (off_part) PetscCall(MatRestoreRowIJ(off_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &oi, &oj, &done));
-  PetscCheck(complete, PETSC_COMM_SELF, PETSC_ERR_PLIB, "an element block is missing from the pattern");
+  if (off_part)
+    PetscCall(MatRestoreRowIJ(off_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &oi, &oj, &done));
+  PetscCheck(complete, PETSC_COMM_SELF, PETSC_ERR_PLIB,
+             "an element block is missing from the pattern");
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -212,16 +223,16 @@ namespace {
 
 struct FillContext {
   const double *x_halo;
-  int32_t first_owned;             // halo index of the first owned vertex (owned: contiguous)
-  PetscScalar *values[2];          // [0] off-diagonal part, [1] diagonal part
-  const int32_t *row_length[2];    // same order
+  int32_t first_owned;           // halo index of the first owned vertex (owned: contiguous)
+  PetscScalar *values[2];        // [0] off-diagonal part, [1] diagonal part
+  const int32_t *row_length[2];  // same order
   double stiffness_scale, shear_scale;
-  PetscScalar *force;              // owned rows, may be null
-  double *vertex_deformation;      // 9 per owned vertex: sum of V F, may be null
-  double *gradients;               // damping: H per element (out), may be null
-  const double *gradients_start;   // damping: H per element at the step's start, may be null
-  PetscScalar *damping_force;      // owned rows, when gradients_start
-  double *damping_energy;          // when gradients_start
+  PetscScalar *force;             // owned rows, may be null
+  double *vertex_deformation;     // 9 per owned vertex: sum of V F, may be null
+  double *gradients;              // damping: H per element (out), may be null
+  const double *gradients_start;  // damping: H per element at the step's start, may be null
+  PetscScalar *damping_force;     // owned rows, when gradients_start
+  double *damping_energy;         // when gradients_start
 };
 
 // Linear-elastic stress of a displacement gradient H (symmetric):
@@ -237,8 +248,9 @@ inline void Stress(const double (&H)[3][3], double l, double m, double sm, doubl
 // Strain energy V H : S / 2 (J).
 inline double StrainEnergy(const double (&H)[3][3], const double (&S)[3][3], double volume) {
   return 0.5 * volume *
-         (H[0][0] * S[0][0] + H[1][1] * S[1][1] + H[2][2] * S[2][2] + (H[0][1] + H[1][0]) * S[0][1] +
-          (H[1][2] + H[2][1]) * S[1][2] + (H[2][0] + H[0][2]) * S[2][0]);
+         (H[0][0] * S[0][0] + H[1][1] * S[1][1] + H[2][2] * S[2][2] +
+          (H[0][1] + H[1][0]) * S[0][1] + (H[1][2] + H[2][1]) * S[1][2] +
+          (H[2][0] + H[0][2]) * S[2][0]);
 }
 
 // The element's nodal forces f_a = V R S g_a (f_0 = -f_1 - f_2 - f_3) added to
@@ -248,7 +260,8 @@ inline void AddStressForces(const double (&R)[3][3], const double (&S)[3][3], do
                             PetscScalar *out) {
   double P[3][3];  // V R S
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) P[i][j] = volume * (R[i][0] * S[0][j] + R[i][1] * S[1][j] + R[i][2] * S[2][j]);
+    for (int j = 0; j < 3; ++j)
+      P[i][j] = volume * (R[i][0] * S[0][j] + R[i][1] * S[1][j] + R[i][2] * S[2][j]);
   double f[4][3];
   for (int a = 1; a < 4; ++a)
     for (int i = 0; i < 3; ++i) f[a][i] = P[i][0] * g[a][0] + P[i][1] * g[a][1] + P[i][2] * g[a][2];
@@ -273,16 +286,24 @@ inline void AddBlock(const double (&B)[3][3], PetscScalar *p, int32_t stride) {
 // Adds the three rows of the block wl h_a h_b^T + wsm h_b h_a^T + diagonal I at
 // p (rows `stride` apart) as four lanes, the fourth zero and masked off: row i
 // is p_a[i] h_b + q_b[i] h_a + diagonal e_i with p = wl h, q = wsm h.
-inline void AddBlockRows(const double *p_a, const double *q_b, __m256d h_a, __m256d h_b, __m256d diagonal,
-                         PetscScalar *p, int32_t stride) {
+inline void AddBlockRows(const double *p_a, const double *q_b, __m256d h_a, __m256d h_b,
+                         __m256d diagonal, PetscScalar *p, int32_t stride) {
   const __m256i mask = _mm256_set_epi64x(0, -1, -1, -1);
-  const __m256d e0 = _mm256_set_pd(0, 0, 0, 1), e1 = _mm256_set_pd(0, 0, 1, 0), e2 = _mm256_set_pd(0, 1, 0, 0);
-  __m256d r0 = _mm256_fmadd_pd(_mm256_broadcast_sd(q_b + 0), h_a, _mm256_fmadd_pd(diagonal, e0, _mm256_mul_pd(_mm256_broadcast_sd(p_a + 0), h_b)));
-  __m256d r1 = _mm256_fmadd_pd(_mm256_broadcast_sd(q_b + 1), h_a, _mm256_fmadd_pd(diagonal, e1, _mm256_mul_pd(_mm256_broadcast_sd(p_a + 1), h_b)));
-  __m256d r2 = _mm256_fmadd_pd(_mm256_broadcast_sd(q_b + 2), h_a, _mm256_fmadd_pd(diagonal, e2, _mm256_mul_pd(_mm256_broadcast_sd(p_a + 2), h_b)));
+  const __m256d e0 = _mm256_set_pd(0, 0, 0, 1), e1 = _mm256_set_pd(0, 0, 1, 0),
+                e2 = _mm256_set_pd(0, 1, 0, 0);
+  __m256d r0 = _mm256_fmadd_pd(
+      _mm256_broadcast_sd(q_b + 0), h_a,
+      _mm256_fmadd_pd(diagonal, e0, _mm256_mul_pd(_mm256_broadcast_sd(p_a + 0), h_b)));
+  __m256d r1 = _mm256_fmadd_pd(
+      _mm256_broadcast_sd(q_b + 1), h_a,
+      _mm256_fmadd_pd(diagonal, e1, _mm256_mul_pd(_mm256_broadcast_sd(p_a + 1), h_b)));
+  __m256d r2 = _mm256_fmadd_pd(
+      _mm256_broadcast_sd(q_b + 2), h_a,
+      _mm256_fmadd_pd(diagonal, e2, _mm256_mul_pd(_mm256_broadcast_sd(p_a + 2), h_b)));
   _mm256_maskstore_pd(p, mask, _mm256_add_pd(_mm256_maskload_pd(p, mask), r0));
   _mm256_maskstore_pd(p + stride, mask, _mm256_add_pd(_mm256_maskload_pd(p + stride, mask), r1));
-  _mm256_maskstore_pd(p + 2 * stride, mask, _mm256_add_pd(_mm256_maskload_pd(p + 2 * stride, mask), r2));
+  _mm256_maskstore_pd(p + 2 * stride, mask,
+                      _mm256_add_pd(_mm256_maskload_pd(p + 2 * stride, mask), r2));
 }
 #endif
 
@@ -312,8 +333,9 @@ static double FillElements(const std::vector<Element> &elements, const std::vect
             for (int i = 0; i < 3; ++i) d[a - 1][i] = xa[i] - x0[i];
           }
           const double *g = other.gradient.data();  // rows grad N_1..3
-          for (int i = 0; i < 3; ++i)  // F = sum_a d_a g_a^T
-            for (int j = 0; j < 3; ++j) batch_F[k](i, j) = d[0][i] * g[j] + d[1][i] * g[3 + j] + d[2][i] * g[6 + j];
+          for (int i = 0; i < 3; ++i)               // F = sum_a d_a g_a^T
+            for (int j = 0; j < 3; ++j)
+              batch_F[k](i, j) = d[0][i] * g[j] + d[1][i] * g[3 + j] + d[2][i] * g[6 + j];
         }
         for (size_t k = count; k < 4; ++k) batch_F[k] = Mat3::Identity();
         RotationOfDeformation4(batch_F, batch_R);
@@ -347,7 +369,8 @@ static double FillElements(const std::vector<Element> &elements, const std::vect
       double H[3][3];
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j)
-          H[i][j] = R[0][i] * F(0, j) + R[1][i] * F(1, j) + R[2][i] * F(2, j) - el.rest_gradient[3 * i + j];
+          H[i][j] = R[0][i] * F(0, j) + R[1][i] * F(1, j) + R[2][i] * F(2, j) -
+                    el.rest_gradient[3 * i + j];
       double S[3][3];
       Stress(H, l, m, sm, S);
       if (el.owned >> 4 & 1u) energy += StrainEnergy(H, S, el.volume);
@@ -364,7 +387,8 @@ static double FillElements(const std::vector<Element> &elements, const std::vect
         }
       }
       for (int a = 0; a < 4; ++a)
-        for (int i = 0; i < 3; ++i) h[a][i] = R[i][0] * g[a][0] + R[i][1] * g[a][1] + R[i][2] * g[a][2];
+        for (int i = 0; i < 3; ++i)
+          h[a][i] = R[i][0] * g[a][0] + R[i][1] * g[a][1] + R[i][2] * g[a][2];
     } else {
       for (int a = 0; a < 4; ++a)
         for (int i = 0; i < 3; ++i) h[a][i] = g[a][i];
@@ -384,13 +408,15 @@ static double FillElements(const std::vector<Element> &elements, const std::vect
       for (int a = 0; a < 4; ++a) hv[a] = _mm256_set_pd(0.0, h[a][2], h[a][1], h[a][0]);
       double diagonal[4][4];
       for (int a = 0; a < 4; ++a)
-        for (int b = a; b < 4; ++b) diagonal[a][b] = q[a][0] * h[b][0] + q[a][1] * h[b][1] + q[a][2] * h[b][2];
+        for (int b = a; b < 4; ++b)
+          diagonal[a][b] = q[a][0] * h[b][0] + q[a][1] * h[b][1] + q[a][2] * h[b][2];
       if ((el.owned & 15u) == 15u) {  // every row owned, every column in the diagonal part
         PetscScalar *values = c.values[1];
         int32_t stride[4];
         for (int a = 0; a < 4; ++a) stride[a] = c.row_length[1][owned_row[a]];
         for (int a = 0; a < 4; ++a) {
-          AddBlockRows(p[a], q[a], hv[a], hv[a], _mm256_set1_pd(diagonal[a][a]), values + offset[5 * a], stride[a]);
+          AddBlockRows(p[a], q[a], hv[a], hv[a], _mm256_set1_pd(diagonal[a][a]),
+                       values + offset[5 * a], stride[a]);
           for (int b = a + 1; b < 4; ++b) {
             const __m256d dv = _mm256_set1_pd(diagonal[a][b]);
             AddBlockRows(p[a], q[b], hv[a], hv[b], dv, values + offset[4 * a + b], stride[a]);
@@ -430,11 +456,15 @@ static double FillElements(const std::vector<Element> &elements, const std::vect
           for (int k = 0; k < 3; ++k) t[k] = (2.0 * m - 2.0 * sm) * w * g[a][k] * g[b][k];
           for (int i = 0; i < 3; ++i)
             for (int j = 0; j < 3; ++j)
-              B[i][j] += R[i][0] * t[0] * R[j][0] + R[i][1] * t[1] * R[j][1] + R[i][2] * t[2] * R[j][2];
+              B[i][j] +=
+                  R[i][0] * t[0] * R[j][0] + R[i][1] * t[1] * R[j][1] + R[i][2] * t[2] * R[j][2];
         }
-        if (a_owned) AddBlock<false>(B, c.values[b_owned] + offset[4 * a + b], c.row_length[b_owned][owned_row[a]]);
+        if (a_owned)
+          AddBlock<false>(B, c.values[b_owned] + offset[4 * a + b],
+                          c.row_length[b_owned][owned_row[a]]);
         if (b_owned && b != a)
-          AddBlock<true>(B, c.values[a_owned] + offset[4 * b + a], c.row_length[a_owned][owned_row[b]]);
+          AddBlock<true>(B, c.values[a_owned] + offset[4 * b + a],
+                         c.row_length[a_owned][owned_row[b]]);
       }
     }
   }
@@ -453,12 +483,14 @@ PetscErrorCode RowAssembler::Fill(Mat matrix, bool rotated, Vec x, double stiffn
     MatInfo info;
     PetscCall(MatGetInfo(diagonal_part, MAT_LOCAL, &info));
     PetscCheck(static_cast<PetscInt>(info.nz_used) == pattern_nonzeros_diagonal_, PETSC_COMM_SELF,
-               PETSC_ERR_ARG_WRONG, "RowAssembler::Fill: the matrix does not come from CreateMatrix");
+               PETSC_ERR_ARG_WRONG,
+               "RowAssembler::Fill: the matrix does not come from CreateMatrix");
   }
   PetscScalar *diagonal_values, *off_values = nullptr;
   PetscCall(MatSeqAIJGetArray(diagonal_part, &diagonal_values));
   if (off_part) PetscCall(MatSeqAIJGetArray(off_part, &off_values));
-  if (diagonal_values) std::memset(diagonal_values, 0, sizeof(PetscScalar) * pattern_nonzeros_diagonal_);
+  if (diagonal_values)
+    std::memset(diagonal_values, 0, sizeof(PetscScalar) * pattern_nonzeros_diagonal_);
   if (off_values) std::memset(off_values, 0, sizeof(PetscScalar) * pattern_nonzeros_off_);
 
   FillContext context;
@@ -497,7 +529,8 @@ PetscErrorCode RowAssembler::Fill(Mat matrix, bool rotated, Vec x, double stiffn
       damping->gradients->resize(9 * elements_.size());
       context.gradients = damping->gradients->data();
       if (damping->start) {
-        PetscCheck(damping->start->size() == damping->gradients->size(), PETSC_COMM_SELF, PETSC_ERR_ARG_SIZ,
+        PetscCheck(damping->start->size() == damping->gradients->size(), PETSC_COMM_SELF,
+                   PETSC_ERR_ARG_SIZ,
                    "RowAssembler::Fill: the damping's start gradients do not match the elements");
         context.gradients_start = damping->start->data();
         PetscCall(VecSet(damping->force, 0.0));
@@ -518,17 +551,21 @@ PetscErrorCode RowAssembler::Fill(Mat matrix, bool rotated, Vec x, double stiffn
                            : Mat3::Identity();
         RotationOfDeformation4(F, R);
         for (PetscInt k = 0; k < batch; ++k)
-          Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(context.vertex_deformation + 9 * (v + k)) = R[k];
+          Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(context.vertex_deformation +
+                                                                   9 * (v + k)) = R[k];
       }
     PetscCall(VecRestoreArrayRead(x_halo_, &x_halo));
   } else {
-    if (standard_shear) FillElements<false, true>(elements_, lame_, context);
-    else FillElements<false, false>(elements_, lame_, context);
+    if (standard_shear)
+      FillElements<false, true>(elements_, lame_, context);
+    else
+      FillElements<false, false>(elements_, lame_, context);
   }
   if (lumped_mass) {
     const PetscScalar *mass;
     PetscCall(VecGetArrayRead(lumped_mass, &mass));
-    for (PetscInt i = 0; i < 3 * count_; ++i) diagonal_values[diagonal_offset_[i]] += mass_scale * mass[i];
+    for (PetscInt i = 0; i < 3 * count_; ++i)
+      diagonal_values[diagonal_offset_[i]] += mass_scale * mass[i];
     PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
   }
   PetscCall(MatSeqAIJRestoreArray(diagonal_part, &diagonal_values));

@@ -56,10 +56,10 @@ class RowAssembler {
   //     force = sum_e R K_e (y_e - y_e,start)  (owned rows, N),
   //     energy = sum_e |y_e - y_e,start|_K_e^2 / 2  (J, summed over ranks).
   struct IncrementDamping {
-    std::vector<double> *gradients = nullptr;     // out: H_e
-    const std::vector<double> *start = nullptr;   // in: H_e at the step's start, or null
-    Vec force = nullptr;                          // out when start
-    PetscReal energy = 0;                         // out when start
+    std::vector<double> *gradients = nullptr;    // out: H_e
+    const std::vector<double> *start = nullptr;  // in: H_e at the step's start, or null
+    Vec force = nullptr;                         // out when start
+    PetscReal energy = 0;                        // out when start
   };
 
   // Collective. matrix = stiffness_scale K + mass_scale diag(lumped_mass), K the
@@ -70,7 +70,8 @@ class RowAssembler {
   // and the damping terms (may be null). lumped_mass may be null (no mass
   // term). x is ignored unless rotated.
   PetscErrorCode Fill(Mat matrix, bool rotated, Vec x, double stiffness_scale, Vec lumped_mass,
-                      double mass_scale, Vec force, PetscReal *energy, IncrementDamping *damping = nullptr);
+                      double mass_scale, Vec force, PetscReal *energy,
+                      IncrementDamping *damping = nullptr);
 
   // Not collective. From now on, every rotated Fill also computes one rotation per
   // owned vertex: the polar rotation of the volume-weighted sum of the
@@ -87,12 +88,13 @@ class RowAssembler {
 
  private:
   struct Element {
-    std::array<int32_t, 4> vertex;      // index into the halo vertices
-    std::array<double, 9> gradient;     // rows grad N_1, grad N_2, grad N_3 (1/m)
-    std::array<double, 9> rest_gradient;  // sum_a (X_a - X_0) grad N_a^T (= I up to round-off), row-major
-    double volume;                      // |V| (m^3)
-    int32_t material;                   // index into lame_
-    uint32_t owned;                     // bit a: vertex a is owned; bit 4: the energy counts here
+    std::array<int32_t, 4> vertex;   // index into the halo vertices
+    std::array<double, 9> gradient;  // rows grad N_1, grad N_2, grad N_3 (1/m)
+    std::array<double, 9>
+        rest_gradient;  // sum_a (X_a - X_0) grad N_a^T (= I up to round-off), row-major
+    double volume;      // |V| (m^3)
+    int32_t material;   // index into lame_
+    uint32_t owned;     // bit a: vertex a is owned; bit 4: the energy counts here
     // Offsets of the blocks a, b (16): entry (3a, 3b) in the values of the
     // diagonal part when b is owned, else of the off-diagonal part; -1 when a is
     // not owned.
@@ -101,13 +103,13 @@ class RowAssembler {
 
   MPI_Comm comm_ = MPI_COMM_NULL;
   double shear_scale_ = 1;
-  PetscInt begin_ = 0, count_ = 0;           // owned PETSc vertices [begin, begin + count)
+  PetscInt begin_ = 0, count_ = 0;  // owned PETSc vertices [begin, begin + count)
   std::vector<Element> elements_;
   std::vector<Lame> lame_;
-  std::vector<PetscInt> halo_vertices_;      // PETSc vertex indices, increasing
+  std::vector<PetscInt> halo_vertices_;  // PETSc vertex indices, increasing
   VecScatter halo_scatter_ = nullptr;
   Vec x_halo_ = nullptr;
-  int32_t first_owned_halo_ = 0;             // halo index of PETSc vertex begin_
+  int32_t first_owned_halo_ = 0;  // halo index of PETSc vertex begin_
   // Row lengths of the owned vertices' rows in both parts of the matrix, and the
   // diagonal entries of the owned rows.
   std::vector<int32_t> row_length_diagonal_, row_length_off_;

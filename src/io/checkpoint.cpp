@@ -3,8 +3,8 @@
 #include <cmath>
 #include <cstdio>
 
-#include "io/hdf5_io.hpp"
 #include "common/options.hpp"
+#include "io/hdf5_io.hpp"
 
 namespace softbody {
 
@@ -14,19 +14,22 @@ PetscErrorCode ProcessCheckpointOptions(MPI_Comm comm, const OutputOptions &outp
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kInteger, "-checkpoint_every"}}));
   char path[PETSC_MAX_PATH_LEN] = "";
   PetscOptionsBegin(comm, nullptr, "Checkpoints and restart", nullptr);
-  PetscCall(PetscOptionsInt("-checkpoint_every",
-                            "Store a checkpoint in the result file every k steps, at the last step and "
-                            "when a signal stops the run (0: none)",
-                            nullptr, o->every, &o->every, nullptr));
-  PetscCall(PetscOptionsString("-restart",
-                               "Continue from the newest checkpoint of this result file (-steps counts "
-                               "from the original start; without -output the file itself is continued)",
-                               nullptr, path, path, sizeof(path), nullptr));
+  PetscCall(
+      PetscOptionsInt("-checkpoint_every",
+                      "Store a checkpoint in the result file every k steps, at the last step and "
+                      "when a signal stops the run (0: none)",
+                      nullptr, o->every, &o->every, nullptr));
+  PetscCall(
+      PetscOptionsString("-restart",
+                         "Continue from the newest checkpoint of this result file (-steps counts "
+                         "from the original start; without -output the file itself is continued)",
+                         nullptr, path, path, sizeof(path), nullptr));
   PetscOptionsEnd();
   o->restart_path = path;
   PetscCheck(o->every >= 0, comm, PETSC_ERR_USER_INPUT,
              "option -checkpoint_every: must be >= 0 (got %" PetscInt_FMT ")", o->every);
-  PetscCheck(o->every == 0 || !output.path.empty() || !o->restart_path.empty(), comm, PETSC_ERR_USER_INPUT,
+  PetscCheck(o->every == 0 || !output.path.empty() || !o->restart_path.empty(), comm,
+             PETSC_ERR_USER_INPUT,
              "option -checkpoint_every: needs -output (checkpoints are stored in the result file)");
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -54,8 +57,8 @@ int NewestSlot(hid_t file, int64_t *step) {
     if (!LinkExists(file, kSlots[s])) continue;
     const hid_t slot = H5Gopen2(file, kSlots[s], H5P_DEFAULT);
     int64_t valid = 0, slot_step = -1;
-    if (slot >= 0 && GetAttribute(slot, "valid", &valid) && valid == 1 && GetAttribute(slot, "step", &slot_step) &&
-        slot_step > *step) {
+    if (slot >= 0 && GetAttribute(slot, "valid", &valid) && valid == 1 &&
+        GetAttribute(slot, "step", &slot_step) && slot_step > *step) {
       newest = s;
       *step = slot_step;
     }
@@ -69,7 +72,9 @@ hid_t OpenForReading(const std::string &path) {
   return H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
 }
 
-std::string Quoted(const std::string &path) { return "'" + path + "'"; }
+std::string Quoted(const std::string &path) {
+  return "'" + path + "'";
+}
 
 // Rank 0: why the result file does not match the scene ("" when it does).
 std::string SceneMismatch(hid_t file, const Scene &scene) {
@@ -83,19 +88,19 @@ std::string SceneMismatch(hid_t file, const Scene &scene) {
     return "it has no readable /mesh group";
   const size_t bodies = scene.bodies.size();
   if (body_fixed.size() != bodies)
-    return "it has " + std::to_string(body_fixed.size()) + (body_fixed.size() == 1 ? " body" : " bodies") +
-           ", the scene " + std::to_string(bodies);
+    return "it has " + std::to_string(body_fixed.size()) +
+           (body_fixed.size() == 1 ? " body" : " bodies") + ", the scene " + std::to_string(bodies);
   std::vector<int32_t> counts(bodies, 0);
   for (int32_t b : vertex_body)
     if (b >= 0 && static_cast<size_t>(b) < bodies) ++counts[b];
   for (size_t b = 0; b < bodies; ++b) {
     const Body &body = scene.bodies[b];
     if (counts[b] != body.mesh.num_vertices())
-      return "body " + std::to_string(b) + " has " + std::to_string(counts[b]) + " vertices there, " +
-             std::to_string(body.mesh.num_vertices()) + " in the scene";
+      return "body " + std::to_string(b) + " has " + std::to_string(counts[b]) +
+             " vertices there, " + std::to_string(body.mesh.num_vertices()) + " in the scene";
     if (body_fixed[b] != (body.fixed ? 1 : 0))
-      return "body " + std::to_string(b) + " is " + (body_fixed[b] ? "fixed" : "free") + " there, " +
-             (body.fixed ? "fixed" : "free") + " in the scene";
+      return "body " + std::to_string(b) + " is " + (body_fixed[b] ? "fixed" : "free") +
+             " there, " + (body.fixed ? "fixed" : "free") + " in the scene";
   }
   std::vector<int32_t> scene_tets;
   for (const Body &body : scene.bodies)
@@ -106,17 +111,21 @@ std::string SceneMismatch(hid_t file, const Scene &scene) {
   for (const Body &body : scene.bodies)
     for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
       for (int c = 0; c < 3; ++c)
-        largest = std::max(largest, std::abs(rest[3 * (body.first_vertex + v) + c] - body.mesh.vertices(v, c)));
+        largest = std::max(
+            largest, std::abs(rest[3 * (body.first_vertex + v) + c] - body.mesh.vertices(v, c)));
   if (largest > 0) {
     char text[96];
     std::snprintf(text, sizeof(text), "the rest positions differ (by up to %.3g m)", largest);
     return text;
   }
-  if (ReadArray(file, "/mesh/body_material", H5T_NATIVE_DOUBLE, &materials) && materials.size() == 3 * bodies)
+  if (ReadArray(file, "/mesh/body_material", H5T_NATIVE_DOUBLE, &materials) &&
+      materials.size() == 3 * bodies)
     for (size_t b = 0; b < bodies; ++b) {
       const Material &m = scene.bodies[b].material;
-      if (materials[3 * b] != m.density || materials[3 * b + 1] != m.young || materials[3 * b + 2] != m.poisson)
-        return "body " + std::to_string(b) + "'s material (density, Young's modulus, Poisson ratio) differs";
+      if (materials[3 * b] != m.density || materials[3 * b + 1] != m.young ||
+          materials[3 * b + 2] != m.poisson)
+        return "body " + std::to_string(b) +
+               "'s material (density, Young's modulus, Poisson ratio) differs";
     }
   return "";
 }
@@ -139,7 +148,8 @@ std::string ReadSlot(hid_t file, int slot_index, int32_t num_vertices, LoopState
   const size_t expected = 3 * static_cast<size_t>(num_vertices);
   if (!ok || positions->size() != expected || velocities->size() != expected ||
       (resting_dims.size() == 2 && resting_dims[1] != 2))
-    return "its checkpoint " + std::string(kSlots[slot_index]) + " is incomplete or has the wrong size";
+    return "its checkpoint " + std::string(kSlots[slot_index]) +
+           " is incomplete or has the wrong size";
   state->step = static_cast<PetscInt>(step);
   state->frames = static_cast<PetscInt>(frames);
   state->deformations_applied = applied;
@@ -161,8 +171,10 @@ PetscErrorCode BroadcastLoopState(MPI_Comm comm, LoopState *state) {
   state->frames = counts[1];
   state->deformations_applied.resize(counts[2]);
   state->resting_contacts.resize(counts[3]);
-  PetscCallMPI(MPI_Bcast(state->deformations_applied.data(), static_cast<int>(counts[2]), MPI_INT32_T, 0, comm));
-  PetscCallMPI(MPI_Bcast(state->resting_contacts.data(), static_cast<int>(2 * counts[3]), MPI_INT32_T, 0, comm));
+  PetscCallMPI(MPI_Bcast(state->deformations_applied.data(), static_cast<int>(counts[2]),
+                         MPI_INT32_T, 0, comm));
+  PetscCallMPI(MPI_Bcast(state->resting_contacts.data(), static_cast<int>(2 * counts[3]),
+                         MPI_INT32_T, 0, comm));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -176,9 +188,11 @@ PetscErrorCode CheckRestartFile(MPI_Comm comm, const std::string &path) {
   if (rank == 0) {
     const hid_t file = OpenForReading(path);
     int64_t step;
-    if (file < 0) why = "option -restart: cannot open " + Quoted(path) + " as an HDF5 file";
+    if (file < 0)
+      why = "option -restart: cannot open " + Quoted(path) + " as an HDF5 file";
     else if (NewestSlot(file, &step) < 0)
-      why = "option -restart: " + Quoted(path) + " holds no checkpoint (runs write them with -checkpoint_every k)";
+      why = "option -restart: " + Quoted(path) +
+            " holds no checkpoint (runs write them with -checkpoint_every k)";
     if (file >= 0) H5Fclose(file);
   }
   PetscCall(AgreeOnMessage(comm, why));
@@ -203,10 +217,12 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, const Scen
     if (slot < 0) why = "option -restart: " + Quoted(path) + " holds no readable checkpoint";
     if (why.empty()) {
       const std::string mismatch = SceneMismatch(file, scene);
-      if (!mismatch.empty()) why = "option -restart: " + Quoted(path) + " does not match the scene: " + mismatch;
+      if (!mismatch.empty())
+        why = "option -restart: " + Quoted(path) + " does not match the scene: " + mismatch;
     }
     if (why.empty()) {
-      const std::string bad = ReadSlot(file, slot, scene.num_vertices(), state, &positions, &velocities);
+      const std::string bad =
+          ReadSlot(file, slot, scene.num_vertices(), state, &positions, &velocities);
       if (!bad.empty()) why = "option -restart: " + Quoted(path) + ": " + bad;
     }
     if (file >= 0) H5Fclose(file);
@@ -215,8 +231,8 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, const Scen
             std::to_string(state->deformations_applied.size()) + " -deform events, this run has " +
             std::to_string(deformations);
     if (why.empty() && steps < state->step)
-      why = "option -steps: " + std::to_string(steps) + " is before the checkpoint of " + Quoted(path) +
-            " at step " + std::to_string(state->step);
+      why = "option -steps: " + std::to_string(steps) + " is before the checkpoint of " +
+            Quoted(path) + " at step " + std::to_string(state->step);
     if (why.empty()) {
       PetscScalar *nx, *nv;
       PetscCall(VecGetArray(natural_x, &nx));
@@ -255,21 +271,26 @@ PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec
     const hid_t group = OpenOrCreateGroup(file, "/checkpoint");
     const hid_t slot = group < 0 ? -1 : OpenOrCreateGroup(file, kSlots[slot_index]);
     // Invalid on disk before its data change; valid again once they are complete.
-    ok = slot >= 0 && SetAttribute(slot, "valid", int64_t{0}) && H5Fflush(file, H5F_SCOPE_LOCAL) >= 0;
+    ok = slot >= 0 && SetAttribute(slot, "valid", int64_t{0}) &&
+         H5Fflush(file, H5F_SCOPE_LOCAL) >= 0;
     const PetscScalar *nx, *nv;
     PetscCall(VecGetArrayRead(natural_x, &nx));
     PetscCall(VecGetArrayRead(natural_v, &nv));
     std::vector<int32_t> resting;
-    for (const auto &contact : state.resting_contacts) resting.insert(resting.end(), contact.begin(), contact.end());
+    for (const auto &contact : state.resting_contacts)
+      resting.insert(resting.end(), contact.begin(), contact.end());
     const hsize_t V = static_cast<hsize_t>(writer->natural_order().num_vertices());
     ok = ok && WriteResizableArray(slot, "positions", H5T_NATIVE_DOUBLE, V, 3, nx) &&
          WriteResizableArray(slot, "velocities", H5T_NATIVE_DOUBLE, V, 3, nv) &&
-         WriteResizableArray(slot, "deformations_applied", H5T_NATIVE_INT32, state.deformations_applied.size(), 1,
+         WriteResizableArray(slot, "deformations_applied", H5T_NATIVE_INT32,
+                             state.deformations_applied.size(), 1,
                              state.deformations_applied.data()) &&
-         WriteResizableArray(slot, "resting_contacts", H5T_NATIVE_INT32, resting.size() / 2, 2, resting.data()) &&
-         SetAttribute(slot, "step", int64_t{state.step}) && SetAttribute(slot, "time", double{state.time}) &&
-         SetAttribute(slot, "frames", int64_t{state.frames}) && SetAttribute(slot, "ranks", int64_t{size}) &&
-         SetAttribute(slot, "valid", int64_t{1});
+         WriteResizableArray(slot, "resting_contacts", H5T_NATIVE_INT32, resting.size() / 2, 2,
+                             resting.data()) &&
+         SetAttribute(slot, "step", int64_t{state.step}) &&
+         SetAttribute(slot, "time", double{state.time}) &&
+         SetAttribute(slot, "frames", int64_t{state.frames}) &&
+         SetAttribute(slot, "ranks", int64_t{size}) && SetAttribute(slot, "valid", int64_t{1});
     PetscCall(VecRestoreArrayRead(natural_x, &nx));
     PetscCall(VecRestoreArrayRead(natural_v, &nv));
     if (slot >= 0) H5Gclose(slot);

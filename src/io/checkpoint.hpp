@@ -36,8 +36,8 @@
 #include <string>
 #include <vector>
 
-#include "io/output.hpp"
 #include "fem/partition.hpp"
+#include "io/output.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
@@ -54,10 +54,10 @@ PetscErrorCode ProcessCheckpointOptions(MPI_Comm comm, const OutputOptions &outp
 
 // What the time loop carries from step to step besides positions and velocities.
 struct LoopState {
-  PetscInt step = 0;        // steps taken since the original start
-  PetscReal time = 0;       // s
-  PetscInt frames = 0;      // frames in the result file up to this step
-  std::vector<int32_t> deformations_applied;              // per -deform event, 0 or 1
+  PetscInt step = 0;                          // steps taken since the original start
+  PetscReal time = 0;                         // s
+  PetscInt frames = 0;                        // frames in the result file up to this step
+  std::vector<int32_t> deformations_applied;  // per -deform event, 0 or 1
   std::vector<std::array<int32_t, 2>> resting_contacts;  // (natural vertex, obstacle; -1 ground)
 };
 

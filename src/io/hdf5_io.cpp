@@ -12,8 +12,8 @@ hid_t CreateSeries(hid_t location, const char *name, const std::vector<hsize_t> 
   const hid_t space = H5Screate_simple(static_cast<int>(dims.size()), dims.data(), max_dims.data());
   const hid_t properties = H5Pcreate(H5P_DATASET_CREATE);
   H5Pset_chunk(properties, static_cast<int>(chunk.size()), chunk.data());
-  const hid_t set = H5Dcreate2(location, name, H5T_NATIVE_DOUBLE, space, H5P_DEFAULT, properties,
-                               H5P_DEFAULT);
+  const hid_t set =
+      H5Dcreate2(location, name, H5T_NATIVE_DOUBLE, space, H5P_DEFAULT, properties, H5P_DEFAULT);
   H5Pclose(properties);
   H5Sclose(space);
   return set;
@@ -38,7 +38,8 @@ bool TransferFrame(hid_t set, hsize_t frame, double *values, bool write) {
   space = H5Dget_space(set);
   start[0] = frame;
   dims[0] = 1;
-  ok = ok && H5Sselect_hyperslab(space, H5S_SELECT_SET, start.data(), nullptr, dims.data(), nullptr) >= 0;
+  ok = ok &&
+       H5Sselect_hyperslab(space, H5S_SELECT_SET, start.data(), nullptr, dims.data(), nullptr) >= 0;
   const hid_t memory = H5Screate_simple(rank, dims.data(), nullptr);
   ok = ok && (write ? H5Dwrite(set, H5T_NATIVE_DOUBLE, memory, space, H5P_DEFAULT, values)
                     : H5Dread(set, H5T_NATIVE_DOUBLE, memory, space, H5P_DEFAULT, values)) >= 0;
@@ -104,8 +105,8 @@ bool WriteArray(hid_t location, const char *name, hid_t type, const std::vector<
   return ok;
 }
 
-bool WriteResizableArray(hid_t location, const char *name, hid_t type, hsize_t rows, hsize_t columns,
-                         const void *values) {
+bool WriteResizableArray(hid_t location, const char *name, hid_t type, hsize_t rows,
+                         hsize_t columns, const void *values) {
   hsize_t dims[2] = {rows, columns};
   hid_t set;
   if (LinkExists(location, name)) {
@@ -150,8 +151,10 @@ bool ReadArray(hid_t location, const char *name, hid_t type, std::vector<T> *val
   return ok;
 }
 
-template bool ReadArray<double>(hid_t, const char *, hid_t, std::vector<double> *, std::vector<hsize_t> *);
-template bool ReadArray<int32_t>(hid_t, const char *, hid_t, std::vector<int32_t> *, std::vector<hsize_t> *);
+template bool ReadArray<double>(hid_t, const char *, hid_t, std::vector<double> *,
+                                std::vector<hsize_t> *);
+template bool ReadArray<int32_t>(hid_t, const char *, hid_t, std::vector<int32_t> *,
+                                 std::vector<hsize_t> *);
 
 bool SetAttribute(hid_t object, const char *name, hid_t type, const void *value) {
   if (H5Aexists(object, name) > 0) H5Adelete(object, name);  // the type may differ
@@ -206,7 +209,8 @@ bool LinkExists(hid_t location, const char *path) {
   while (true) {
     const size_t slash = full.find('/', from);
     const std::string prefix = full.substr(0, slash);
-    if (!prefix.empty() && prefix != "/" && H5Lexists(location, prefix.c_str(), H5P_DEFAULT) <= 0) return false;
+    if (!prefix.empty() && prefix != "/" && H5Lexists(location, prefix.c_str(), H5P_DEFAULT) <= 0)
+      return false;
     if (slash == std::string::npos) return true;
     from = slash + 1;
   }

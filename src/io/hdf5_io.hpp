@@ -35,8 +35,8 @@ bool WriteArray(hid_t location, const char *name, hid_t type, const std::vector<
 
 // A two-dimensional dataset [rows][columns] whose row count may change between
 // writes (chunked, unlimited rows): created at the first write, resized after.
-bool WriteResizableArray(hid_t location, const char *name, hid_t type, hsize_t rows, hsize_t columns,
-                         const void *values);
+bool WriteResizableArray(hid_t location, const char *name, hid_t type, hsize_t rows,
+                         hsize_t columns, const void *values);
 
 // Reads a whole dataset of `type` (any shape) into values, and its dims.
 template <typename T>

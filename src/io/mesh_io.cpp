@@ -18,9 +18,9 @@
 #include <unordered_map>
 #include <vector>
 
-#include "fem/element.hpp"
 #include "common/errors.hpp"
 #include "common/text_reader.hpp"
+#include "fem/element.hpp"
 
 extern char **environ;
 
@@ -29,7 +29,8 @@ namespace softbody {
 namespace fs = std::filesystem;
 
 static bool EndsWith(const std::string &s, const std::string &suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 TetMesh ReadTetMesh(const std::string &path, const MeshingOptions &meshing) {
@@ -46,12 +47,20 @@ namespace {
 // ------------------------------------------------------------ shared checks
 
 // Sections of MEDIT files that we skip: number of integers per row.
-const std::map<std::string, int> kSkippedSections = {
-    {"Edges", 3},           {"Triangles", 4},       {"Quadrilaterals", 5},
-    {"Hexahedra", 9},       {"Prisms", 7},          {"Corners", 1},
-    {"Ridges", 1},          {"RequiredVertices", 1}, {"RequiredEdges", 1},
-    {"RequiredTriangles", 1}, {"Normals", 3},       {"Tangents", 3},
-    {"NormalAtVertices", 2}, {"TangentAtEdges", 3}};
+const std::map<std::string, int> kSkippedSections = {{"Edges", 3},
+                                                     {"Triangles", 4},
+                                                     {"Quadrilaterals", 5},
+                                                     {"Hexahedra", 9},
+                                                     {"Prisms", 7},
+                                                     {"Corners", 1},
+                                                     {"Ridges", 1},
+                                                     {"RequiredVertices", 1},
+                                                     {"RequiredEdges", 1},
+                                                     {"RequiredTriangles", 1},
+                                                     {"Normals", 3},
+                                                     {"Tangents", 3},
+                                                     {"NormalAtVertices", 2},
+                                                     {"TangentAtEdges", 3}};
 
 // A count read from `token` (of the current line). A row takes at least one byte,
 // so a count beyond the bytes left is rejected before anything is allocated (a
@@ -60,7 +69,8 @@ long ParseCount(const TextReader &in, std::string_view token, const char *what) 
   const long count = in.ParseInteger(token, (std::string("number of ") + what).c_str());
   if (count < 0) in.Fail(std::string("negative number of ") + what);
   if (static_cast<size_t>(count) > in.remaining_bytes())
-    in.Fail(std::to_string(count) + " " + what + " announced, more than the rest of the file holds");
+    in.Fail(std::to_string(count) + " " + what +
+            " announced, more than the rest of the file holds");
   return count;
 }
 
@@ -180,7 +190,7 @@ OffSurface ReadOffSurface(const std::string &path) {
     in.Fail("a closed surface needs at least 4 vertices and 4 faces (found " + std::to_string(nv) +
             " and " + std::to_string(nf) + ")");
 
-  std::map<std::array<double, 3>, long> first_at;  // exact coordinates -> vertex
+  std::map<std::array<double, 3>, long> first_at;       // exact coordinates -> vertex
   surface.vertices.reserve(RowsToAllocate(in, nv, 3));  // rows "x y z"
   surface.vertex_lines.reserve(surface.vertices.capacity());
   for (long v = 0; v < nv; ++v) {

@@ -65,7 +65,7 @@ TetMesh ReadOff(const std::string &path, const MeshingOptions &meshing = Meshing
 // The OFF surface as ReadOff reads and checks it, before TetGen runs.
 struct OffSurface {
   std::vector<Eigen::RowVector3d> vertices;
-  std::vector<long> vertex_lines;  // line of each vertex row
+  std::vector<long> vertex_lines;           // line of each vertex row
   std::vector<std::vector<int32_t>> faces;  // 0-based vertex indices, >= 3 each
 };
 

@@ -5,18 +5,19 @@
 #include <filesystem>
 #include <string_view>
 
-#include "io/hdf5_io.hpp"
 #include "common/options.hpp"
+#include "io/hdf5_io.hpp"
 
 namespace softbody {
 
 PetscErrorCode ProcessOutputOptions(MPI_Comm comm, OutputOptions *o) {
   PetscFunctionBeginUser;
   char path[PETSC_MAX_PATH_LEN] = "", dir[PETSC_MAX_PATH_LEN] = "";
-  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kInteger, "-output_every"},
-                                     {OptionSyntax::kInteger, "-flush_every"}}));
+  PetscCall(CheckOptionSyntax(
+      comm, {{OptionSyntax::kInteger, "-output_every"}, {OptionSyntax::kInteger, "-flush_every"}}));
   PetscOptionsBegin(comm, nullptr, "Output", nullptr);
-  PetscCall(PetscOptionsString("-output", "HDF5 file of the frames (+ .xdmf beside it); none if unset",
+  PetscCall(PetscOptionsString("-output",
+                               "HDF5 file of the frames (+ .xdmf beside it); none if unset",
                                nullptr, path, path, sizeof(path), nullptr));
   PetscCall(PetscOptionsInt("-output_every", "Write a frame every k steps", nullptr, o->every,
                             &o->every, nullptr));
@@ -55,12 +56,15 @@ std::string XdmfPath(const std::string &h5_path) {
 std::string WhyNotWritable(const std::string &path) {
   namespace fs = std::filesystem;
   if (path.empty()) return "empty file name";
-  if (fs::path(path).extension() == ".xdmf") return "the result file must not end in .xdmf (that name is its .xdmf)";
-  const fs::path folder = fs::path(path).has_parent_path() ? fs::path(path).parent_path() : fs::path(".");
+  if (fs::path(path).extension() == ".xdmf")
+    return "the result file must not end in .xdmf (that name is its .xdmf)";
+  const fs::path folder =
+      fs::path(path).has_parent_path() ? fs::path(path).parent_path() : fs::path(".");
   std::error_code error;
   if (!fs::exists(folder, error)) return "folder '" + folder.string() + "' does not exist";
   if (!fs::is_directory(folder, error)) return "'" + folder.string() + "' is not a folder";
-  if (access(folder.c_str(), W_OK | X_OK) != 0) return "folder '" + folder.string() + "' is not writable";
+  if (access(folder.c_str(), W_OK | X_OK) != 0)
+    return "folder '" + folder.string() + "' is not writable";
   for (const std::string &file : {path, XdmfPath(path)}) {
     if (!fs::exists(file, error)) continue;
     if (fs::is_directory(file, error)) return "'" + file + "' is a folder";
@@ -76,8 +80,9 @@ PetscErrorCode CheckOutputPath(MPI_Comm comm, const char *option, const std::str
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   const std::string why = rank == 0 ? WhyNotWritable(path) : "";
-  PetscCall(AgreeOnSuccess(comm, why.empty(),
-                           std::string("option ") + option + ": cannot create '" + path + "': " + why));
+  PetscCall(
+      AgreeOnSuccess(comm, why.empty(),
+                     std::string("option ") + option + ": cannot create '" + path + "': " + why));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -97,7 +102,8 @@ PetscErrorCode NaturalOrder::Setup(const Scene &scene, const DofLayout &layout, 
       from[3 * f + c] = 3 * layout.petsc_of_free[f] + c;
       to[3 * f + c] = 3 * layout.natural_of_free[f] + c;
     }
-  PetscCall(VecCreateSeq(PETSC_COMM_SELF, layout.rank == 0 ? 3 * scene.num_vertices() : 0, &natural_template_));
+  PetscCall(VecCreateSeq(PETSC_COMM_SELF, layout.rank == 0 ? 3 * scene.num_vertices() : 0,
+                         &natural_template_));
   IS is_from, is_to;
   PetscCall(ISCreateGeneral(PETSC_COMM_SELF, 3 * n_free, from.data(), PETSC_COPY_VALUES, &is_from));
   PetscCall(ISCreateGeneral(PETSC_COMM_SELF, 3 * n_free, to.data(), PETSC_COPY_VALUES, &is_to));
@@ -145,8 +151,8 @@ struct SeriesName {
   const char *name;
   bool per_vertex;
 };
-constexpr SeriesName kSeries[] = {{"/time", false},          {"/positions", true},
-                                  {"/velocities", true},     {"/energy/kinetic", false},
+constexpr SeriesName kSeries[] = {{"/time", false},           {"/positions", true},
+                                  {"/velocities", true},      {"/energy/kinetic", false},
                                   {"/energy/elastic", false}, {"/energy/gravitational", false}};
 
 // Root attribute "complete": 0 while the run goes on, 1 once it has finished.
@@ -162,7 +168,8 @@ bool WriteMesh(hid_t file, const Scene &scene) {
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
     body_fixed.push_back(body.fixed && !body.at_rest ? 1 : 0);
-    materials.insert(materials.end(), {body.material.density, body.material.young, body.material.poisson});
+    materials.insert(materials.end(),
+                     {body.material.density, body.material.young, body.material.poisson});
     for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
       for (int a = 0; a < 4; ++a) tets.push_back(body.first_vertex + body.mesh.tets(t, a));
     const auto boundary = BoundaryTriangles(body.mesh);
@@ -204,8 +211,9 @@ bool ResultWriter::CreateFile(const Scene &scene) {
   bool ok = energy >= 0;
   if (energy >= 0) H5Gclose(energy);
   for (const SeriesName &series : kSeries) {
-    const hid_t set = CreateSeries(file_, series.name, series.per_vertex ? std::vector<hsize_t>{V, 3}
-                                                                         : std::vector<hsize_t>{});
+    const hid_t set =
+        CreateSeries(file_, series.name,
+                     series.per_vertex ? std::vector<hsize_t>{V, 3} : std::vector<hsize_t>{});
     ok = ok && set >= 0;
     if (set >= 0) H5Dclose(set);
   }
@@ -244,7 +252,8 @@ bool ResultWriter::CopyFrames(const Continuation &continuation) {
 }
 
 PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
-                                  const DofLayout &layout, Vec like, const Continuation *continuation) {
+                                  const DofLayout &layout, Vec like,
+                                  const Continuation *continuation) {
   PetscFunctionBeginUser;
   comm_ = comm;
   options_ = options;
@@ -276,9 +285,10 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
     if (ok) {
       xdmf_ = std::fopen(XdmfPath(options_.path).c_str(), "w");
       what = "cannot create '" + XdmfPath(options_.path) + "' beside";
-      ok = xdmf_ && std::fputs("<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n<Domain>\n<Grid "
-                               "Name=\"softbody\" GridType=\"Collection\" CollectionType=\"Temporal\">\n",
-                               xdmf_) >= 0;
+      ok = xdmf_ && std::fputs(
+                        "<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n<Domain>\n<Grid "
+                        "Name=\"softbody\" GridType=\"Collection\" CollectionType=\"Temporal\">\n",
+                        xdmf_) >= 0;
       xdmf_tail_ = ok ? std::ftell(xdmf_) : 0;
       ok = ok && ExtendXdmf();
     }
@@ -305,7 +315,8 @@ PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec veloc
     const PetscScalar *x, *v;
     PetscCall(VecGetArrayRead(positions_, &x));
     PetscCall(VecGetArrayRead(velocities_, &v));
-    ok = WriteSeriesFrame(file_, "/time", frame, &time) && WriteSeriesFrame(file_, "/positions", frame, x) &&
+    ok = WriteSeriesFrame(file_, "/time", frame, &time) &&
+         WriteSeriesFrame(file_, "/positions", frame, x) &&
          WriteSeriesFrame(file_, "/velocities", frame, v) &&
          WriteSeriesFrame(file_, "/energy/kinetic", frame, &energy.kinetic) &&
          WriteSeriesFrame(file_, "/energy/elastic", frame, &energy.elastic) &&
@@ -315,7 +326,8 @@ PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec veloc
   }
   PetscCall(AgreeOnSuccess(comm_, ok, "cannot write frame to '" + options_.path + "'"));
   times_.push_back(time);
-  if (static_cast<PetscInt>(times_.size() - xdmf_frames_) >= options_.flush_every) PetscCall(Flush());
+  if (static_cast<PetscInt>(times_.size() - xdmf_frames_) >= options_.flush_every)
+    PetscCall(Flush());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -330,27 +342,33 @@ bool ResultWriter::ExtendXdmf() {
   const std::string V = std::to_string(num_vertices_), T = std::to_string(num_tets_);
   const std::string F = std::to_string(times_.size());
   auto slab = [&](const char *dataset, size_t frame) {
-    return "<DataItem Dimensions=\"" + V + " 3\" NumberType=\"Float\" Precision=\"8\" "
-           "Format=\"HDF\">" + h5 + ":" + dataset + "|" + std::to_string(frame) + " 0 0:1 1 1:1 " +
-           V + " 3:" + F + " " + V + " 3</DataItem>\n";
+    return "<DataItem Dimensions=\"" + V +
+           " 3\" NumberType=\"Float\" Precision=\"8\" "
+           "Format=\"HDF\">" +
+           h5 + ":" + dataset + "|" + std::to_string(frame) + " 0 0:1 1 1:1 " + V + " 3:" + F +
+           " " + V + " 3</DataItem>\n";
   };
   std::string entries;
   for (size_t f = xdmf_frames_; f < times_.size(); ++f) {
     char time[32];
     std::snprintf(time, sizeof(time), "%.17g", times_[f]);
-    entries += "<Grid Name=\"frame " + std::to_string(f) + "\" GridType=\"Uniform\">\n<Time Value=\"" + time +
-               "\"/>\n<Topology TopologyType=\"Tetrahedron\" NumberOfElements=\"" + T + "\">\n" +
-               "<DataItem Dimensions=\"" + T + " 4\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">" + h5 +
-               ":/mesh/tets</DataItem>\n</Topology>\n<Geometry GeometryType=\"XYZ\">\n" + slab("/positions", f) +
-               "</Geometry>\n<Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">\n" +
-               slab("/velocities", f) +
-               "</Attribute>\n<Attribute Name=\"body\" AttributeType=\"Scalar\" Center=\"Node\">\n"
-               "<DataItem Dimensions=\"" + V + "\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">" + h5 +
-               ":/mesh/vertex_body</DataItem>\n</Attribute>\n</Grid>\n";
+    entries +=
+        "<Grid Name=\"frame " + std::to_string(f) + "\" GridType=\"Uniform\">\n<Time Value=\"" +
+        time + "\"/>\n<Topology TopologyType=\"Tetrahedron\" NumberOfElements=\"" + T + "\">\n" +
+        "<DataItem Dimensions=\"" + T + " 4\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">" +
+        h5 + ":/mesh/tets</DataItem>\n</Topology>\n<Geometry GeometryType=\"XYZ\">\n" +
+        slab("/positions", f) +
+        "</Geometry>\n<Attribute Name=\"velocity\" AttributeType=\"Vector\" Center=\"Node\">\n" +
+        slab("/velocities", f) +
+        "</Attribute>\n<Attribute Name=\"body\" AttributeType=\"Scalar\" Center=\"Node\">\n"
+        "<DataItem Dimensions=\"" +
+        V + "\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">" + h5 +
+        ":/mesh/vertex_body</DataItem>\n</Attribute>\n</Grid>\n";
   }
   bool ok = std::fseek(xdmf_, xdmf_tail_, SEEK_SET) == 0 && std::fputs(entries.c_str(), xdmf_) >= 0;
   xdmf_tail_ = std::ftell(xdmf_);
-  ok = ok && xdmf_tail_ >= 0 && std::fputs("</Grid>\n</Domain>\n</Xdmf>\n", xdmf_) >= 0 && std::fflush(xdmf_) == 0;
+  ok = ok && xdmf_tail_ >= 0 && std::fputs("</Grid>\n</Domain>\n</Xdmf>\n", xdmf_) >= 0 &&
+       std::fflush(xdmf_) == 0;
   if (ok) xdmf_frames_ = times_.size();
   return ok;
 }
@@ -369,7 +387,8 @@ PetscErrorCode ResultWriter::Close(const std::vector<std::pair<std::string, doub
   PetscFunctionBeginUser;
   bool ok = true;
   if (rank_ == 0 && file_ >= 0) {
-    for (const auto &[name, value] : statistics) ok = ok && SetAttribute(file_, name.c_str(), value);
+    for (const auto &[name, value] : statistics)
+      ok = ok && SetAttribute(file_, name.c_str(), value);
     ok = ok && SetAttribute(file_, "interrupted", H5T_NATIVE_INT, &interrupted_by) &&
          MarkComplete(file_, interrupted_by ? 0 : 1) && H5Fclose(file_) >= 0;
     file_ = -1;
@@ -381,15 +400,16 @@ PetscErrorCode ResultWriter::Close(const std::vector<std::pair<std::string, doub
 }
 
 PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout,
-                              const LocalElements &elements, PetscReal shear_scale,
-                              Vec lumped_mass, PetscReal alpha, PetscReal beta) {
+                              const LocalElements &elements, PetscReal shear_scale, Vec lumped_mass,
+                              PetscReal alpha, PetscReal beta) {
   PetscFunctionBeginUser;
   MPI_Comm comm = PetscObjectComm((PetscObject)lumped_mass);
   Mat stiffness;
   PetscCall(CreateStiffnessMatrix(comm, layout, elements, shear_scale, &stiffness));
   std::error_code error;
   if (layout.rank == 0) std::filesystem::create_directories(dir, error);
-  PetscCall(AgreeOnSuccess(comm, !error, "option -export_matrices: cannot create folder '" + dir + "'"));
+  PetscCall(
+      AgreeOnSuccess(comm, !error, "option -export_matrices: cannot create folder '" + dir + "'"));
 
   // Natural order of the free DOFs, with the PETSc layout's local sizes.
   std::vector<PetscInt> natural;

@@ -38,10 +38,10 @@
 namespace softbody {
 
 struct OutputOptions {
-  std::string path;         // -output FILE.h5 ("" = write nothing)
-  PetscInt every = 1;       // -output_every k
-  PetscInt flush_every = 1; // -flush_every k: flush the file and extend the .xdmf every k frames
-  std::string matrix_dir;   // -export_matrices DIR ("" = none)
+  std::string path;          // -output FILE.h5 ("" = write nothing)
+  PetscInt every = 1;        // -output_every k
+  PetscInt flush_every = 1;  // -flush_every k: flush the file and extend the .xdmf every k frames
+  std::string matrix_dir;    // -export_matrices DIR ("" = none)
 };
 
 // Collective. Reads -output -output_every -flush_every -export_matrices.
@@ -101,7 +101,8 @@ class ResultWriter {
   // cut back to them (source == path), or a new file with a copy of them.
   // `like` is a PETSc-ordered DOF vector.
   PetscErrorCode Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
-                      const DofLayout &layout, Vec like, const Continuation *continuation = nullptr);
+                      const DofLayout &layout, Vec like,
+                      const Continuation *continuation = nullptr);
   // Collective. Appends one frame; flushes every options.flush_every frames.
   PetscErrorCode WriteFrame(PetscReal time, Vec positions, Vec velocities,
                             const EnergySample &energy);
@@ -146,7 +147,7 @@ class ResultWriter {
 // Collective. Writes DIR/M.bin, DIR/K.bin, DIR/D.bin (D = alpha M + beta K).
 // K is the rest stiffness (in both modes).
 PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout,
-                              const LocalElements &elements, PetscReal shear_scale,
-                              Vec lumped_mass, PetscReal alpha, PetscReal beta);
+                              const LocalElements &elements, PetscReal shear_scale, Vec lumped_mass,
+                              PetscReal alpha, PetscReal beta);
 
 }  // namespace softbody

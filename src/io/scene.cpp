@@ -4,11 +4,11 @@
 #include <cmath>
 #include <filesystem>
 
-#include "fem/element.hpp"
 #include "common/errors.hpp"
-#include "io/mesh_io.hpp"
 #include "common/options.hpp"
 #include "common/text_reader.hpp"
+#include "fem/element.hpp"
+#include "io/mesh_io.hpp"
 
 namespace softbody {
 
@@ -44,8 +44,9 @@ constexpr int kBodyFields = 12;
 Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
                   const std::filesystem::path &folder, const MeshingOptions &meshing) {
   if (fields.size() != kBodyFields)
-    in.Fail("expected 12 fields 'file density young poisson is_fixed px py pz qw qx qy qz', found " +
-            std::to_string(fields.size()));
+    in.Fail(
+        "expected 12 fields 'file density young poisson is_fixed px py pz qw qx qy qz', found " +
+        std::to_string(fields.size()));
   Body body;
   body.mesh_path = (folder / std::string(fields[0])).lexically_normal().string();
   Material &m = body.material;
@@ -57,7 +58,8 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
   if (!(m.poisson > -1 && m.poisson < 0.5))
     in.Fail("Poisson ratio must lie in (-1, 0.5) (got " + std::string(fields[3]) + ")");
   const long fixed = in.ParseInteger(fields[4], "is_fixed");
-  if (fixed != 0 && fixed != 1) in.Fail("is_fixed must be 0 or 1 (got " + std::string(fields[4]) + ")");
+  if (fixed != 0 && fixed != 1)
+    in.Fail("is_fixed must be 0 or 1 (got " + std::string(fields[4]) + ")");
   body.fixed = fixed == 1;
   Eigen::Vector3d position;
   Eigen::Vector4d quaternion;
@@ -73,7 +75,8 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
   // Far from the origin (or with huge coordinates) a mesh loses its shape to
   // rounding, or its centroid overflows.
   if (!body.mesh.vertices.allFinite())
-    in.Fail("mesh " + body.mesh_path + ": placing it overflows (position or coordinates too large)");
+    in.Fail("mesh " + body.mesh_path +
+            ": placing it overflows (position or coordinates too large)");
   for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
     TetPositions X;
     for (int a = 0; a < 4; ++a) X.row(a) = body.mesh.vertices.row(body.mesh.tets(t, a));
@@ -117,11 +120,12 @@ Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(num_velocities) + " velocity lines, found " +
               std::to_string(i));
-    if (fields.size() != 5) in.Fail("expected 5 fields 'mesh vertex vx vy vz', found " +
-                                    std::to_string(fields.size()));
+    if (fields.size() != 5)
+      in.Fail("expected 5 fields 'mesh vertex vx vy vz', found " + std::to_string(fields.size()));
     const long b = in.ParseInteger(fields[0], "mesh index");
     if (b < 0 || b >= num_meshes)
-      in.Fail("mesh index " + std::to_string(b) + " out of range 0.." + std::to_string(num_meshes - 1));
+      in.Fail("mesh index " + std::to_string(b) + " out of range 0.." +
+              std::to_string(num_meshes - 1));
     const Body &body = scene.bodies[b];
     const long v = in.ParseInteger(fields[1], "vertex index");
     if (v < 0 || v >= body.mesh.num_vertices())

@@ -8,9 +8,9 @@
 // Units: density kg/m^3, young Pa, positions m, velocities m/s. Mesh paths are
 // relative to the scene file; a mesh is a MEDIT .mesh, a gmsh .msh or an OFF
 // surface .off, tetrahedralised by TetGen on load (see mesh_io.hpp; the OFF
-// vertices stay the mesh's first vertices, so velocity indices refer to them). Placement: the mesh's volume-weighted centroid is
-// moved to the origin, rotated by the normalised quaternion (w, x, y, z), then
-// translated by p.
+// vertices stay the mesh's first vertices, so velocity indices refer to them). Placement: the
+// mesh's volume-weighted centroid is moved to the origin, rotated by the normalised quaternion (w,
+// x, y, z), then translated by p.
 //
 // Natural vertex order: body 0's vertices in file order, then body 1's, ...
 #pragma once
@@ -33,10 +33,10 @@ struct Material {
 struct Body {
   std::string mesh_path;  // as resolved against the scene's folder
   Material material;
-  bool fixed;             // immobile: contributes no unknowns
-  bool at_rest = false;   // free in the file, but nothing can set it in motion: treated as fixed
-  TetMesh mesh;           // placed: vertices are the rest positions in the world
-  int32_t first_vertex;   // natural index of the body's vertex 0
+  bool fixed;            // immobile: contributes no unknowns
+  bool at_rest = false;  // free in the file, but nothing can set it in motion: treated as fixed
+  TetMesh mesh;          // placed: vertices are the rest positions in the world
+  int32_t first_vertex;  // natural index of the body's vertex 0
 };
 
 struct Scene {
@@ -44,7 +44,7 @@ struct Scene {
   std::vector<Body> bodies;
   // Natural order, #V x 3 initial velocities (m/s), zero where none is given.
   Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> initial_velocities;
-  int num_velocity_entries = 0;  // entries in the file's velocity section
+  int num_velocity_entries = 0;      // entries in the file's velocity section
   int ignored_fixed_velocities = 0;  // of which on fixed bodies (they never move)
 
   int32_t num_vertices() const;

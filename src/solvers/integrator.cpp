@@ -10,7 +10,8 @@
 
 namespace softbody {
 
-const char *const kElasticityModes[] = {"linear", "corotational", "ElasticityMode", "MODE_", nullptr};
+const char *const kElasticityModes[] = {"linear", "corotational", "ElasticityMode", "MODE_",
+                                        nullptr};
 
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionBeginUser;
@@ -36,12 +37,13 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              nullptr, kElasticityModes, (PetscEnum)o->mode, (PetscEnum *)&o->mode,
                              nullptr));
   PetscCall(PetscOptionsReal("-dt", "Time step (s)", nullptr, o->dt, &o->dt, nullptr));
-  PetscCall(PetscOptionsString("-dt_schedule",
-                               "Change the time step during the run: t1:dt1,t2:dt2 (s) means dt1 from "
-                               "time t1 on, then dt2 from t2 on; A is refactorised once per change",
-                               nullptr, schedule, schedule, sizeof(schedule), nullptr));
-  PetscCall(PetscOptionsRealArray("-gravity", "Gravitational acceleration gx,gy,gz (m/s^2)", nullptr,
-                                  gravity, &gravity_count, &gravity_set));
+  PetscCall(
+      PetscOptionsString("-dt_schedule",
+                         "Change the time step during the run: t1:dt1,t2:dt2 (s) means dt1 from "
+                         "time t1 on, then dt2 from t2 on; A is refactorised once per change",
+                         nullptr, schedule, schedule, sizeof(schedule), nullptr));
+  PetscCall(PetscOptionsRealArray("-gravity", "Gravitational acceleration gx,gy,gz (m/s^2)",
+                                  nullptr, gravity, &gravity_count, &gravity_set));
   PetscCall(PetscOptionsInt("-steps", "Number of time steps (0: set up only)", nullptr, o->steps,
                             &o->steps, nullptr));
   PetscCall(PetscOptionsReal("-alpha", "Rayleigh mass damping a in D = a M + b K (1/s)", nullptr,
@@ -64,14 +66,16 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                             "Corotational mode: most linearised solves per step (1: the single "
                             "linearised step, no check)",
                             nullptr, o->newton_max_it, &o->newton_max_it, nullptr));
-  PetscCall(PetscOptionsBool("-fallback_direct",
-                             "Repeat a solve that breaks down (factor or preconditioner not positive "
-                             "definite, NaN) by a direct factorisation, MUMPS Cholesky (its options take "
-                             "the prefix -fallback_)",
-                             nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
+  PetscCall(
+      PetscOptionsBool("-fallback_direct",
+                       "Repeat a solve that breaks down (factor or preconditioner not positive "
+                       "definite, NaN) by a direct factorisation, MUMPS Cholesky (its options take "
+                       "the prefix -fallback_)",
+                       nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
   PetscOptionsEnd();
   if (gravity_set) {
-    PetscCheck(gravity_count == 3, comm, PETSC_ERR_USER_INPUT, "option -gravity: expected gx,gy,gz");
+    PetscCheck(gravity_count == 3, comm, PETSC_ERR_USER_INPUT,
+               "option -gravity: expected gx,gy,gz");
     o->gravity = Eigen::Vector3d(gravity[0], gravity[1], gravity[2]);
   }
   o->dt_schedule.clear();
@@ -80,27 +84,29 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
     const std::string_view item = rest.substr(0, comma);
     const size_t colon = item.find(':');
     std::pair<PetscReal, PetscReal> entry;
-    PetscCheck(colon != std::string_view::npos && ParseNumber(item.substr(0, colon), &entry.first) &&
-                   ParseNumber(item.substr(colon + 1), &entry.second) && std::isfinite(entry.first) &&
-                   std::isfinite(entry.second) && entry.first >= 0 && entry.second > 0,
-               comm, PETSC_ERR_USER_INPUT,
-               "option -dt_schedule: '%s' is not time:dt with time >= 0 and dt > 0 (s)",
-               std::string(item).c_str());
+    PetscCheck(
+        colon != std::string_view::npos && ParseNumber(item.substr(0, colon), &entry.first) &&
+            ParseNumber(item.substr(colon + 1), &entry.second) && std::isfinite(entry.first) &&
+            std::isfinite(entry.second) && entry.first >= 0 && entry.second > 0,
+        comm, PETSC_ERR_USER_INPUT,
+        "option -dt_schedule: '%s' is not time:dt with time >= 0 and dt > 0 (s)",
+        std::string(item).c_str());
     PetscCheck(o->dt_schedule.empty() || entry.first > o->dt_schedule.back().first, comm,
                PETSC_ERR_USER_INPUT, "option -dt_schedule: times must increase");
     o->dt_schedule.push_back(entry);
     if (comma == std::string_view::npos) break;
     rest.remove_prefix(comma + 1);
   }
-  PetscCheck(o->dt > 0, comm, PETSC_ERR_USER_INPUT, "option -dt: must be > 0 (got %g)", (double)o->dt);
-  PetscCheck(o->steps >= 0, comm, PETSC_ERR_USER_INPUT, "option -steps: must be >= 0 (got %" PetscInt_FMT ")",
-             o->steps);
+  PetscCheck(o->dt > 0, comm, PETSC_ERR_USER_INPUT, "option -dt: must be > 0 (got %g)",
+             (double)o->dt);
+  PetscCheck(o->steps >= 0, comm, PETSC_ERR_USER_INPUT,
+             "option -steps: must be >= 0 (got %" PetscInt_FMT ")", o->steps);
   PetscCheck(o->alpha >= 0, comm, PETSC_ERR_USER_INPUT, "option -alpha: must be >= 0 (got %g)",
              (double)o->alpha);
   PetscCheck(o->beta >= 0, comm, PETSC_ERR_USER_INPUT, "option -beta: must be >= 0 (got %g)",
              (double)o->beta);
-  PetscCheck(o->newton_rtol > 0, comm, PETSC_ERR_USER_INPUT, "option -newton_rtol: must be > 0 (got %g)",
-             (double)o->newton_rtol);
+  PetscCheck(o->newton_rtol > 0, comm, PETSC_ERR_USER_INPUT,
+             "option -newton_rtol: must be > 0 (got %g)", (double)o->newton_rtol);
   PetscCheck(o->newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
              "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o->newton_max_it);
   PetscCheck(o->shear_scale > 0, comm, PETSC_ERR_USER_INPUT,
@@ -200,7 +206,8 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const Dof
   } else if (warp) {  // linear mode: A itself, no rotations (a direct solve in one iteration)
     PetscCall(PCWarpSetLinearOperator(pc, A_));
     std::vector<double> identity(9 * layout.local_count(), 0.0);
-    for (PetscInt v = 0; v < layout.local_count(); ++v) identity[9 * v] = identity[9 * v + 4] = identity[9 * v + 8] = 1.0;
+    for (PetscInt v = 0; v < layout.local_count(); ++v)
+      identity[9 * v] = identity[9 * v + 4] = identity[9 * v + 8] = 1.0;
     PetscCall(PCWarpSetRotations(pc, layout.local_count(), identity.data()));
   }
   PetscCall(SetTimeStep(options.dt));
@@ -238,11 +245,13 @@ PetscErrorCode ImplicitEuler::SetBodies(std::vector<int32_t> owned_body, int num
   PetscCall(VecRestoreArrayRead(mass_, &m));
   PetscCall(MPIU_Allreduce(MPI_IN_PLACE, second.data(), 9 * num_bodies, MPI_DOUBLE, MPI_SUM, comm));
   for (int b = 0; b < num_bodies; ++b)
-    if (rigid_[b].mass > 0) rigid_[b].inverse_inertia = Eigen::Map<Eigen::Matrix3d>(&second[9 * b]).inverse();
+    if (rigid_[b].mass > 0)
+      rigid_[b].inverse_inertia = Eigen::Map<Eigen::Matrix3d>(&second[9 * b]).inverse();
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta) {
+PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force,
+                                          std::vector<Eigen::Vector3d> *momenta) {
   PetscFunctionBeginUser;
   const PetscScalar *X, *m, *v, *f = nullptr;
   PetscCall(VecGetArrayRead(rest_, &X));
@@ -252,7 +261,8 @@ PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force, std::vector<Ei
   momenta->assign(2 * rigid_.size(), Eigen::Vector3d::Zero());  // per body: p, L
   for (size_t i = 0; i < owned_body_.size(); ++i) {
     const int b = owned_body_[i];
-    Eigen::Vector3d p = Eigen::Vector3d(m[3 * i] * v[3 * i], m[3 * i + 1] * v[3 * i + 1], m[3 * i + 2] * v[3 * i + 2]);
+    Eigen::Vector3d p = Eigen::Vector3d(m[3 * i] * v[3 * i], m[3 * i + 1] * v[3 * i + 1],
+                                        m[3 * i + 2] * v[3 * i + 2]);
     if (f) p += dt_ * Eigen::Vector3d(&f[3 * i]);
     (*momenta)[2 * b] += p;
     (*momenta)[2 * b + 1] += (Eigen::Vector3d(&X[3 * i]) - rigid_[b].centre).cross(p);
@@ -261,8 +271,8 @@ PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force, std::vector<Ei
   PetscCall(VecRestoreArrayRead(mass_, &m));
   PetscCall(VecRestoreArrayRead(w, &v));
   if (f) PetscCall(VecRestoreArrayRead(gravity_force_, &f));
-  PetscCall(MPIU_Allreduce(MPI_IN_PLACE, momenta->data(), 6 * static_cast<int>(rigid_.size()), MPI_DOUBLE,
-                           MPI_SUM, PetscObjectComm((PetscObject)w)));
+  PetscCall(MPIU_Allreduce(MPI_IN_PLACE, momenta->data(), 6 * static_cast<int>(rigid_.size()),
+                           MPI_DOUBLE, MPI_SUM, PetscObjectComm((PetscObject)w)));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -284,7 +294,8 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   {
     StageScope stage(Stages().assembly);
     PetscCall(PetscTime(&start));
-    PetscCall(assembler_.Fill(A_, false, nullptr, b * dt + dt * dt, mass_, 1.0 + a * dt, nullptr, nullptr));
+    PetscCall(assembler_.Fill(A_, false, nullptr, b * dt + dt * dt, mass_, 1.0 + a * dt, nullptr,
+                              nullptr));
     PetscCall(PetscTime(&end));
     stats_.assemble_seconds = end - start;
     ++stats_.assemblies;
@@ -325,8 +336,8 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     if (b > 0 && !damping_force_) PetscCall(VecDuplicate(elastic_force_, &damping_force_));
     RowAssembler::IncrementDamping damping{&corotated_, step_started_ ? &corotated_start_ : nullptr,
                                            damping_force_};
-    PetscCall(assembler_.Fill(A_, true, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_, elastic_force_,
-                              &elastic_energy_, b > 0 ? &damping : nullptr));
+    PetscCall(assembler_.Fill(A_, true, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_,
+                              elastic_force_, &elastic_energy_, b > 0 ? &damping : nullptr));
     if (step_started_) damping_energy_ = damping.energy;
     PetscCall(PetscTime(&end));
     stats_.assemble_seconds = end - start;
@@ -336,7 +347,8 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
       PC pc;
       PetscCall(KSPGetPC(ksp_, &pc));
       const std::vector<double> &rotations = assembler_.vertex_rotations();
-      PetscCall(PCWarpSetRotations(pc, static_cast<PetscInt>(rotations.size() / 9), rotations.data()));
+      PetscCall(
+          PCWarpSetRotations(pc, static_cast<PetscInt>(rotations.size() / 9), rotations.data()));
     }
   }
   elastic_state_current_ = true;
@@ -363,10 +375,12 @@ PetscErrorCode ImplicitEuler::PrimeSolver(Vec x_first, PetscReal dt_first) {
 static bool IsBreakdown(KSPConvergedReason reason) {
   return reason == KSP_DIVERGED_PC_FAILED || reason == KSP_DIVERGED_INDEFINITE_PC ||
          reason == KSP_DIVERGED_INDEFINITE_MAT || reason == KSP_DIVERGED_NANORINF ||
-         reason == KSP_DIVERGED_BREAKDOWN || reason == KSP_DIVERGED_BREAKDOWN_BICG || reason == KSP_DIVERGED_DTOL;
+         reason == KSP_DIVERGED_BREAKDOWN || reason == KSP_DIVERGED_BREAKDOWN_BICG ||
+         reason == KSP_DIVERGED_DTOL;
 }
 
-PetscErrorCode ImplicitEuler::SolveDirectly(Vec v, KSPConvergedReason failed, KSPConvergedReason *reason) {
+PetscErrorCode ImplicitEuler::SolveDirectly(Vec v, KSPConvergedReason failed,
+                                            KSPConvergedReason *reason) {
   PetscFunctionBeginUser;
   if (!fallback_ksp_) {
     PetscCall(KSPCreate(PetscObjectComm((PetscObject)A_), &fallback_ksp_));
@@ -378,7 +392,8 @@ PetscErrorCode ImplicitEuler::SolveDirectly(Vec v, KSPConvergedReason failed, KS
     PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
     PetscCall(KSPSetFromOptions(fallback_ksp_));
   }
-  PetscCall(PetscInfo(ksp_, "solve %" PetscInt_FMT " broke down (%s): repeated by the direct fallback\n",
+  PetscCall(PetscInfo(ksp_,
+                      "solve %" PetscInt_FMT " broke down (%s): repeated by the direct fallback\n",
                       stats_.solves + 1, KSPConvergedReasons[failed]));
   PetscCall(KSPSetOperators(fallback_ksp_, A_, A_));  // refactorises only when A changed
   PetscCall(KSPSolve(fallback_ksp_, rhs_, v));
@@ -407,10 +422,12 @@ PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
     PetscCall(KSPGetConvergedReason(ksp_, &reason));
     PetscCall(KSPGetIterationNumber(ksp_, &iterations));
     reactions_.clear();
-    if (IsBreakdown(reason) && options_.fallback_direct) PetscCall(SolveDirectly(v, reason, &reason));
+    if (IsBreakdown(reason) && options_.fallback_direct)
+      PetscCall(SolveDirectly(v, reason, &reason));
   } else {
     StageScope stage(Stages().contact);
-    PetscCall(projected_.Solve(ksp_, rhs_, contact->velocity_constraints(), v, &reactions_, &iterations));
+    PetscCall(
+        projected_.Solve(ksp_, rhs_, contact->velocity_constraints(), v, &reactions_, &iterations));
     ++stats_.contact_solves;
     stats_.contact_iterations += iterations;
   }
@@ -449,10 +466,13 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
       const double damping = 1.0 + options_.alpha * dt_;
       for (size_t i = 0; i < owned_body_.size(); ++i) {
         const RigidBody &body = rigid_[owned_body_[i]];
-        const Eigen::Vector3d dp = target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
-        const Eigen::Vector3d dL = target[2 * owned_body_[i] + 1] / damping - solved[2 * owned_body_[i] + 1];
+        const Eigen::Vector3d dp =
+            target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
+        const Eigen::Vector3d dL =
+            target[2 * owned_body_[i] + 1] / damping - solved[2 * owned_body_[i] + 1];
         const Eigen::Vector3d r = Eigen::Vector3d(&X[3 * i]) - body.centre;
-        Eigen::Map<Eigen::Vector3d>(&w[3 * i]) += dp / body.mass + (body.inverse_inertia * dL).cross(r);
+        Eigen::Map<Eigen::Vector3d>(&w[3 * i]) +=
+            dp / body.mass + (body.inverse_inertia * dL).cross(r);
       }
       PetscCall(VecRestoreArray(v, &w));
       PetscCall(VecRestoreArrayRead(rest_, &X));
@@ -496,13 +516,13 @@ PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
   PetscFunctionBeginUser;
   const PetscReal a = options_.alpha, b = options_.beta, dt = dt_;
   // g = M (v - v0) + a dt M v + dt f_el + b h - dt f_ext
-  PetscCall(VecWAXPY(work_, -1.0, v_start_, v));      // v - v0
+  PetscCall(VecWAXPY(work_, -1.0, v_start_, v));  // v - v0
   PetscCall(VecPointwiseMult(g, mass_, work_));
   PetscReal inertia, mass_damping = 0, external = 0;
-  PetscCall(VecDot(g, work_, &inertia));              // |v - v0|_M^2
+  PetscCall(VecDot(g, work_, &inertia));  // |v - v0|_M^2
   if (a > 0) {
     PetscCall(VecPointwiseMult(work_, mass_, v));
-    PetscCall(VecDot(work_, v, &mass_damping));      // |v|_M^2
+    PetscCall(VecDot(work_, v, &mass_damping));  // |v|_M^2
     PetscCall(VecAXPY(g, a * dt, work_));
   }
   PetscCall(VecAXPY(g, dt, elastic_force_));
@@ -512,8 +532,8 @@ PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
     PetscCall(VecDot(gravity_force_, v, &external));
   }
   // P = |v - v0|_M^2 / 2 + a dt |v|_M^2 / 2 + E + (b / dt) Psi - dt f_ext . v
-  *merit = 0.5 * inertia + 0.5 * a * dt * mass_damping + elastic_energy_ + (b > 0 ? b / dt * damping_energy_ : 0) -
-           dt * external;
+  *merit = 0.5 * inertia + 0.5 * a * dt * mass_damping + elastic_energy_ +
+           (b > 0 ? b / dt * damping_energy_ : 0) - dt * external;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -555,8 +575,10 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
   for (; k < options_.newton_max_it; ++k) {
     // A_k d = -g(v_k); the first direction is v1 itself, guessed as v0.
     PetscCall(VecScale(rhs_, -1.0));
-    if (k == 0) PetscCall(VecCopy(v_start_, direction_));
-    else PetscCall(VecZeroEntries(direction_));
+    if (k == 0)
+      PetscCall(VecCopy(v_start_, direction_));
+    else
+      PetscCall(VecZeroEntries(direction_));
     PetscCall(Solve(direction_, nullptr));
     PetscReal slope;
     PetscCall(VecDot(rhs_, direction_, &slope));
@@ -575,8 +597,8 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
       PetscCall(Residual(iterate_, rhs_, &merit));
       PetscCall(VecNorm(rhs_, NORM_2, &residual));
       const bool near_root = last_residual <= 1e-2 * scale;
-      if (merit <= last_merit + 1e-4 * s * slope || (near_root && residual <= (1 - 1e-4 * s) * last_residual) ||
-          halvings == 40)
+      if (merit <= last_merit + 1e-4 * s * slope ||
+          (near_root && residual <= (1 - 1e-4 * s) * last_residual) || halvings == 40)
         break;
       s *= 0.5;
       ++stats_.backtracks;
@@ -589,13 +611,15 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
     const PetscReal energy = 0.5 * kinetic + elastic_energy_ - dt_ * work;
     const PetscReal gain = energy - start_energy;
     PetscCall(PetscInfo(ksp_,
-                        "corotational iterate %" PetscInt_FMT ": |g| = %g (%g of the scale), step length %g, "
+                        "corotational iterate %" PetscInt_FMT
+                        ": |g| = %g (%g of the scale), step length %g, "
                         "energy gain %g J of %g J\n",
-                        k + 1, (double)residual, (double)(residual / scale), (double)s, (double)gain,
-                        (double)start_energy));
+                        k + 1, (double)residual, (double)(residual / scale), (double)s,
+                        (double)gain, (double)start_energy));
     if (residual <= tolerance) break;
     // The linearised step stands unless it gains energy (round-off allowed).
-    const PetscReal round_off = 1e-12 * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
+    const PetscReal round_off =
+        1e-12 * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
     dissipative = gain <= round_off;
     if (k == 0 && !options_.newton_always && dissipative) break;
     // A dissipative iterate also stands once the iteration stalls (|g| falls by
@@ -611,10 +635,12 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
   stats_.newton_iterations += iterations;
   stats_.max_newton_iterations = PetscMax(stats_.max_newton_iterations, iterations);
   if (iterations == options_.newton_max_it && residual > tolerance && options_.newton_max_it > 1) {
-    PetscCheck(dissipative, PetscObjectComm((PetscObject)x), PETSC_ERR_NOT_CONVERGED,
-               "step: the corotational iteration did not converge (|g| = %g > %g after %" PetscInt_FMT
-               " iterations) and its last iterate gains energy; try a smaller -dt or a larger -newton_max_it",
-               (double)residual, (double)tolerance, iterations);
+    PetscCheck(
+        dissipative, PetscObjectComm((PetscObject)x), PETSC_ERR_NOT_CONVERGED,
+        "step: the corotational iteration did not converge (|g| = %g > %g after %" PetscInt_FMT
+        " iterations) and its last iterate gains energy; try a smaller -dt or a larger "
+        "-newton_max_it",
+        (double)residual, (double)tolerance, iterations);
     ++stats_.newton_stopped_short;
   }
   // x = x0 + dt v_k and the elastic state of x are current: the next step starts from them.
@@ -638,7 +664,8 @@ PetscErrorCode ImplicitEuler::TimeAssembly(Vec x, PetscInt repeats, std::vector<
     PetscCallMPI(MPI_Barrier(PetscObjectComm((PetscObject)x)));
     PetscCall(PetscTime(&start));
     PetscCall(assembler_.Fill(A_, rotated, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_,
-                              rotated ? elastic_force_ : nullptr, rotated ? &elastic_energy_ : nullptr));
+                              rotated ? elastic_force_ : nullptr,
+                              rotated ? &elastic_energy_ : nullptr));
     PetscCall(PetscTime(&end));
     seconds->push_back(end - start);
   }
@@ -656,7 +683,8 @@ PetscErrorCode ImplicitEuler::Energies(Vec x, Vec v, EnergySample *energy) {
     const PetscScalar *x_touched, *X_touched;
     PetscCall(VecGetArrayRead(x_touched_, &x_touched));
     PetscCall(VecGetArrayRead(X_touched_, &X_touched));
-    const double local_energy = LinearStrainEnergy(*elements_, options_.shear_scale, x_touched, X_touched);
+    const double local_energy =
+        LinearStrainEnergy(*elements_, options_.shear_scale, x_touched, X_touched);
     PetscCall(VecRestoreArrayRead(x_touched_, &x_touched));
     PetscCall(VecRestoreArrayRead(X_touched_, &X_touched));
     PetscCall(MPIU_Allreduce(&local_energy, &energy->elastic, 1, MPIU_REAL, MPIU_SUM,

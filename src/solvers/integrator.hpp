@@ -48,10 +48,10 @@
 #include <utility>
 #include <vector>
 
-#include "fem/assembly.hpp"
 #include "contact/contact.hpp"
-#include "solvers/projected_solve.hpp"
+#include "fem/assembly.hpp"
 #include "fem/row_assembly.hpp"
+#include "solvers/projected_solve.hpp"
 
 namespace softbody {
 
@@ -60,13 +60,13 @@ extern const char *const kElasticityModes[];
 
 struct IntegratorOptions {
   ElasticityMode mode = MODE_LINEAR;
-  PetscReal dt = 0.02;     // s
+  PetscReal dt = 0.02;  // s
   // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2
   PetscInt steps = 100;
-  PetscReal alpha = 0.1;   // mass damping a, 1/s
-  PetscReal beta = 0.1;    // stiffness damping b, s
+  PetscReal alpha = 0.1;  // mass damping a, 1/s
+  PetscReal beta = 0.1;   // stiffness damping b, s
   PetscReal shear_scale = 1.0;
   // Corotational mode: the step's nonlinear equation is solved by Newton-type
   // iterations until |g| <= newton_rtol |g(0)| (see CorotationalStep).
@@ -91,18 +91,19 @@ struct SolverStatistics {
   PetscInt last_iterations = 0;
   PetscInt min_iterations = PETSC_MAX_INT;
   PetscInt max_iterations = 0;
-  PetscLogDouble factor_seconds = 0;  // wall time of the last (re)factorisation/set-up
-  PetscLogDouble assemble_seconds = 0;  // wall time of the last fill of A (linear: with K)
+  PetscLogDouble factor_seconds = 0;      // wall time of the last (re)factorisation/set-up
+  PetscLogDouble assemble_seconds = 0;    // wall time of the last fill of A (linear: with K)
   PetscLogDouble last_setup_seconds = 0;  // preconditioner set-up inside the last step
-  PetscInt assemblies = 0;            // fills of A
-  PetscInt time_step_changes = 0;     // SetTimeStep calls after the first
-  PetscInt contact_solves = 0;        // solves with contact constraints
-  PetscInt contact_iterations = 0;    // their CG iterations
-  PetscInt newton_iterations = 0;     // corotational: linearised solves, all steps
-  PetscInt max_newton_iterations = 0; // corotational: most in one step
-  PetscInt backtracks = 0;            // corotational: line-search step halvings
-  PetscInt newton_stopped_short = 0;  // corotational: dissipative steps that stalled above -newton_rtol
-  PetscInt fallback_solves = 0;       // solves repeated by the direct fallback after a breakdown
+  PetscInt assemblies = 0;                // fills of A
+  PetscInt time_step_changes = 0;         // SetTimeStep calls after the first
+  PetscInt contact_solves = 0;            // solves with contact constraints
+  PetscInt contact_iterations = 0;        // their CG iterations
+  PetscInt newton_iterations = 0;         // corotational: linearised solves, all steps
+  PetscInt max_newton_iterations = 0;     // corotational: most in one step
+  PetscInt backtracks = 0;                // corotational: line-search step halvings
+  PetscInt newton_stopped_short =
+      0;                         // corotational: dissipative steps that stalled above -newton_rtol
+  PetscInt fallback_solves = 0;  // solves repeated by the direct fallback after a breakdown
 };
 
 class ImplicitEuler {
@@ -187,8 +188,8 @@ class ImplicitEuler {
   KSP ksp_ = nullptr;
   KSP fallback_ksp_ = nullptr;  // created at the first breakdown
   Vec elastic_force_ = nullptr, rhs_ = nullptr;
-  Vec gravity_force_ = nullptr;           // M g, only when g != 0
-  Vec x_start_ = nullptr;                 // x0 during a step with contact
+  Vec gravity_force_ = nullptr;  // M g, only when g != 0
+  Vec x_start_ = nullptr;        // x0 during a step with contact
   // Corotational iteration: v0, the iterate v_k (and v_k before its line search),
   // the direction d, a work vector.
   Vec v_start_ = nullptr, iterate_ = nullptr, v_trial_base_ = nullptr, direction_ = nullptr,
@@ -202,10 +203,10 @@ class ImplicitEuler {
   PetscReal damping_energy_ = 0;
   ProjectedSolver projected_;
   std::vector<PetscReal> reactions_;
-  PetscReal elastic_energy_ = 0;           // corotational mode (linear: in Energies)
+  PetscReal elastic_energy_ = 0;  // corotational mode (linear: in Energies)
   bool elastic_state_current_ = false;
-  bool gamg_ = false;                     // the PC uses the near-null space
-  RowAssembler assembler_;                // fills A (and K) straight into their CSR values
+  bool gamg_ = false;       // the PC uses the near-null space
+  RowAssembler assembler_;  // fills A (and K) straight into their CSR values
   // Linear mode, rigid-body velocities (SetBodies): per body mass (kg), rest centre
   // of mass (m) and inverse rotational inertia about it (1/(kg m^2)).
   struct RigidBody {

@@ -27,7 +27,8 @@ void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &const
   }
 }
 
-ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<VelocityConstraint> &constraints) {
+ConstrainedVertex CombineConstraints(PetscInt vertex,
+                                     const std::vector<VelocityConstraint> &constraints) {
   const int k = static_cast<int>(std::min<size_t>(constraints.size(), 6));
   // Candidate active sets S (bit masks), each solved exactly: p = least-norm
   // solution of N_S^T p = c_S, in span(N_S).
@@ -47,9 +48,11 @@ ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<Velocity
         c[size++] = constraints[j].velocity;
         immobile += constraints[j].immobile;
       }
-    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(N.leftCols(size), Eigen::ComputeThinU | Eigen::ComputeThinV);
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(N.leftCols(size),
+                                                Eigen::ComputeThinU | Eigen::ComputeThinV);
     if (svd.singularValues()[size - 1] < kMinSeparation) continue;  // near-parallel directions
-    const Eigen::Vector3d p = N.leftCols(size).transpose().completeOrthogonalDecomposition().solve(c.head(size));
+    const Eigen::Vector3d p =
+        N.leftCols(size).transpose().completeOrthogonalDecomposition().solve(c.head(size));
     double violation = 0, scale = 0;
     for (int j = 0; j < k; ++j) {
       violation = std::max(violation, constraints[j].velocity - constraints[j].normal.dot(p));
@@ -60,8 +63,9 @@ ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<Velocity
     const bool better =
         violation < best_violation ||
         (violation == best_violation &&
-         (size > best_size || (size == best_size && (immobile > best_immobile ||
-                                                     (immobile == best_immobile && norm < best_norm)))));
+         (size > best_size ||
+          (size == best_size &&
+           (immobile > best_immobile || (immobile == best_immobile && norm < best_norm)))));
     if (!better) continue;
     best_violation = violation;
     best_norm = norm;
@@ -86,8 +90,10 @@ void ProjectedSolver::Project(const PetscScalar *w, PetscScalar *y, bool project
 
 PetscErrorCode ProjectedSolver::ProjectVec(Vec w, Vec y, bool project) const {
   PetscFunctionBeginUser;
-  if (project) PetscCall(VecCopy(w, y));
-  else PetscCall(VecZeroEntries(y));
+  if (project)
+    PetscCall(VecCopy(w, y));
+  else
+    PetscCall(VecZeroEntries(y));
   const PetscScalar *win;
   PetscScalar *yout;
   PetscCall(VecGetArrayRead(w, &win));
@@ -124,8 +130,9 @@ PetscErrorCode ProjectedSolver::ApplyPreconditioner(PC shell, Vec w, Vec y) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b, const std::vector<VelocityConstraint> &constraints,
-                                      Vec v, std::vector<PetscReal> *reactions, PetscInt *iterations) {
+PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
+                                      const std::vector<VelocityConstraint> &constraints, Vec v,
+                                      std::vector<PetscReal> *reactions, PetscInt *iterations) {
   PetscFunctionBeginUser;
   PetscCall(KSPSetUp(solver));  // refreshes the preconditioner if A changed
   PetscCall(KSPGetOperators(solver, &A_, nullptr));
@@ -169,7 +176,8 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b, const std::vector<Veloc
   PetscCall(KSPGetConvergedReason(inner_, &reason));
   PetscCall(KSPGetIterationNumber(inner_, iterations));
   PetscCheck(reason >= 0, PetscObjectComm((PetscObject)b), PETSC_ERR_NOT_CONVERGED,
-             "the contact-constrained solve did not converge (%s after %" PetscInt_FMT " iterations)",
+             "the contact-constrained solve did not converge (%s after %" PetscInt_FMT
+             " iterations)",
              KSPConvergedReasons[reason], *iterations);
   // v = P w + z; reactions from A v - b.
   PetscCall(ProjectVec(w_, v, true));
@@ -181,8 +189,8 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b, const std::vector<Veloc
   reactions->resize(constraints.size());
   for (size_t i = 0; i < constraints.size(); ++i) {
     const VelocityConstraint &c = constraints[i];
-    (*reactions)[i] = c.normal.dot(Eigen::Vector3d(residual[3 * c.vertex], residual[3 * c.vertex + 1],
-                                                    residual[3 * c.vertex + 2]));
+    (*reactions)[i] = c.normal.dot(Eigen::Vector3d(
+        residual[3 * c.vertex], residual[3 * c.vertex + 1], residual[3 * c.vertex + 2]));
   }
   PetscCall(VecRestoreArrayRead(work_, &residual));
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -24,16 +24,16 @@
 namespace softbody {
 
 struct VelocityConstraint {
-  PetscInt vertex;          // local vertex index (owned)
-  Eigen::Vector3d normal;   // unit direction n
-  PetscReal velocity;       // prescribed n . v (m/s)
-  bool immobile = false;    // from an obstacle that cannot yield (ground, fixed body)
+  PetscInt vertex;         // local vertex index (owned)
+  Eigen::Vector3d normal;  // unit direction n
+  PetscReal velocity;      // prescribed n . v (m/s)
+  bool immobile = false;   // from an obstacle that cannot yield (ground, fixed body)
 };
 // The constraints of one vertex: an orthonormal basis of their directions and
 // the velocity component in its span that satisfies them all.
 struct ConstrainedVertex {
   PetscInt vertex;
-  Eigen::Matrix3d basis;    // first `rank` columns
+  Eigen::Matrix3d basis;  // first `rank` columns
   int rank;
   Eigen::Vector3d prescribed;
 };
@@ -50,7 +50,8 @@ struct ConstrainedVertex {
 // Pure; the first six constraints are considered (a contact with its two
 // friction tangents and the normals of up to three obstacles).
 constexpr double kMinSeparation = 0.1;
-ConstrainedVertex CombineConstraints(PetscInt vertex, const std::vector<VelocityConstraint> &constraints);
+ConstrainedVertex CombineConstraints(PetscInt vertex,
+                                     const std::vector<VelocityConstraint> &constraints);
 
 class ProjectedSolver {
  public:
@@ -75,8 +76,8 @@ class ProjectedSolver {
 
   KSP inner_ = nullptr;
   Mat shell_ = nullptr;
-  Mat A_ = nullptr;                 // not owned
-  PC unconstrained_pc_ = nullptr;   // not owned
+  Mat A_ = nullptr;                // not owned
+  PC unconstrained_pc_ = nullptr;  // not owned
   std::vector<ConstrainedVertex> vertices_;
   Vec work_ = nullptr, work2_ = nullptr, z_ = nullptr, rhs_ = nullptr, w_ = nullptr;
 };

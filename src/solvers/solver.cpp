@@ -54,7 +54,8 @@ PetscErrorCode CreateSolver(Mat A, Vec coordinates, KSP *ksp) {
   PetscCall(KSPGetPC(*ksp, &pc));
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
   PetscCall(PetscOptionsHasName(nullptr, nullptr, "-ksp_initial_guess_nonzero", &guess_set));
-  if (!preonly && !guess_set) PetscCall(KSPSetInitialGuessNonzero(*ksp, warp ? PETSC_FALSE : PETSC_TRUE));
+  if (!preonly && !guess_set)
+    PetscCall(KSPSetInitialGuessNonzero(*ksp, warp ? PETSC_FALSE : PETSC_TRUE));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -11,7 +11,7 @@
 namespace softbody {
 
 // Presets compiled in from config/: the defaults of linear and corotational mode.
-extern const char *const kDirectPreset;  // config/direct.opts
+extern const char *const kDirectPreset;        // config/direct.opts
 extern const char *const kCorotationalPreset;  // config/cg-warp.opts
 
 // Not collective. Makes softbody's own PC types known to PETSc (once):

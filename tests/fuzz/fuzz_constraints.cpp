@@ -26,8 +26,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     const std::vector<DistanceConstraint> constraints =
         ReadConstraints(fuzz::Folder().Write("constraints.txt", data, size), *scene);
     for (const DistanceConstraint &c : constraints) {
-      fuzz::Require(c.a >= 0 && c.a < scene->num_vertices() && c.b >= 0 &&
-                        c.b < scene->num_vertices(), "vertex out of range");
+      fuzz::Require(
+          c.a >= 0 && c.a < scene->num_vertices() && c.b >= 0 && c.b < scene->num_vertices(),
+          "vertex out of range");
       fuzz::Require(c.a != c.b, "constraint of a vertex with itself");
       fuzz::Require(c.lower >= 0 && c.lower <= c.upper, "bounds");
     }

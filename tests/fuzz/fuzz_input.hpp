@@ -25,7 +25,8 @@ class InputFolder {
  public:
   InputFolder() {
     std::error_code error;
-    const bool shm = std::filesystem::is_directory("/dev/shm", error) && access("/dev/shm", W_OK) == 0;
+    const bool shm =
+        std::filesystem::is_directory("/dev/shm", error) && access("/dev/shm", W_OK) == 0;
     std::string pattern =
         ((shm ? std::filesystem::path("/dev/shm") : std::filesystem::temp_directory_path()) /
          "softbody-fuzz-XXXXXX")
@@ -88,8 +89,9 @@ inline void WriteMeshes(const InputFolder &folder) {
                "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n"
                "0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n"
                "1 1 2 3 4\n$EndElements\n");
-  folder.Write("tet.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n"
-                          "3 0 3 2\n3 1 2 3\n");
+  folder.Write("tet.off",
+               "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n"
+               "3 0 3 2\n3 1 2 3\n");
 }
 
 // Runs `parse`; an InputError is a clean rejection of bad input.
@@ -97,8 +99,7 @@ template <class Parse>
 void ParseOrReject(Parse parse) {
   try {
     parse();
-  } catch (const InputError &) {
-  }
+  } catch (const InputError &) {}
 }
 
 // An invariant of an accepted input; aborts (a finding) when it does not hold.

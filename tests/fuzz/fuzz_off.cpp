@@ -23,7 +23,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     fuzz::Require(distinct.size() == nv, "repeated vertex");
     for (const std::vector<int32_t> &face : surface.faces) {
       fuzz::Require(face.size() >= 3, "face of fewer than 3 vertices");
-      for (int32_t v : face) fuzz::Require(v >= 0 && static_cast<size_t>(v) < nv, "face vertex out of range");
+      for (int32_t v : face)
+        fuzz::Require(v >= 0 && static_cast<size_t>(v) < nv, "face vertex out of range");
       fuzz::Require(std::set<int32_t>(face.begin(), face.end()).size() == face.size(),
                     "face repeats a vertex");
     }

@@ -16,8 +16,8 @@
 // LAPACK / BLAS (Fortran interface): the separator's dense Schur complement.
 extern "C" {
 void dpotrf_(const char *uplo, const int *n, double *a, const int *lda, int *info);
-void dsyrk_(const char *uplo, const char *trans, const int *n, const int *k, const double *alpha, const double *a,
-            const int *lda, const double *beta, double *c, const int *ldc);
+void dsyrk_(const char *uplo, const char *trans, const int *n, const int *k, const double *alpha,
+            const double *a, const int *lda, const double *beta, double *c, const int *ldc);
 }
 
 namespace softbody {
@@ -56,9 +56,9 @@ struct PackedFactor {
   void From(const cholmod_factor *L) {
     n = static_cast<int>(L->n);
     supernodes = static_cast<int>(L->nsuper);
-    const int *perm = static_cast<const int *>(L->Perm), *super = static_cast<const int *>(L->super),
-              *pi = static_cast<const int *>(L->pi), *px = static_cast<const int *>(L->px),
-              *s = static_cast<const int *>(L->s);
+    const int *perm = static_cast<const int *>(L->Perm),
+              *super = static_cast<const int *>(L->super), *pi = static_cast<const int *>(L->pi),
+              *px = static_cast<const int *>(L->px), *s = static_cast<const int *>(L->s);
     permutation.assign(perm, perm + n);
     first_column.assign(super, super + supernodes + 1);
     row_start.assign(pi, pi + supernodes + 1);
@@ -78,8 +78,10 @@ struct PackedFactor {
       const int columns = super[k + 1] - super[k], height = pi[k + 1] - pi[k];
       Real *out = values.data() + value_start[k];
       for (int j = 0; j < columns; ++j) {
-        inverse_diagonal[super[k] + j] = static_cast<Real>(1.0 / x[px[k] + static_cast<size_t>(j) * height + j]);
-        for (int i = j; i < height; ++i) *out++ = static_cast<Real>(x[px[k] + static_cast<size_t>(j) * height + i]);
+        inverse_diagonal[super[k] + j] =
+            static_cast<Real>(1.0 / x[px[k] + static_cast<size_t>(j) * height + j]);
+        for (int i = j; i < height; ++i)
+          *out++ = static_cast<Real>(x[px[k] + static_cast<size_t>(j) * height + i]);
       }
     }
     y.resize(n);
@@ -101,18 +103,19 @@ struct PackedFactor {
 
   // Column j of supernode k from its diagonal entry down (height - j entries).
   const Real *Column(int k, int j, int height) const {
-    return values.data() + value_start[k] + static_cast<size_t>(j) * height - static_cast<size_t>(j) * (j - 1) / 2;
+    return values.data() + value_start[k] + static_cast<size_t>(j) * height -
+           static_cast<size_t>(j) * (j - 1) / 2;
   }
 
   // out[i] -= sum_q c_q[i] v_q over i < count, four columns q at once.
-  static void Update4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, Real v0, Real v1, Real v2,
-                      Real v3, Real *out, int count) {
+  static void Update4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, Real v0,
+                      Real v1, Real v2, Real v3, Real *out, int count) {
 #pragma omp simd
     for (int i = 0; i < count; ++i) out[i] -= c0[i] * v0 + c1[i] * v1 + c2[i] * v2 + c3[i] * v3;
   }
   // s_q = sum_i c_q[i] x[i] over i < count, four columns q at once.
-  static void Dot4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, const Real *x, int count,
-                   Real *s) {
+  static void Dot4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, const Real *x,
+                   int count, Real *s) {
     Real s0 = 0, s1 = 0, s2 = 0, s3 = 0;
 #pragma omp simd reduction(+ : s0, s1, s2, s3)
     for (int i = 0; i < count; ++i) {
@@ -147,11 +150,11 @@ struct PackedFactor {
           yk[j + q] *= inverse[j + q];
           for (int i = j + q + 1; i < j + 4; ++i) yk[i] -= c[q][i] * yk[j + q];
         }
-        Update4(c[0] + j + 4, c[1] + j + 4, c[2] + j + 4, c[3] + j + 4, yk[j], yk[j + 1], yk[j + 2], yk[j + 3],
-                yk + j + 4, columns - j - 4);
+        Update4(c[0] + j + 4, c[1] + j + 4, c[2] + j + 4, c[3] + j + 4, yk[j], yk[j + 1], yk[j + 2],
+                yk[j + 3], yk + j + 4, columns - j - 4);
         if (below > 0)
-          Update4(c[0] + columns, c[1] + columns, c[2] + columns, c[3] + columns, -yk[j], -yk[j + 1], -yk[j + 2],
-                  -yk[j + 3], w, below);
+          Update4(c[0] + columns, c[1] + columns, c[2] + columns, c[3] + columns, -yk[j],
+                  -yk[j + 1], -yk[j + 2], -yk[j + 3], w, below);
       }
       for (; j < used; ++j) {
         const Real *column = Column(k, j, height) - j;  // column[i]: row i
@@ -268,15 +271,15 @@ struct DenseFactor {
 // factor and broadcast, and every rank sweeps backward over its interior.
 struct Split {
   PetscInt interior = 0, separator = 0;
-  std::vector<PetscInt> separator_dofs;  // global DOFs of S, increasing (the same on every rank)
-  std::vector<PetscInt> local_dofs;      // global DOFs of M_r, increasing
-  std::vector<PetscInt> owned_position;  // per local index: position among the owned DOFs, or -1
-  std::vector<PetscInt> separator_local; // per separator index k: local index in M_r
-  Mat *local = nullptr;                  // M_r
-  cholmod_factor *factor = nullptr;      // symbolic (values dropped after the copy)
+  std::vector<PetscInt> separator_dofs;   // global DOFs of S, increasing (the same on every rank)
+  std::vector<PetscInt> local_dofs;       // global DOFs of M_r, increasing
+  std::vector<PetscInt> owned_position;   // per local index: position among the owned DOFs, or -1
+  std::vector<PetscInt> separator_local;  // per separator index k: local index in M_r
+  Mat *local = nullptr;                   // M_r
+  cholmod_factor *factor = nullptr;       // symbolic (values dropped after the copy)
   PackedFactor<float> single;
   PackedFactor<double> full;
-  DenseFactor<float> dense_single;       // rank 0
+  DenseFactor<float> dense_single;  // rank 0
   DenseFactor<double> dense_full;
   std::vector<double> separator_values;  // n_S: right-hand side, then solution
   std::vector<double> local_b;           // per local index
@@ -285,13 +288,13 @@ struct Split {
 struct Supernodal {
   cholmod_common common;
   bool started = false;
-  cholmod_factor *factor = nullptr;      // one rank
-  PetscObjectState pattern_state = -1;   // nonzero state of the factorised pattern
+  cholmod_factor *factor = nullptr;     // one rank
+  PetscObjectState pattern_state = -1;  // nonzero state of the factorised pattern
   SupernodalOrdering ordering = kOrderingBest;
   SupernodalPrecision precision = kDouble;
   PackedFactor<float> single;
   cholmod_dense *solution = nullptr, *work_y = nullptr, *work_e = nullptr;  // cholmod_solve2's
-  Split split;                           // more than one rank
+  Split split;                                                              // more than one rank
   double stored = 0, nonzeros = 0, flops = 0;
   // The last set-up met a matrix that is not (numerically) positive definite:
   // decided on all ranks together; the PC then reports PC_FACTOR_NUMERIC_ZEROPIVOT
@@ -334,14 +337,16 @@ PetscErrorCode PCSetFromOptions_Supernodal(PC pc, PetscOptionItems *PetscOptions
   PetscFunctionBeginUser;
   Supernodal *s = static_cast<Supernodal *>(pc->data);
   PetscOptionsHeadBegin(PetscOptionsObject, "Supernodal Cholesky (CHOLMOD) options");
-  PetscCall(PetscOptionsEnum("-pc_supernodal_ordering",
-                             "Fill-reducing ordering: best (CHOLMOD tries AMD, then METIS if AMD fills "
-                             "much, and keeps the better), amd or metis",
-                             nullptr, kOrderings, (PetscEnum)s->ordering, (PetscEnum *)&s->ordering, nullptr));
-  PetscCall(PetscOptionsEnum("-pc_supernodal_precision",
-                             "Precision of the factor in the solves: double, or single (half the memory traffic, "
-                             "about 1e-7 relative accuracy: for use as a preconditioner)",
-                             nullptr, kPrecisions, (PetscEnum)s->precision, (PetscEnum *)&s->precision, nullptr));
+  PetscCall(PetscOptionsEnum(
+      "-pc_supernodal_ordering",
+      "Fill-reducing ordering: best (CHOLMOD tries AMD, then METIS if AMD fills "
+      "much, and keeps the better), amd or metis",
+      nullptr, kOrderings, (PetscEnum)s->ordering, (PetscEnum *)&s->ordering, nullptr));
+  PetscCall(PetscOptionsEnum(
+      "-pc_supernodal_precision",
+      "Precision of the factor in the solves: double, or single (half the memory traffic, "
+      "about 1e-7 relative accuracy: for use as a preconditioner)",
+      nullptr, kPrecisions, (PetscEnum)s->precision, (PetscEnum *)&s->precision, nullptr));
   PetscOptionsHeadEnd();
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -383,7 +388,8 @@ void StartCholmod(Supernodal *s) {
 // Analyses (when `*factor` is null: with `user_order`, given in full, if not
 // null) and factorises the SeqAIJ matrix A into *factor; a matrix that is not
 // positive definite sets s->failed.
-PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_order, cholmod_factor **factor) {
+PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_order,
+                         cholmod_factor **factor) {
   PetscFunctionBeginUser;
   StartCholmod(s);
   PetscInt n;
@@ -396,41 +402,45 @@ PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_orde
   cholmod_sparse view = LowerView(n, row_start, columns, values);
   if (!*factor) {
     if (user_order) {  // exactly this order: one method, no postorder
-      const int methods = s->common.nmethods, postorder = s->common.postorder, ordering = s->common.method[0].ordering;
+      const int methods = s->common.nmethods, postorder = s->common.postorder,
+                ordering = s->common.method[0].ordering;
       s->common.nmethods = 1;
       s->common.method[0].ordering = CHOLMOD_GIVEN;
       s->common.postorder = 0;
-      *factor = cholmod_analyze_p(&view, const_cast<int *>(user_order->data()), nullptr, 0, &s->common);
+      *factor =
+          cholmod_analyze_p(&view, const_cast<int *>(user_order->data()), nullptr, 0, &s->common);
       s->common.nmethods = methods;
       s->common.postorder = postorder;
       s->common.method[0].ordering = ordering;
     } else {
       *factor = cholmod_analyze(&view, &s->common);
     }
-    PetscCheck(*factor, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD analysis failed (status %d)",
-               s->common.status);
+    PetscCheck(*factor, PETSC_COMM_SELF, PETSC_ERR_LIB,
+               "supernodal: CHOLMOD analysis failed (status %d)", s->common.status);
   }
   const int ok = cholmod_factorize(&view, *factor, &s->common);
   PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
   PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
-  PetscCheck(ok && (s->common.status == CHOLMOD_OK || s->common.status == CHOLMOD_NOT_POSDEF), PETSC_COMM_SELF,
-             PETSC_ERR_LIB, "supernodal: CHOLMOD factorisation failed (status %d)", s->common.status);
+  PetscCheck(ok && (s->common.status == CHOLMOD_OK || s->common.status == CHOLMOD_NOT_POSDEF),
+             PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD factorisation failed (status %d)",
+             s->common.status);
   if (s->common.status == CHOLMOD_NOT_POSDEF) {
     PetscCall(PetscInfo(nullptr, "supernodal: the matrix is not positive definite (column %d)\n",
                         (int)(*factor)->minor));
     s->failed = true;
     PetscFunctionReturn(PETSC_SUCCESS);
   }
-  PetscCheck((*factor)->is_super && (*factor)->xtype == CHOLMOD_REAL, PETSC_COMM_SELF, PETSC_ERR_LIB,
-             "supernodal: CHOLMOD did not return a real supernodal factor");
+  PetscCheck((*factor)->is_super && (*factor)->xtype == CHOLMOD_REAL, PETSC_COMM_SELF,
+             PETSC_ERR_LIB, "supernodal: CHOLMOD did not return a real supernodal factor");
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 // Keeps the symbolic factor (for refactorisations), frees CHOLMOD's values.
 PetscErrorCode DropValues(Supernodal *s, cholmod_factor *factor) {
   PetscFunctionBeginUser;
-  PetscCheck(cholmod_change_factor(CHOLMOD_PATTERN, 0, 1, 1, 1, factor, &s->common), PETSC_COMM_SELF,
-             PETSC_ERR_LIB, "supernodal: CHOLMOD could not drop the factor's values");
+  PetscCheck(cholmod_change_factor(CHOLMOD_PATTERN, 0, 1, 1, 1, factor, &s->common),
+             PETSC_COMM_SELF, PETSC_ERR_LIB,
+             "supernodal: CHOLMOD could not drop the factor's values");
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -483,8 +493,8 @@ PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
   PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm));
   for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + counts[r];
   p.separator_dofs.resize(offsets[size]);
-  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, p.separator_dofs.data(), counts.data(), offsets.data(),
-                              MPIU_INT, comm));
+  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, p.separator_dofs.data(), counts.data(),
+                              offsets.data(), MPIU_INT, comm));
   p.separator = static_cast<PetscInt>(p.separator_dofs.size());
 
   // M_r's DOFs: the owned interior and the whole separator, increasing.
@@ -502,8 +512,10 @@ PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
     const PetscInt g = p.local_dofs[l];
     if (g >= begin && g < begin + owned) p.owned_position[l] = g - begin;
     const auto k = std::lower_bound(p.separator_dofs.begin(), p.separator_dofs.end(), g);
-    if (k != p.separator_dofs.end() && *k == g) p.separator_local[k - p.separator_dofs.begin()] = l;
-    else interior_local.push_back(static_cast<int>(l));
+    if (k != p.separator_dofs.end() && *k == g)
+      p.separator_local[k - p.separator_dofs.begin()] = l;
+    else
+      interior_local.push_back(static_cast<int>(l));
   }
   IS local;
   PetscCall(ISCreateGeneral(PETSC_COMM_SELF, n, p.local_dofs.data(), PETSC_USE_POINTER, &local));
@@ -517,32 +529,38 @@ PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
   if (p.interior > 0) {
     IS interior;
     Mat interior_matrix;
-    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, p.interior, interior_local.data(), PETSC_USE_POINTER, &interior));
-    PetscCall(MatCreateSubMatrix(p.local[0], interior, interior, MAT_INITIAL_MATRIX, &interior_matrix));
+    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, p.interior, interior_local.data(), PETSC_USE_POINTER,
+                              &interior));
+    PetscCall(
+        MatCreateSubMatrix(p.local[0], interior, interior, MAT_INITIAL_MATRIX, &interior_matrix));
     PetscCall(ISDestroy(&interior));
     StartCholmod(s);
     PetscInt m;
     const PetscInt *row_start, *columns;
-    PetscCall(MatGetRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+    PetscCall(
+        MatGetRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
     const PetscScalar *values;
     PetscCall(MatSeqAIJGetArrayRead(interior_matrix, &values));
     cholmod_sparse view = LowerView(m, row_start, columns, values);
     cholmod_factor *symbolic = cholmod_analyze(&view, &s->common);
     PetscCall(MatSeqAIJRestoreArrayRead(interior_matrix, &values));
-    PetscCall(MatRestoreRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
-    PetscCheck(symbolic, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD analysis failed (status %d)",
-               s->common.status);
+    PetscCall(MatRestoreRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start,
+                              &columns, &done));
+    PetscCheck(symbolic, PETSC_COMM_SELF, PETSC_ERR_LIB,
+               "supernodal: CHOLMOD analysis failed (status %d)", s->common.status);
     const int *perm = static_cast<const int *>(symbolic->Perm);
     for (PetscInt i = 0; i < p.interior; ++i) order.push_back(interior_local[perm[i]]);
     cholmod_free_factor(&symbolic, &s->common);
     PetscCall(MatDestroy(&interior_matrix));
   }
-  for (PetscInt k = 0; k < p.separator; ++k) order.push_back(static_cast<int>(p.separator_local[k]));
+  for (PetscInt k = 0; k < p.separator; ++k)
+    order.push_back(static_cast<int>(p.separator_local[k]));
   cholmod_free_factor(&p.factor, &s->common);
   if (n > 0) {
     PetscCall(Factorise(s, p.local[0], &order, &p.factor));
-    PetscCheck(s->failed || std::equal(order.begin(), order.end(), static_cast<const int *>(p.factor->Perm)), PETSC_COMM_SELF,
-               PETSC_ERR_LIB, "supernodal: CHOLMOD changed the given order");
+    PetscCheck(s->failed ||
+                   std::equal(order.begin(), order.end(), static_cast<const int *>(p.factor->Perm)),
+               PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD changed the given order");
   }
   p.local_b.assign(n, 0.0);
   p.separator_values.assign(p.separator, 0.0);
@@ -602,19 +620,21 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
     PetscCall(DropValues(s, p.factor));
     if (separator > 0) {
       const double one = 1.0, zero = 0.0;
-      dsyrk_("L", "N", &separator, &separator, &one, trailing.data(), &separator, &zero, schur.data(), &separator);
+      dsyrk_("L", "N", &separator, &separator, &one, trailing.data(), &separator, &zero,
+             schur.data(), &separator);
     }
   }
   // Rank 0: S = sum_r C_r - (ranks - 1) A_SS, factorised densely.
   if (separator > 0) {
-    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : schur.data(), schur.data(), separator * separator, MPI_DOUBLE,
-                            MPI_SUM, 0, comm));
+    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : schur.data(), schur.data(),
+                            separator * separator, MPI_DOUBLE, MPI_SUM, 0, comm));
     if (rank == 0) {
       PetscInt m;
       const PetscInt *row_start, *columns;
       PetscBool done;
       const PetscScalar *values;
-      PetscCall(MatGetRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+      PetscCall(
+          MatGetRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
       PetscCall(MatSeqAIJGetArrayRead(p.local[0], &values));
       std::vector<PetscInt> separator_index(m, -1);
       for (PetscInt k = 0; k < p.separator; ++k) separator_index[p.separator_local[k]] = k;
@@ -622,16 +642,20 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
         const PetscInt l = p.separator_local[k];
         for (PetscInt e = row_start[l]; e < row_start[l + 1]; ++e) {
           const PetscInt c = separator_index[columns[e]];
-          if (c >= 0 && c >= k) schur[static_cast<size_t>(k) * separator + c] -= (size - 1) * values[e];
+          if (c >= 0 && c >= k)
+            schur[static_cast<size_t>(k) * separator + c] -= (size - 1) * values[e];
         }
       }
       PetscCall(MatSeqAIJRestoreArrayRead(p.local[0], &values));
-      PetscCall(MatRestoreRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+      PetscCall(MatRestoreRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns,
+                                &done));
       int info = 0;
       dpotrf_("L", &separator, schur.data(), &separator, &info);
-      PetscCheck(info >= 0, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: LAPACK dpotrf failed (info %d)", info);
+      PetscCheck(info >= 0, PETSC_COMM_SELF, PETSC_ERR_LIB,
+                 "supernodal: LAPACK dpotrf failed (info %d)", info);
       if (info > 0) {
-        PetscCall(PetscInfo(nullptr, "supernodal: the separator's Schur complement is not positive definite\n"));
+        PetscCall(PetscInfo(
+            nullptr, "supernodal: the separator's Schur complement is not positive definite\n"));
         s->failed = true;
       }
     }
@@ -642,8 +666,10 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
     if (rank == 0) {
       for (int j = 0; j < separator; ++j)  // dpotrf leaves the upper triangle as it was
         for (int i = 0; i < j; ++i) schur[static_cast<size_t>(j) * separator + i] = 0.0;
-      if (s->precision == kSingle) p.dense_single.From(schur, separator);
-      else p.dense_full.From(schur, separator);
+      if (s->precision == kSingle)
+        p.dense_single.From(schur, separator);
+      else
+        p.dense_full.From(schur, separator);
       entries += 0.5 * separator * (separator + 1.0);
       flops += separator * (double)separator * separator / 3.0;
     }
@@ -656,8 +682,8 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
 }
 
 template <typename Real>
-PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, PackedFactor<Real> &factor, const DenseFactor<Real> &dense,
-                          const PetscScalar *b, PetscScalar *x) {
+PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, PackedFactor<Real> &factor,
+                          const DenseFactor<Real> &dense, const PetscScalar *b, PetscScalar *x) {
   PetscFunctionBeginUser;
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
@@ -668,26 +694,31 @@ PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, PackedFactor<Real> &factor, c
     if (p.owned_position[l] >= 0) p.local_b[l] = b[p.owned_position[l]];
   // Forward over the interior; the separator rows collect -L_S,I L_I^-1 b_I.
   if (n > 0) {
-    for (PetscInt i = 0; i < interior; ++i) factor.y[i] = static_cast<Real>(p.local_b[factor.permutation[i]]);
+    for (PetscInt i = 0; i < interior; ++i)
+      factor.y[i] = static_cast<Real>(p.local_b[factor.permutation[i]]);
     for (PetscInt i = interior; i < n; ++i) factor.y[i] = 0;
     factor.Forward(interior);
   }
   for (PetscInt k = 0; k < p.separator; ++k) {
     const PetscInt l = p.separator_local[k];
-    p.separator_values[k] = static_cast<double>(factor.y[interior + k]) + p.local_b[l];  // b_S where owned
+    p.separator_values[k] =
+        static_cast<double>(factor.y[interior + k]) + p.local_b[l];  // b_S where owned
   }
   if (p.separator > 0) {
-    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : p.separator_values.data(), p.separator_values.data(),
-                            static_cast<int>(p.separator), MPI_DOUBLE, MPI_SUM, 0, comm));
+    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : p.separator_values.data(),
+                            p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE,
+                            MPI_SUM, 0, comm));
     if (rank == 0) {
       std::vector<Real> y(p.separator_values.begin(), p.separator_values.end());
       dense.Solve(y.data());
       std::copy(y.begin(), y.end(), p.separator_values.begin());
     }
-    PetscCallMPI(MPI_Bcast(p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE, 0, comm));
+    PetscCallMPI(
+        MPI_Bcast(p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE, 0, comm));
   }
   if (n > 0) {
-    for (PetscInt k = 0; k < p.separator; ++k) factor.y[interior + k] = static_cast<Real>(p.separator_values[k]);
+    for (PetscInt k = 0; k < p.separator; ++k)
+      factor.y[interior + k] = static_cast<Real>(p.separator_values[k]);
     factor.Backward(interior);
     for (PetscInt i = 0; i < n; ++i) {
       const PetscInt l = factor.permutation[i];
@@ -711,8 +742,10 @@ PetscErrorCode PCSetUp_Supernodal(PC pc) {
   PetscMPIInt size;
   PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)pc), &size));
   s->failed = false;
-  if (size == 1) PetscCall(SetUpOneRank(s, A, new_pattern));
-  else PetscCall(SetUpSplit(s, A, new_pattern));
+  if (size == 1)
+    PetscCall(SetUpOneRank(s, A, new_pattern));
+  else
+    PetscCall(SetUpSplit(s, A, new_pattern));
   s->pattern_state = pattern;
   PetscCall(PCSetFailedReason(pc, s->failed ? PC_FACTOR_NUMERIC_ZEROPIVOT : PC_NOERROR));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -733,8 +766,10 @@ PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
   PetscCall(VecGetArrayRead(b, &rhs));
   PetscCall(VecGetArrayWrite(x, &out));
   if (size > 1) {
-    if (s->precision == kSingle) PetscCall(ApplySplit(comm, s->split, s->split.single, s->split.dense_single, rhs, out));
-    else PetscCall(ApplySplit(comm, s->split, s->split.full, s->split.dense_full, rhs, out));
+    if (s->precision == kSingle)
+      PetscCall(ApplySplit(comm, s->split, s->split.single, s->split.dense_single, rhs, out));
+    else
+      PetscCall(ApplySplit(comm, s->split, s->split.full, s->split.dense_full, rhs, out));
   } else if (s->precision == kSingle) {
     s->single.Solve(rhs, out);
   } else {  // CHOLMOD's own solve (BLAS-2 per supernode) streams the double factor fastest
@@ -747,9 +782,10 @@ PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
     dense.x = const_cast<PetscScalar *>(rhs);
     dense.xtype = CHOLMOD_REAL;
     dense.dtype = CHOLMOD_DOUBLE;
-    const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr, &s->work_y,
-                                  &s->work_e, &s->common);
-    PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)", s->common.status);
+    const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr,
+                                  &s->work_y, &s->work_e, &s->common);
+    PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)",
+               s->common.status);
     std::memcpy(out, s->solution->x, sizeof(PetscScalar) * n);
   }
   PetscCall(VecRestoreArrayWrite(x, &out));
@@ -766,14 +802,19 @@ PetscErrorCode PCView_Supernodal(PC pc, PetscViewer viewer) {
   if (ascii) {
     PetscMPIInt size;
     PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)pc), &size));
-    PetscCall(PetscViewerASCIIPrintf(viewer, "  CHOLMOD supernodal Cholesky, ordering %s, solves in %s precision\n",
-                                     kOrderings[s->ordering], kPrecisions[s->precision]));
+    PetscCall(PetscViewerASCIIPrintf(
+        viewer, "  CHOLMOD supernodal Cholesky, ordering %s, solves in %s precision\n",
+        kOrderings[s->ordering], kPrecisions[s->precision]));
     if (size > 1)
-      PetscCall(PetscViewerASCIIPrintf(viewer, "  split at a separator of %" PetscInt_FMT
-                                       " DOFs: a factor of the interior per rank, the dense Schur complement "
-                                       "on rank 0\n", s->split.separator));
+      PetscCall(PetscViewerASCIIPrintf(
+          viewer,
+          "  split at a separator of %" PetscInt_FMT
+          " DOFs: a factor of the interior per rank, the dense Schur complement "
+          "on rank 0\n",
+          s->split.separator));
     if (s->stored > 0)
-      PetscCall(PetscViewerASCIIPrintf(viewer, "  factor: %.4g nonzeros, %.4g stored entries, %.4g flops\n",
+      PetscCall(PetscViewerASCIIPrintf(viewer,
+                                       "  factor: %.4g nonzeros, %.4g stored entries, %.4g flops\n",
                                        s->nonzeros, s->stored, s->flops));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -805,17 +846,19 @@ PetscErrorCode PCSupernodalSetSinglePrecision(PC pc, bool single) {
   PetscFunctionBeginUser;
   PetscBool is_supernodal;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &is_supernodal));
-  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG, "not a supernodal PC");
+  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG,
+             "not a supernodal PC");
   static_cast<Supernodal *>(pc->data)->precision = single ? kSingle : kDouble;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode PCSupernodalGetFactorSize(PC pc, double *stored_entries, double *nonzeros, double *factor_flops,
-                                         int *bytes_per_entry) {
+PetscErrorCode PCSupernodalGetFactorSize(PC pc, double *stored_entries, double *nonzeros,
+                                         double *factor_flops, int *bytes_per_entry) {
   PetscFunctionBeginUser;
   PetscBool is_supernodal;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &is_supernodal));
-  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG, "not a supernodal PC");
+  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG,
+             "not a supernodal PC");
   const Supernodal *s = static_cast<const Supernodal *>(pc->data);
   *stored_entries = s->stored;
   *nonzeros = s->nonzeros;

@@ -13,8 +13,8 @@ namespace softbody {
 namespace {
 
 struct Warp {
-  Mat linear = nullptr;   // A0 (referenced)
-  PC inner = nullptr;     // A0^-1
+  Mat linear = nullptr;           // A0 (referenced)
+  PC inner = nullptr;             // A0^-1
   std::vector<double> rotations;  // 9 per owned vertex, row-major
   Vec rotated = nullptr, inner_solution = nullptr;
 };
@@ -110,7 +110,8 @@ PetscErrorCode PCView_Warp(PC pc, PetscViewer viewer) {
   PetscBool ascii;
   PetscCall(PetscObjectTypeCompare((PetscObject)viewer, PETSCVIEWERASCII, &ascii));
   if (ascii) {
-    PetscCall(PetscViewerASCIIPrintf(viewer, "  per-vertex rotations around the linear system's factor:\n"));
+    PetscCall(PetscViewerASCIIPrintf(
+        viewer, "  per-vertex rotations around the linear system's factor:\n"));
     if (w->inner) {
       PetscCall(PetscViewerASCIIPushTab(viewer));
       PetscCall(PCView(w->inner, viewer));
