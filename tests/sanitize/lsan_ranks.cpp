@@ -6,7 +6,7 @@
 // uninstrumented libraries, so the reports cannot be told from ours or suppressed
 // by name, and the full unwinder (fast_unwind_on_malloc=0) that makes them
 // suppressible slows every allocation, and the suite, about fourfold. So softbody
-// skips the leak check at exit unless SOFTBODY_LSAN=1: tests/test_leaks.py sets it,
+// skips the leak check at exit unless SOFTBODY_LSAN=1: tests/regression/test_leaks.py sets it,
 // with the full unwinder and tests/sanitize/lsan.supp, for a few representative
 // runs. Everything else of ASan and UBSan stays on in every run.
 #include <cstdlib>

@@ -82,7 +82,7 @@ def read_frames(path):
 
 def box_mesh(args, name, size, cells):
     """Writes a box mesh (tools/box_mesh.py) into the work folder; returns its path."""
-    tools = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools")
+    tools = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools")
     path = os.path.join(args.work, name)
     subprocess.run([sys.executable, os.path.join(tools, "box_mesh.py"), path, "--size", *map(str, size),
                     "--cells", *map(str, cells)], check=True, capture_output=True)

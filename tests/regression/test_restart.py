@@ -38,7 +38,7 @@ import harness  # noqa: E402
 args = harness.arguments()
 checks = harness.Checks()
 work = os.path.abspath(args.work)
-beam = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "beam-scene.txt")
+beam = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes", "beam-scene.txt")
 
 
 def path(name):

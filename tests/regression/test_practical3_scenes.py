@@ -11,7 +11,7 @@
     parallel normals (the ground and the other statue's face) were prescribed
     the least-norm velocity meeting both, (c_1 - c_2) / sin(angle), up to 1.2e3
     m/s; each vertex's constraints are now combined with bounded velocity
-    (projected_solve.hpp, tests/test_contact_kernels.cpp). Its criteria: no
+    (projected_solve.hpp, tests/unit/test_contact_kernels.cpp). Its criteria: no
     NaN; total energy bounded, below 2 x its initial value at every frame
     (measured peak 1.61-1.67 x: the ground pushes the statues up by 6.2 m);
     lowest vertex after frame 0 above -1 % of the body height (measured -0.03
@@ -55,7 +55,7 @@ import harness  # noqa: E402
 args = harness.arguments()
 checks = harness.Checks()
 HERE = os.path.dirname(os.path.abspath(__file__))
-P3 = os.path.join(HERE, "..", "config", "practical3.opts")
+P3 = os.path.join(HERE, "..", "..", "config", "practical3.opts")
 
 
 read = harness.read_frames

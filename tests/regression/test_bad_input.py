@@ -2,7 +2,7 @@
 """Bad input ends the run with one clear line, never a hang, crash or traceback.
 
 Every case runs softbody (2 ranks, some also 1 rank) on a hand-written input
-from tests/bad_input/ or with a bad option, and checks:
+from tests/data/bad_input/ or with a bad option, and checks:
 - every rank exits non-zero (each rank is wrapped so that its own exit code is
   reported and mpirun does not cut a waiting rank short: a rank that waits on
   another is a hang, caught by the time limit);
@@ -23,7 +23,7 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
 
-INPUTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "bad_input")
+INPUTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "bad_input")
 RANK_LIMIT = 25  # seconds a rank may run before `timeout` ends it (a hang)
 RUN_LIMIT = 40  # seconds for the whole mpirun
 MARK = "softbody-test-rank-exit"

@@ -31,7 +31,7 @@ import harness  # noqa: E402
 args = harness.arguments()
 checks = harness.Checks()
 work = os.path.abspath(args.work)
-scene = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "beam-scene.txt")
+scene = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes", "beam-scene.txt")
 DT = 0.02  # the default -dt
 STOPPED = re.compile(r"softbody: stopped by (SIG\w+) after step (\d+) of 1000000")
 

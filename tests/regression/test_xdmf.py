@@ -27,7 +27,7 @@ import harness  # noqa: E402
 
 args = harness.arguments()
 checks = harness.Checks()
-scene = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "beam-scene.txt")
+scene = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes", "beam-scene.txt")
 
 
 def result(name):

@@ -1,7 +1,7 @@
 // Unit tests of the OFF (TetGen) and gmsh readers (src/mesh_io.hpp) and of scenes
 // that mix .off, .mesh and .msh files (src/scene.hpp).
 //
-// Files: tests/meshes/ (run from tests/, as ctest does; see tests/meshes/README.md).
+// Files: tests/data/meshes/ (run from tests/, as ctest does; see tests/data/meshes/README.md).
 // Every check of a tetrahedralisation is independent of the reader: this file
 // parses the OFF surfaces itself and measures volumes with its own determinants.
 #include <gtest/gtest.h>
@@ -347,7 +347,7 @@ TEST(TetgenSwitches, Checked) {
 }
 
 TEST_F(OffTest, SeedBunny) {
-  const std::string path = "../../shared/seed-data/infomgp-p3/bunny.off";
+  const std::string path = "../../../shared/seed-data/infomgp-p3/bunny.off";
   if (!fs::exists(path))
     GTEST_SKIP() << path << " not found (tests that need ../shared skip without it)";
   const auto start = std::chrono::steady_clock::now();
@@ -362,8 +362,8 @@ TEST_F(OffTest, SeedBunny) {
 // -------------------------------------------------------------------- gmsh
 
 TEST(ReadGmsh, Versions22And41GiveTheSameMesh) {
-  // tests/meshes/cube-4.1.msh: gmsh 4.8.4 on cube.geo; cube-2.2.msh: the same
-  // mesh saved again as 2.2 (see tests/meshes/README.md).
+  // tests/data/meshes/cube-4.1.msh: gmsh 4.8.4 on cube.geo; cube-2.2.msh: the same
+  // mesh saved again as 2.2 (see tests/data/meshes/README.md).
   const TetMesh mesh41 = ReadGmsh(kMeshes + "cube-4.1.msh");
   const TetMesh mesh22 = ReadTetMesh(kMeshes + "cube-2.2.msh");  // dispatch on .msh
   EXPECT_EQ(mesh41.num_vertices(), 45);
@@ -491,7 +491,7 @@ TEST_F(GmshTest, UnknownExtensionListsTheFormats) {
 // --------------------------------------------------------- mixed scenes
 
 TEST_F(OffTest, SceneMixesFormats) {
-  // tests/meshes/mixed-scene.txt: box_quads.off, cube.mesh, cube-4.1.msh,
+  // tests/data/meshes/mixed-scene.txt: box_quads.off, cube.mesh, cube-4.1.msh,
   // cube-2.2.msh (fixed); velocities on OFF vertex 7 and gmsh node 45.
   const std::string path = kMeshes + "mixed-scene.txt";
   const Scene scene = ReadScene(path, MeshingOptions());

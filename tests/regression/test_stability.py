@@ -28,7 +28,7 @@ import harness  # noqa: E402
 # open cases are listed in the README's "Stability").
 KNOWN_FAILURES = set()
 
-TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools", "stability.py")
+TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools", "stability.py")
 LIMIT = 540  # seconds before the whole subset counts as hung (ctest's TIMEOUT is 600)
 
 

@@ -29,7 +29,7 @@ import harness  # noqa: E402
 
 args = harness.arguments()
 checks = harness.Checks()
-scene = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "beam-scene.txt")
+scene = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes", "beam-scene.txt")
 STEPS = 150
 LINE = re.compile(r"step (\d+)/(\d+)  t = \S+ s  \S+ steps/s  (ETA [^ ]+( \S+)*|in [^ ]+( \S+)*)  solver its \d+")
 

@@ -30,7 +30,7 @@ import harness  # noqa: E402
 args = harness.arguments()
 checks = harness.Checks()
 HERE = os.path.dirname(os.path.abspath(__file__))
-CONFIG = os.path.join(HERE, "..", "config")
+CONFIG = os.path.join(HERE, "..", "..", "config")
 ALPHA, DT, STEPS, DENSITY = 0.1, 0.01, 20, 1000.0
 
 mesh = os.path.join(args.work, "sliver.mesh")

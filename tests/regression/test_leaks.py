@@ -18,7 +18,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+ROOT = os.path.dirname(os.path.dirname(HERE))
 
 args = harness.arguments()
 libraries = subprocess.run(["ldd", args.softbody], capture_output=True, text=True).stdout
@@ -29,13 +29,13 @@ if "libasan" not in libraries and "libclang_rt.asan" not in libraries:
 env_options = os.environ.get("ASAN_OPTIONS", "")
 os.environ["ASAN_OPTIONS"] = (env_options + ":" if env_options else "") + \
     "detect_leaks=1:fast_unwind_on_malloc=0"
-suppressions = os.path.join(HERE, "sanitize", "lsan.supp")
+suppressions = os.path.join(HERE, "..", "sanitize", "lsan.supp")
 os.environ["LSAN_OPTIONS"] = f"suppressions={suppressions}:print_suppressions=0"
 os.environ["SOFTBODY_LSAN"] = "1"
 
-mixed = os.path.join(HERE, "meshes", "mixed-scene.txt")
-valid = os.path.join(HERE, "bad_input", "valid.txt")
-bad = os.path.join(HERE, "bad_input", "mesh_degenerate.txt")
+mixed = os.path.join(HERE, "..", "data", "meshes", "mixed-scene.txt")
+valid = os.path.join(HERE, "..", "data", "bad_input", "valid.txt")
+bad = os.path.join(HERE, "..", "data", "bad_input", "mesh_degenerate.txt")
 practical3 = os.path.join(ROOT, "config", "practical3.opts")
 cg_gamg = os.path.join(ROOT, "config", "cg-gamg.opts")
 out = os.path.join(args.work, "out.h5")

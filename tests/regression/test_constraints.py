@@ -9,7 +9,7 @@ Every distance is recomputed here from /positions and the rest distance from
     [lo, hi] x rest at every frame (1e-6 relative); emptyconstraints.txt loads
     (no constraint line in the summary) and gives the same frames as no
     -constraints, bit for bit.
-(b) tests/constraints/hang.txt (4-field lines: rest distance kept): cube A
+(b) tests/data/constraints/hang.txt (4-field lines: rest distance kept): cube A
     hangs from a fixed cube by 25 links, cube B from A by 25 more, under
     gravity: every distance equals its rest distance at every frame (1e-6).
     Constraints are resolved after the solve (as the issue specifies), so they
@@ -24,7 +24,7 @@ Every distance is recomputed here from /positions and the rest distance from
     has half the x-extent (1e-9); by t = 3 s the shape has recovered (x-extent
     in the body's own frame within 2 % of rest) and the elastic energy is below
     1 % of its peak.
-(e) Bad constraint files (tests/constraints/bad_*.txt): one line
+(e) Bad constraint files (tests/data/constraints/bad_*.txt): one line
     "softbody: error: FILE:LINE: ...", non-zero exit.
 """
 import os
@@ -39,8 +39,8 @@ import harness  # noqa: E402
 args = harness.arguments()
 checks = harness.Checks()
 HERE = os.path.dirname(os.path.abspath(__file__))
-INPUTS = os.path.join(HERE, "constraints")
-P3 = os.path.join(HERE, "..", "config", "practical3.opts")
+INPUTS = os.path.join(HERE, "..", "data", "constraints")
+P3 = os.path.join(HERE, "..", "..", "config", "practical3.opts")
 TOL = 1e-6
 
 
@@ -129,7 +129,7 @@ for name, line, key in BAD:
 
 # ---------------------------------------------------------------- (b) own 4-field file
 print("(b) two cubes hanging from a fixed cube by 4-field constraints (rest distance kept)")
-# tests/constraints/hang.txt: 25 links from the fixed cube's bottom face (j = 0)
+# tests/data/constraints/hang.txt: 25 links from the fixed cube's bottom face (j = 0)
 # to cube A's top face (j = 4), 25 from A's bottom face to cube B's top face,
 # each vertically aligned across a 0.25 m gap.
 H, RHO, E, G = 0.5, 1000.0, 1e6, 9.81
@@ -254,7 +254,7 @@ checks.check(a["positions"][:, :, 1].min() >= -1e-9,
 none, out_none = simulate("cylinders_none", scene, CYL)
 zero, out_zero = simulate("cylinders_empty", scene, CYL + ["-constraints", empty])
 # The seed bounds [0.8, 1.2] never bind in this scene (see the ratios above);
-# tests/constraints/cylinder-tight.txt asks [0.95, 1.02] of the same pairs,
+# tests/data/constraints/cylinder-tight.txt asks [0.95, 1.02] of the same pairs,
 # which the unconstrained run leaves: the check has teeth.
 tight_file = os.path.join(INPUTS, "cylinder-tight.txt")
 tight_constraints = read_constraints(tight_file)

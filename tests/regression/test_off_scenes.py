@@ -3,7 +3,7 @@
 
 - ../shared/seed-data/infomgp-p3/bunny-scene.txt (one bunny.off), 2 ranks, 2 steps
   (skipped without ../shared);
-- tests/meshes/mixed-scene.txt: box_quads.off, cube.mesh, cube-4.1.msh and
+- tests/data/meshes/mixed-scene.txt: box_quads.off, cube.mesh, cube-4.1.msh and
   cube-2.2.msh (fixed), 2 ranks, 2 steps;
 - the same with -tetgen_max_volume 0.01 and with -tetgen_switches pY;
 - bad options and an open OFF surface: one error line, non-zero exit.
@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
 
-MESHES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "meshes")
+MESHES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "meshes")
 STEPS = 2
 
 

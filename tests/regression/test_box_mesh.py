@@ -15,7 +15,7 @@ import numpy as np
 
 import harness
 
-TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools", "box_mesh.py")
+TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools", "box_mesh.py")
 
 
 def generate(path, size, cells=None, tets=None):

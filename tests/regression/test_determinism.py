@@ -24,7 +24,7 @@ import harness  # noqa: E402
 args = harness.arguments()
 checks = harness.Checks()
 work = os.path.abspath(args.work)
-beam = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "beam-scene.txt")
+beam = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes", "beam-scene.txt")
 TIMINGS = {"setup_seconds", "loop_seconds", "output_seconds", "contact_seconds"}
 
 harness.box_mesh(args, "bar.mesh", (1.0, 0.25, 0.25), (8, 2, 2))
