@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "common/large_array.hpp"
+#include "common/number_format.hpp"
 #include "common/options.hpp"
 #include "solvers/supernodal/supernodal.hpp"
 #include "solvers/warp/warp_preconditioner.hpp"
@@ -34,7 +35,7 @@ PetscErrorCode ProcessBenchmarkOptions(MPI_Comm comm, BenchmarkOptions *o) {
              "option -bench_assembly_repeats: must be >= 1 (got %" PetscInt_FMT ")",
              o->assembly_repeats);
   PetscCheck(o->triad_mb > 0, comm, PETSC_ERR_USER_INPUT,
-             "option -bench_triad_mb: must be > 0 (got %g)", (double)o->triad_mb);
+             "option -bench_triad_mb: must be > 0 (got %s)", FormatNumber(o->triad_mb).c_str());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

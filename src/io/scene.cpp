@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "common/errors.hpp"
+#include "common/number_format.hpp"
 #include "common/options.hpp"
 #include "common/text_reader.hpp"
 #include "fem/element.hpp"
@@ -173,8 +174,8 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscCheck(bad_switches.empty(), comm, PETSC_ERR_USER_INPUT, "option -tetgen_switches: %s",
              bad_switches.c_str());
   PetscCheck(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume), comm,
-             PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %g)",
-             (double)meshing.max_volume);
+             PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %s)",
+             FormatNumber(meshing.max_volume).c_str());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
