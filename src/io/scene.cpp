@@ -183,10 +183,12 @@ namespace {
 
 // FNV-1a hash of every body's vertices and tets.
 uint64_t HashMeshes(const Scene &scene) {
-  uint64_t hash = 14695981039346656037ull;
+  constexpr uint64_t kFnvOffsetBasis = 14695981039346656037ull;  // FNV-1a, 64 bits
+  constexpr uint64_t kFnvPrime = 1099511628211ull;
+  uint64_t hash = kFnvOffsetBasis;
   const auto add = [&hash](const void *data, size_t bytes) {
     for (size_t i = 0; i < bytes; ++i)
-      hash = (hash ^ static_cast<const unsigned char *>(data)[i]) * 1099511628211ull;
+      hash = (hash ^ static_cast<const unsigned char *>(data)[i]) * kFnvPrime;
   };
   for (const Body &body : scene.bodies) {
     add(body.mesh.vertices.data(), sizeof(double) * body.mesh.vertices.size());
