@@ -265,7 +265,7 @@ PetscErrorCode Simulation::TimeLoop() {
   PetscCall(AgreeOnStop(comm_, &stop_signal_));
   for (PetscInt step = start_.step + 1; step <= integration.steps && !stop_signal_; ++step) {
     const PetscLogDouble loop_before = report_.times.loop;
-    PetscCall(Step(step));
+    PetscCall(Step());
     PetscCall(AgreeOnStop(comm_, &stop_signal_));
     PetscCall(RecordStep(step, loop_before));
   }
@@ -276,7 +276,7 @@ PetscErrorCode Simulation::TimeLoop() {
 
 // One time step: the solve (collisions and constraints inside it), then the
 // deformations due by the new time, so that the frame at that time shows them.
-PetscErrorCode Simulation::Step(PetscInt) {
+PetscErrorCode Simulation::Step() {
   PetscFunctionBeginUser;
   TimedStage timer(Stages().step, &report_.times.loop);
   const PetscReal dt = TimeStepAt(options_.integration, time_);

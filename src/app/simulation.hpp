@@ -66,7 +66,7 @@ class Simulation {
   PetscErrorCode SetUpSolvers();
   PetscErrorCode StartTimeLoop();
   PetscErrorCode TimeLoop();
-  PetscErrorCode Step(PetscInt step);
+  PetscErrorCode Step();
   PetscErrorCode RecordStep(PetscInt step, PetscLogDouble loop_before);
   PetscErrorCode Checkpoint(PetscInt step);
   PetscErrorCode CloseOutput();

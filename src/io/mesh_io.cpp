@@ -115,6 +115,50 @@ void SetTets(const std::vector<std::array<int32_t, 4>> &tets, TetMesh *mesh) {
 
 // ------------------------------------------------------------------- MEDIT
 
+namespace {
+
+// After "Vertices": n, then n rows "x y z ref".
+void ReadMeditVertices(TextReader &in, TetMesh *mesh) {
+  const long n = ExpectCount(in, "vertices");
+  mesh->vertices.resize(RowsToAllocate(in, n, 4), 3);  // rows "x y z ref"
+  for (long v = 0; v < n; ++v) {
+    Eigen::RowVector3d x;
+    for (int c = 0; c < 3; ++c) x[c] = in.ExpectReal("vertex coordinate");
+    in.ExpectInteger("vertex reference");
+    mesh->vertices.row(v) = x;
+  }
+}
+
+// After "Tetrahedra": n, then n rows "a b c d ref" (1-based), none degenerate.
+void ReadMeditTets(TextReader &in, TetMesh *mesh) {
+  const long n = ExpectCount(in, "tetrahedra");
+  mesh->tets.resize(RowsToAllocate(in, n, 5), 4);  // rows "a b c d ref"
+  for (long t = 0; t < n; ++t) {
+    std::array<int32_t, 4> corners;
+    for (int a = 0; a < 4; ++a) {
+      const long index = in.ExpectInteger("tetrahedron vertex index");
+      if (index < 1 || index > mesh->num_vertices())
+        in.Fail("tetrahedron " + std::to_string(t + 1) + ": vertex index " + std::to_string(index) +
+                " out of range 1.." + std::to_string(mesh->num_vertices()));
+      corners[a] = static_cast<int32_t>(index - 1);
+    }
+    in.ExpectInteger("tetrahedron reference");
+    for (int a = 0; a < 4; ++a) mesh->tets(t, a) = corners[a];
+    CheckTet(*mesh, static_cast<int32_t>(t), in);
+  }
+}
+
+// A section softbody does not use (kSkippedSections): its count and rows.
+void SkipMeditSection(TextReader &in, std::string_view keyword) {
+  const auto section = kSkippedSections.find(std::string(keyword));
+  if (section == kSkippedSections.end())
+    in.Fail("unknown MEDIT keyword '" + std::string(keyword) + "'");
+  const long n = ExpectCount(in, section->first.c_str());
+  for (long row = 0; row < n * section->second; ++row) in.ExpectToken(section->first.c_str());
+}
+
+}  // namespace
+
 TetMesh ReadMedit(const std::string &path) {
   TextReader in(path);
   TetMesh mesh;
@@ -128,41 +172,15 @@ TetMesh ReadMedit(const std::string &path) {
       if (in.ExpectInteger("dimension") != 3) in.Fail("only 3-dimensional meshes are supported");
     } else if (keyword == "Vertices") {
       if (have_vertices) in.Fail("second Vertices section");
-      const long n = ExpectCount(in, "vertices");
-      mesh.vertices.resize(RowsToAllocate(in, n, 4), 3);  // rows "x y z ref"
-      for (long v = 0; v < n; ++v) {
-        Eigen::RowVector3d x;
-        for (int c = 0; c < 3; ++c) x[c] = in.ExpectReal("vertex coordinate");
-        in.ExpectInteger("vertex reference");
-        mesh.vertices.row(v) = x;
-      }
+      ReadMeditVertices(in, &mesh);
       have_vertices = true;
     } else if (keyword == "Tetrahedra") {
       if (!have_vertices) in.Fail("Tetrahedra before Vertices");
       if (have_tets) in.Fail("second Tetrahedra section");
-      const long n = ExpectCount(in, "tetrahedra");
-      mesh.tets.resize(RowsToAllocate(in, n, 5), 4);  // rows "a b c d ref"
-      for (long t = 0; t < n; ++t) {
-        std::array<int32_t, 4> corners;
-        for (int a = 0; a < 4; ++a) {
-          const long index = in.ExpectInteger("tetrahedron vertex index");
-          if (index < 1 || index > mesh.num_vertices())
-            in.Fail("tetrahedron " + std::to_string(t + 1) + ": vertex index " +
-                    std::to_string(index) + " out of range 1.." +
-                    std::to_string(mesh.num_vertices()));
-          corners[a] = static_cast<int32_t>(index - 1);
-        }
-        in.ExpectInteger("tetrahedron reference");
-        for (int a = 0; a < 4; ++a) mesh.tets(t, a) = corners[a];
-        CheckTet(mesh, static_cast<int32_t>(t), in);
-      }
+      ReadMeditTets(in, &mesh);
       have_tets = true;
     } else {
-      const auto section = kSkippedSections.find(std::string(keyword));
-      if (section == kSkippedSections.end())
-        in.Fail("unknown MEDIT keyword '" + std::string(keyword) + "'");
-      const long n = ExpectCount(in, section->first.c_str());
-      for (long row = 0; row < n * section->second; ++row) in.ExpectToken(section->first.c_str());
+      SkipMeditSection(in, keyword);
     }
   }
   if (!have_tets || mesh.num_tets() == 0) in.Fail("no tetrahedra in the mesh");
