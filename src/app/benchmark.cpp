@@ -4,15 +4,32 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <limits>
 #include <memory>
 #include <sstream>
 
 #include "common/large_array.hpp"
+#include "common/number_format.hpp"
 #include "common/options.hpp"
 #include "solvers/supernodal/supernodal.hpp"
 #include "solvers/warp/warp_preconditioner.hpp"
 
 namespace softbody {
+
+namespace {
+
+// Timed passes of the triad; the best one counts (the others warm caches and
+// pages, or are disturbed by the system).
+constexpr int kTriadPasses = 5;
+// Bytes a product with A or K reads per nonzero: an 8-byte value and a 4-byte
+// column index.
+constexpr double kProductBytesPerNonzero = 12.0;
+// Sweeps over the factor L per solve with it: a forward and a backward one.
+constexpr double kFactorSweepsPerSolve = 2.0;
+// Bytes a refill of A writes per nonzero (corotational mode): its 8-byte value.
+constexpr double kRefillBytesPerNonzero = 8.0;
+
+}  // namespace
 
 PetscErrorCode ProcessBenchmarkOptions(MPI_Comm comm, BenchmarkOptions *o) {
   PetscFunctionBeginUser;
@@ -34,7 +51,7 @@ PetscErrorCode ProcessBenchmarkOptions(MPI_Comm comm, BenchmarkOptions *o) {
              "option -bench_assembly_repeats: must be >= 1 (got %" PetscInt_FMT ")",
              o->assembly_repeats);
   PetscCheck(o->triad_mb > 0, comm, PETSC_ERR_USER_INPUT,
-             "option -bench_triad_mb: must be > 0 (got %g)", (double)o->triad_mb);
+             "option -bench_triad_mb: must be > 0 (got %s)", FormatNumber(o->triad_mb).c_str());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -56,8 +73,8 @@ PetscErrorCode TriadBandwidth(MPI_Comm comm, PetscReal megabytes_per_array,
   }
   PetscMPIInt size;
   PetscCallMPI(MPI_Comm_size(comm, &size));
-  double best = 1e30;
-  for (int pass = 0; pass < 5; ++pass) {
+  double best = std::numeric_limits<double>::infinity();
+  for (int pass = 0; pass < kTriadPasses; ++pass) {
     PetscCallMPI(MPI_Barrier(comm));
     const double start = MPI_Wtime();
     double *PETSC_RESTRICT pa = a.data();
@@ -113,7 +130,8 @@ PetscErrorCode FactorNonzeros(PC pc, double *nonzeros, int *bytes_per_entry) {
       Mat factor;
       PetscInt entries;
       PetscCall(PCFactorGetMatrix(pc, &factor));
-      PetscCall(MatMumpsGetInfog(factor, 29, &entries));  // entries in the factors (< 0: millions)
+      constexpr PetscInt kInfogFactorEntries = 29;  // MUMPS INFOG(29): entries in the factors
+      PetscCall(MatMumpsGetInfog(factor, kInfogFactorEntries, &entries));  // < 0: millions
       *nonzeros = entries < 0 ? -1e6 * entries : entries;
     } else {
       Mat factor;
@@ -124,6 +142,39 @@ PetscErrorCode FactorNonzeros(PC pc, double *nonzeros, int *bytes_per_entry) {
     }
   }
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// What the step's memory traffic depends on: the sizes of A and of the factor
+// behind the preconditioner, and whether the solve is direct (preonly).
+struct SystemSizes {
+  double matrix_nonzeros = 0, factor_nonzeros = 0;
+  int factor_bytes = 8;  // bytes per factor entry read by a solve
+  PetscBool preonly = PETSC_FALSE;
+};
+
+PetscErrorCode MeasureSystem(ImplicitEuler *integrator, SystemSizes *sizes) {
+  PetscFunctionBeginUser;
+  MatInfo info;
+  PetscCall(MatGetInfo(integrator->system_matrix(), MAT_GLOBAL_SUM, &info));
+  sizes->matrix_nonzeros = info.nz_used;
+  PC pc;
+  PetscCall(KSPGetPC(integrator->solver(), &pc));
+  PetscCall(FactorNonzeros(pc, &sizes->factor_nonzeros, &sizes->factor_bytes));
+  PetscCall(PetscObjectTypeCompare((PetscObject)integrator->solver(), KSPPREONLY, &sizes->preonly));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Bytes a step must move at least (see benchmark.hpp), with `iterations` mean
+// solver iterations per solve and `solves_per_step` solves per step.
+double StepTrafficBytes(const SystemSizes &sizes, bool corotational, double iterations,
+                        double solves_per_step) {
+  const double products = sizes.preonly ? (corotational ? 0.0 : 1.0) : iterations * solves_per_step;
+  const double factor_solves =
+      sizes.preonly ? solves_per_step
+                    : (sizes.factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
+  return kProductBytesPerNonzero * sizes.matrix_nonzeros * products +
+         kFactorSweepsPerSolve * sizes.factor_bytes * sizes.factor_nonzeros * factor_solves +
+         (corotational ? kRefillBytesPerNonzero * sizes.matrix_nonzeros : 0.0);
 }
 
 }  // namespace
@@ -143,18 +194,8 @@ PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEule
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &assemble_s, 1, MPI_DOUBLE, MPI_MAX, comm));
 
   const SolverStatistics &stats = integrator->statistics();
-  const bool corotational = integrator->mode() == MODE_COROTATIONAL;
-  MatInfo info;
-  PetscCall(MatGetInfo(integrator->system_matrix(), MAT_GLOBAL_SUM, &info));
-  const double matrix_nonzeros = info.nz_used;
-  PC pc;
-  PetscCall(KSPGetPC(integrator->solver(), &pc));
-  double factor_nonzeros;
-  int factor_bytes;
-  PetscCall(FactorNonzeros(pc, &factor_nonzeros, &factor_bytes));
-  PetscBool preonly;
-  PetscCall(PetscObjectTypeCompare((PetscObject)integrator->solver(), KSPPREONLY, &preonly));
-
+  SystemSizes sizes;
+  PetscCall(MeasureSystem(integrator, &sizes));
   const double steps = static_cast<double>(step_seconds_.size());
   const double iterations = stats.solves ? double(stats.total_iterations) / stats.solves : 0;
   const double step_s = Median(step_seconds_);
@@ -163,14 +204,9 @@ PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEule
 
   double bandwidth;
   PetscCall(TriadBandwidth(comm, options_.triad_mb, &bandwidth));
-  // Bytes a step must move at least (see benchmark.hpp).
   const double solves_per_step = steps > 0 ? stats.solves / steps : 1;
-  const double products = preonly ? (corotational ? 0.0 : 1.0) : iterations * solves_per_step;
-  const double factor_solves =
-      preonly ? solves_per_step : (factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
-  const double bytes = 12.0 * matrix_nonzeros * products +
-                       2.0 * factor_bytes * factor_nonzeros * factor_solves +
-                       (corotational ? 8.0 * matrix_nonzeros : 0.0);
+  const double bytes =
+      StepTrafficBytes(sizes, integrator->mode() == MODE_COROTATIONAL, iterations, solves_per_step);
   const double bound_s = bytes / (bandwidth * 1e9);
   const double tets = static_cast<double>(scene.num_tets());
 
@@ -183,15 +219,21 @@ PetscErrorCode Benchmark::Finish(MPI_Comm comm, const Scene &scene, ImplicitEule
                  {"assemble_rate", tets / assemble_s / ranks},
                  {"factor_s", factor_s},
                  {"iterations", iterations},
-                 {"matrix_nonzeros", matrix_nonzeros},
-                 {"factor_nonzeros", factor_nonzeros},
+                 {"matrix_nonzeros", sizes.matrix_nonzeros},
+                 {"factor_nonzeros", sizes.factor_nonzeros},
                  {"peak_rss_mb", peak_rss},
                  {"bandwidth_gbs", bandwidth},
                  {"bound_s", bound_s},
                  {"bound_fraction", step_s > 0 ? bound_s / step_s : 0.0}};
+  PetscCall(PrintAttributes(comm));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode Benchmark::PrintAttributes(MPI_Comm comm) const {
+  PetscFunctionBeginUser;
   std::ostringstream line;
   line << "softbody bench:";
-  line.precision(6);
+  line.precision(kPrintedDigits);
   for (const auto &[name, value] : attributes_) line << ' ' << name << '=' << value;
   PetscCall(PetscPrintf(comm, "%s\n", line.str().c_str()));
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -41,8 +41,12 @@ namespace softbody {
 
 struct BenchmarkOptions {
   PetscBool enabled = PETSC_FALSE;  // -bench
-  PetscInt assembly_repeats = 5;    // -bench_assembly_repeats
-  PetscReal triad_mb = 128;         // -bench_triad_mb: MB per array per rank
+  // -bench_assembly_repeats: the median of 5 fills ignores one or two disturbed by
+  // the system.
+  PetscInt assembly_repeats = 5;
+  // -bench_triad_mb: MB per array per rank; 128 MB is far beyond any cache, so
+  // the triad measures memory bandwidth.
+  PetscReal triad_mb = 128;
 };
 
 // Collective. Reads -bench, -bench_assembly_repeats, -bench_triad_mb.
@@ -70,6 +74,11 @@ class Benchmark {
   const std::vector<std::pair<std::string, double>> &attributes() const { return attributes_; }
 
  private:
+  // Significant digits of the values on the "softbody bench:" line.
+  static constexpr int kPrintedDigits = 6;
+  // Rank 0 prints the attributes as one line "softbody bench: name=value ...".
+  PetscErrorCode PrintAttributes(MPI_Comm comm) const;
+
   BenchmarkOptions options_;
   std::vector<double> step_seconds_, setup_seconds_;
   PetscInt last_total_iterations_ = 0;

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <petscsys.h>
+#include <petsctime.h>
 
 namespace softbody {
 
@@ -40,6 +41,27 @@ class StageScope {
 
  private:
   PetscLogStage stage_;
+};
+
+// A stopwatch for the lifetime of the scope: adds its wall time (s) to *total and
+// pushes `stage` meanwhile, so that the run summary and -log_view agree.
+class TimedStage {
+ public:
+  TimedStage(PetscLogStage stage, PetscLogDouble *total) : total_(total) {
+    PetscCallVoid(PetscLogStagePush(stage));
+    PetscCallVoid(PetscTime(&start_));
+  }
+  ~TimedStage() {
+    PetscLogDouble end;
+    PetscCallVoid(PetscTime(&end));
+    *total_ += end - start_;
+    PetscCallVoid(PetscLogStagePop());
+  }
+  TimedStage(const TimedStage &) = delete;
+  TimedStage &operator=(const TimedStage &) = delete;
+
+ private:
+  PetscLogDouble *total_, start_ = 0;
 };
 
 }  // namespace softbody

@@ -14,6 +14,13 @@ namespace softbody {
 
 namespace {
 
+// Shortest time between two updates of the progress line (s): four a second
+// reads as live without flooding a slow terminal or a log file.
+constexpr double kProgressInterval = 0.25;
+// Durations above this (s, about four months) print as "?": an ETA that long
+// comes from a rate measured over too few steps.
+constexpr double kLongestDuration = 1e7;
+
 volatile std::sig_atomic_t g_stop_signal = 0;
 bool g_line_open = false;  // rank 0: a progress line without its newline yet
 
@@ -29,7 +36,7 @@ extern "C" void RecordStopSignal(int signal) {
 // "12 s", "3 min 20 s", "2 h 05 min".
 std::string Duration(double seconds) {
   char text[32];
-  if (!(seconds >= 0) || seconds > 1e7) return "?";
+  if (!(seconds >= 0) || seconds > kLongestDuration) return "?";
   const long s = static_cast<long>(seconds + 0.5);
   if (s < 60)
     std::snprintf(text, sizeof(text), "%ld s", s);
@@ -127,7 +134,7 @@ void ProgressLine::Update(PetscInt step, PetscReal time, PetscInt iterations) {
   PetscCallVoid(PetscTime(&now));
   // The first step prints at once (the user sees the line and an ETA straight
   // away), later ones at most four times a second; Finish prints the last.
-  if (step == last_ || (step != first_ + 1 && now - printed_ < 0.25)) return;
+  if (step == last_ || (step != first_ + 1 && now - printed_ < kProgressInterval)) return;
   printed_ = now;
   Print(false);
 }

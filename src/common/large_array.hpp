@@ -2,7 +2,7 @@
 // a supernodal Cholesky solve, the triad's arrays): 2 MB aligned and, where the
 // kernel allows it (transparent huge pages in "madvise" mode), backed by 2 MB
 // pages, so that the streaming loads do not stop at every 4 KB page for a TLB
-// miss (about 10 % of a triangular solve's time on the machine of the README).
+// miss.
 // Not collective.
 #pragma once
 

@@ -2,8 +2,19 @@
 
 namespace softbody {
 
+namespace {
+
+// Chunk of a time series of scalars (time, energies): this many frames, so that
+// appending a frame rarely allocates and a short run's file stays small.
+constexpr hsize_t kScalarSeriesChunk = 1024;
+// Chunk rows of an extendible table (e.g. the resting contacts of a checkpoint).
+constexpr hsize_t kChunkRows = 256;
+
+}  // namespace
+
 hid_t CreateSeries(hid_t location, const char *name, const std::vector<hsize_t> &frame_dims) {
-  std::vector<hsize_t> dims{0}, max_dims{H5S_UNLIMITED}, chunk{frame_dims.empty() ? 1024u : 1u};
+  std::vector<hsize_t> dims{0}, max_dims{H5S_UNLIMITED},
+      chunk{frame_dims.empty() ? kScalarSeriesChunk : 1};
   for (hsize_t d : frame_dims) {
     dims.push_back(d);
     max_dims.push_back(d);
@@ -116,7 +127,7 @@ bool WriteResizableArray(hid_t location, const char *name, hid_t type, hsize_t r
       return false;
     }
   } else {
-    const hsize_t max_dims[2] = {H5S_UNLIMITED, columns}, chunk[2] = {256, columns};
+    const hsize_t max_dims[2] = {H5S_UNLIMITED, columns}, chunk[2] = {kChunkRows, columns};
     const hid_t space = H5Screate_simple(2, dims, max_dims);
     const hid_t properties = H5Pcreate(H5P_DATASET_CREATE);
     H5Pset_chunk(properties, 2, chunk);

@@ -115,6 +115,50 @@ void SetTets(const std::vector<std::array<int32_t, 4>> &tets, TetMesh *mesh) {
 
 // ------------------------------------------------------------------- MEDIT
 
+namespace {
+
+// After "Vertices": n, then n rows "x y z ref".
+void ReadMeditVertices(TextReader &in, TetMesh *mesh) {
+  const long n = ExpectCount(in, "vertices");
+  mesh->vertices.resize(RowsToAllocate(in, n, 4), 3);  // rows "x y z ref"
+  for (long v = 0; v < n; ++v) {
+    Eigen::RowVector3d x;
+    for (int c = 0; c < 3; ++c) x[c] = in.ExpectReal("vertex coordinate");
+    in.ExpectInteger("vertex reference");
+    mesh->vertices.row(v) = x;
+  }
+}
+
+// After "Tetrahedra": n, then n rows "a b c d ref" (1-based), none degenerate.
+void ReadMeditTets(TextReader &in, TetMesh *mesh) {
+  const long n = ExpectCount(in, "tetrahedra");
+  mesh->tets.resize(RowsToAllocate(in, n, 5), 4);  // rows "a b c d ref"
+  for (long t = 0; t < n; ++t) {
+    std::array<int32_t, 4> corners;
+    for (int a = 0; a < 4; ++a) {
+      const long index = in.ExpectInteger("tetrahedron vertex index");
+      if (index < 1 || index > mesh->num_vertices())
+        in.Fail("tetrahedron " + std::to_string(t + 1) + ": vertex index " + std::to_string(index) +
+                " out of range 1.." + std::to_string(mesh->num_vertices()));
+      corners[a] = static_cast<int32_t>(index - 1);
+    }
+    in.ExpectInteger("tetrahedron reference");
+    for (int a = 0; a < 4; ++a) mesh->tets(t, a) = corners[a];
+    CheckTet(*mesh, static_cast<int32_t>(t), in);
+  }
+}
+
+// A section softbody does not use (kSkippedSections): its count and rows.
+void SkipMeditSection(TextReader &in, std::string_view keyword) {
+  const auto section = kSkippedSections.find(std::string(keyword));
+  if (section == kSkippedSections.end())
+    in.Fail("unknown MEDIT keyword '" + std::string(keyword) + "'");
+  const long n = ExpectCount(in, section->first.c_str());
+  for (long row = 0; row < n * section->second; ++row) in.ExpectToken(section->first.c_str());
+}
+
+}  // namespace
+
 TetMesh ReadMedit(const std::string &path) {
   TextReader in(path);
   TetMesh mesh;
@@ -128,41 +172,15 @@ TetMesh ReadMedit(const std::string &path) {
       if (in.ExpectInteger("dimension") != 3) in.Fail("only 3-dimensional meshes are supported");
     } else if (keyword == "Vertices") {
       if (have_vertices) in.Fail("second Vertices section");
-      const long n = ExpectCount(in, "vertices");
-      mesh.vertices.resize(RowsToAllocate(in, n, 4), 3);  // rows "x y z ref"
-      for (long v = 0; v < n; ++v) {
-        Eigen::RowVector3d x;
-        for (int c = 0; c < 3; ++c) x[c] = in.ExpectReal("vertex coordinate");
-        in.ExpectInteger("vertex reference");
-        mesh.vertices.row(v) = x;
-      }
+      ReadMeditVertices(in, &mesh);
       have_vertices = true;
     } else if (keyword == "Tetrahedra") {
       if (!have_vertices) in.Fail("Tetrahedra before Vertices");
       if (have_tets) in.Fail("second Tetrahedra section");
-      const long n = ExpectCount(in, "tetrahedra");
-      mesh.tets.resize(RowsToAllocate(in, n, 5), 4);  // rows "a b c d ref"
-      for (long t = 0; t < n; ++t) {
-        std::array<int32_t, 4> corners;
-        for (int a = 0; a < 4; ++a) {
-          const long index = in.ExpectInteger("tetrahedron vertex index");
-          if (index < 1 || index > mesh.num_vertices())
-            in.Fail("tetrahedron " + std::to_string(t + 1) + ": vertex index " +
-                    std::to_string(index) + " out of range 1.." +
-                    std::to_string(mesh.num_vertices()));
-          corners[a] = static_cast<int32_t>(index - 1);
-        }
-        in.ExpectInteger("tetrahedron reference");
-        for (int a = 0; a < 4; ++a) mesh.tets(t, a) = corners[a];
-        CheckTet(mesh, static_cast<int32_t>(t), in);
-      }
+      ReadMeditTets(in, &mesh);
       have_tets = true;
     } else {
-      const auto section = kSkippedSections.find(std::string(keyword));
-      if (section == kSkippedSections.end())
-        in.Fail("unknown MEDIT keyword '" + std::string(keyword) + "'");
-      const long n = ExpectCount(in, section->first.c_str());
-      for (long row = 0; row < n * section->second; ++row) in.ExpectToken(section->first.c_str());
+      SkipMeditSection(in, keyword);
     }
   }
   if (!have_tets || mesh.num_tets() == 0) in.Fail("no tetrahedra in the mesh");
@@ -171,9 +189,10 @@ TetMesh ReadMedit(const std::string &path) {
 
 // --------------------------------------------------------------------- OFF
 
-OffSurface ReadOffSurface(const std::string &path) {
-  TextReader in(path);
-  OffSurface surface;
+namespace {
+
+// The counts line "nv nf [ne]" after the header OFF (maybe on the header's line).
+void ReadOffCounts(TextReader &in, long *nv, long *nf) {
   std::vector<std::string_view> fields;
   if (!in.NextLine(&fields)) in.Fail("empty file (expected the header OFF)");
   if (fields[0] != "OFF")
@@ -183,16 +202,20 @@ OffSurface ReadOffSurface(const std::string &path) {
     in.Fail("expected the counts 'nv nf ne', found end of file");
   if (fields.size() != 2 && fields.size() != 3)
     in.Fail("expected the counts 'nv nf ne', found " + std::to_string(fields.size()) + " fields");
-  const long nv = ParseCount(in, fields[0], "vertices");
-  const long nf = ParseCount(in, fields[1], "faces");
+  *nv = ParseCount(in, fields[0], "vertices");
+  *nf = ParseCount(in, fields[1], "faces");
   if (fields.size() == 3) in.ParseInteger(fields[2], "number of edges");
-  if (nv < 4 || nf < 4)
-    in.Fail("a closed surface needs at least 4 vertices and 4 faces (found " + std::to_string(nv) +
-            " and " + std::to_string(nf) + ")");
+  if (*nv < 4 || *nf < 4)
+    in.Fail("a closed surface needs at least 4 vertices and 4 faces (found " + std::to_string(*nv) +
+            " and " + std::to_string(*nf) + ")");
+}
 
-  std::map<std::array<double, 3>, long> first_at;       // exact coordinates -> vertex
-  surface.vertices.reserve(RowsToAllocate(in, nv, 3));  // rows "x y z"
-  surface.vertex_lines.reserve(surface.vertices.capacity());
+// nv rows "x y z", no two at the same position.
+void ReadOffVertices(TextReader &in, long nv, OffSurface *surface) {
+  std::vector<std::string_view> fields;
+  std::map<std::array<double, 3>, long> first_at;        // exact coordinates -> vertex
+  surface->vertices.reserve(RowsToAllocate(in, nv, 3));  // rows "x y z"
+  surface->vertex_lines.reserve(surface->vertices.capacity());
   for (long v = 0; v < nv; ++v) {
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(nv) + " vertex rows, found " + std::to_string(v));
@@ -205,38 +228,60 @@ OffSurface ReadOffSurface(const std::string &path) {
     if (!inserted)  // TetGen would merge the two and renumber the rest
       in.Fail("vertex " + std::to_string(v) + " repeats the position of vertex " +
               std::to_string(where->second) + " (line " +
-              std::to_string(surface.vertex_lines[where->second]) + ")");
-    surface.vertices.push_back(x);
-    surface.vertex_lines.push_back(in.line());
+              std::to_string(surface->vertex_lines[where->second]) + ")");
+    surface->vertices.push_back(x);
+    surface->vertex_lines.push_back(in.line());
   }
-  surface.faces.reserve(RowsToAllocate(in, nf, 4));  // rows "k i1 ... ik", k >= 3
+}
+
+// Face f's row "k i1 ... ik": k >= 3 distinct vertex indices in 0 .. nv - 1.
+std::vector<int32_t> ParseOffFace(TextReader &in, const std::vector<std::string_view> &fields,
+                                  long f, long nv) {
+  const long k = in.ParseInteger(fields[0], "number of face vertices");
+  if (k < 3)
+    in.Fail("face " + std::to_string(f) + " has " + std::to_string(k) +
+            " vertices (at least 3 needed)");
+  if (static_cast<long>(fields.size()) - 1 < k)
+    in.Fail("face " + std::to_string(f) + ": " + std::to_string(k) + " vertex indices announced, " +
+            std::to_string(fields.size() - 1) + " found");
+  std::vector<int32_t> face(k);
+  for (long i = 0; i < k; ++i) {  // fields after the k indices (a colour) are ignored
+    const long index = in.ParseInteger(fields[1 + i], "face vertex index");
+    if (index < 0 || index >= nv)
+      in.Fail("face " + std::to_string(f) + ": vertex index " + std::to_string(index) +
+              " out of range 0.." + std::to_string(nv - 1));
+    face[i] = static_cast<int32_t>(index);
+  }
+  std::vector<int32_t> sorted = face;  // O(k log k): a face may have many vertices
+  std::sort(sorted.begin(), sorted.end());
+  const auto repeated = std::adjacent_find(sorted.begin(), sorted.end());
+  if (repeated != sorted.end())
+    in.Fail("face " + std::to_string(f) + " repeats vertex " + std::to_string(*repeated));
+  return face;
+}
+
+// nf face rows, then nothing.
+void ReadOffFaces(TextReader &in, long nv, long nf, OffSurface *surface) {
+  std::vector<std::string_view> fields;
+  surface->faces.reserve(RowsToAllocate(in, nf, 4));  // rows "k i1 ... ik", k >= 3
   for (long f = 0; f < nf; ++f) {
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(nf) + " face rows, found " + std::to_string(f));
-    const long k = in.ParseInteger(fields[0], "number of face vertices");
-    if (k < 3)
-      in.Fail("face " + std::to_string(f) + " has " + std::to_string(k) +
-              " vertices (at least 3 needed)");
-    if (static_cast<long>(fields.size()) - 1 < k)
-      in.Fail("face " + std::to_string(f) + ": " + std::to_string(k) +
-              " vertex indices announced, " + std::to_string(fields.size() - 1) + " found");
-    std::vector<int32_t> face(k);
-    for (long i = 0; i < k; ++i) {  // fields after the k indices (a colour) are ignored
-      const long index = in.ParseInteger(fields[1 + i], "face vertex index");
-      if (index < 0 || index >= nv)
-        in.Fail("face " + std::to_string(f) + ": vertex index " + std::to_string(index) +
-                " out of range 0.." + std::to_string(nv - 1));
-      face[i] = static_cast<int32_t>(index);
-    }
-    std::vector<int32_t> sorted = face;  // O(k log k): a face may have many vertices
-    std::sort(sorted.begin(), sorted.end());
-    const auto repeated = std::adjacent_find(sorted.begin(), sorted.end());
-    if (repeated != sorted.end())
-      in.Fail("face " + std::to_string(f) + " repeats vertex " + std::to_string(*repeated));
-    surface.faces.push_back(std::move(face));
+    surface->faces.push_back(ParseOffFace(in, fields, f, nv));
   }
   if (in.NextLine(&fields))
     in.Fail("unexpected content after the " + std::to_string(nf) + " faces");
+}
+
+}  // namespace
+
+OffSurface ReadOffSurface(const std::string &path) {
+  TextReader in(path);
+  OffSurface surface;
+  long nv, nf;
+  ReadOffCounts(in, &nv, &nf);
+  ReadOffVertices(in, nv, &surface);
+  ReadOffFaces(in, nv, nf, &surface);
   return surface;
 }
 
@@ -466,76 +511,86 @@ std::string CheckTetgenSwitches(const std::string &switches) {
   return "";
 }
 
-TetMesh ReadOff(const std::string &path, const MeshingOptions &meshing) {
-  const OffSurface surface = ReadOffSurface(path);
-  const std::string bad_switches = CheckTetgenSwitches(meshing.tetgen_switches);
-  if (!bad_switches.empty()) throw InputError(Where(path, 0, "TetGen switches " + bad_switches));
-  if (!(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume)))
-    throw InputError(Where(path, 0, "the tetrahedron volume bound must be >= 0 and finite"));
+namespace {
 
-  // 1. The surface as a .smesh file in a folder of our own.
-  const TemporaryFolder folder(path);
-  const fs::path smesh = folder.path() / "surface.smesh";
-  WriteSmesh(surface, smesh, path);
+// TetGen writes coordinates with 17 digits, so the surface vertices come back
+// bit for bit; this relative tolerance (of the surface's extent) only guards
+// against a TetGen that writes fewer digits.
+constexpr double kTetgenCoordinateTolerance = 1e-14;
 
-  // 2. tetgen -<switches>[a<volume>]JQ: J keeps unused input points (so the
-  // numbering of the surface vertices survives), Q keeps the log to errors.
-  std::string switches = meshing.tetgen_switches;
-  if (meshing.max_volume > 0) switches += "a" + FormatReal(meshing.max_volume);
-  switches += "JQ";
-  const fs::path log = folder.path() / "tetgen.log";
-  const int status = RunTetgen(switches, smesh, log, path);
-  const auto fail = [&](const std::string &what) {
-    const std::string intersections = FindSelfIntersections(smesh, folder.path(), path);
+// One TetGen run on an OFF surface: its input, switches and what failure says.
+struct TetgenRun {
+  std::string path;  // the OFF file, named in every message
+  fs::path folder, smesh;
+  std::string switches;  // as passed, without '-'
+
+  // Throws the InputError of a failed run, with the self-intersections that
+  // `tetgen -d` finds, if any (the usual cause).
+  [[noreturn]] void Fail(const std::string &what) const {
+    const std::string intersections = FindSelfIntersections(smesh, folder, path);
     throw InputError(Where(path, 0,
                            "TetGen (tetgen -" + switches + ") " + what +
                                (intersections.empty() ? "" : ": " + intersections)));
-  };
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    const std::string reason = LastMeaningfulLine(log);
-    fail("failed (" + DescribeStatus(status) + ")" +
-         (reason.empty() ? "" : ", saying '" + reason + "'"));
   }
+};
 
-  // 3. Its output: surface.1.node and surface.1.ele (none when there are no tets).
-  const fs::path node_file = folder.path() / "surface.1.node";
-  const fs::path ele_file = folder.path() / "surface.1.ele";
-  std::vector<Eigen::RowVector3d> points;
-  std::vector<std::array<int32_t, 4>> tets;
+// tetgen -<switches>[a<volume>]JQ: J keeps unused input points (so the
+// numbering of the surface vertices survives), Q keeps the log to errors.
+std::string TetgenSwitches(const MeshingOptions &meshing) {
+  std::string switches = meshing.tetgen_switches;
+  if (meshing.max_volume > 0) switches += "a" + FormatReal(meshing.max_volume);
+  return switches + "JQ";
+}
+
+// TetGen's output: surface.1.node and surface.1.ele (none when there are no tets).
+void ReadTetgenOutput(const TetgenRun &run, std::vector<Eigen::RowVector3d> *points,
+                      std::vector<std::array<int32_t, 4>> *tets) {
+  const fs::path node_file = run.folder / "surface.1.node";
+  const fs::path ele_file = run.folder / "surface.1.ele";
   try {
     long base = 0;
-    points = ReadTetgenNodes(node_file, &base);
+    *points = ReadTetgenNodes(node_file, &base);
     if (fs::exists(ele_file))
-      tets = ReadTetgenElements(ele_file, base, static_cast<long>(points.size()));
+      *tets = ReadTetgenElements(ele_file, base, static_cast<long>(points->size()));
   } catch (const InputError &error) {
-    throw InputError(Where(path, 0, std::string("unreadable TetGen output: ") + error.what()));
+    throw InputError(Where(run.path, 0, std::string("unreadable TetGen output: ") + error.what()));
   }
-  if (tets.empty()) fail("made no tetrahedra: the surface encloses no volume (is it open?)");
+  if (tets->empty()) run.Fail("made no tetrahedra: the surface encloses no volume (is it open?)");
+}
 
-  // 4. The promise of the header: OFF vertex i is output point i (TetGen writes
-  // 17 digits, so they agree bit for bit; the tolerance only guards against a
-  // TetGen that writes fewer), and every surface vertex belongs to a tet.
+// The promise of the header: OFF vertex i is output point i (set to the OFF
+// coordinates exactly), and every surface vertex belongs to a tet.
+void KeepSurfaceNumbering(const TetgenRun &run, const OffSurface &surface,
+                          const std::vector<std::array<int32_t, 4>> &tets,
+                          std::vector<Eigen::RowVector3d> *points) {
   const long nv = static_cast<long>(surface.vertices.size());
   double extent = 0;
   for (const Eigen::RowVector3d &x : surface.vertices)
     extent = std::max(extent, x.cwiseAbs().maxCoeff());
   for (long v = 0; v < nv; ++v) {
-    if (v >= static_cast<long>(points.size()) ||
-        !((points[v] - surface.vertices[v]).cwiseAbs().maxCoeff() <= 1e-14 * extent))
-      throw InputError(Where(path, surface.vertex_lines[v],
+    if (v >= static_cast<long>(points->size()) ||
+        !(((*points)[v] - surface.vertices[v]).cwiseAbs().maxCoeff() <=
+          kTetgenCoordinateTolerance * extent))
+      throw InputError(Where(run.path, surface.vertex_lines[v],
                              "TetGen did not keep vertex " + std::to_string(v) +
                                  " in its place in the numbering (unsupported TetGen version?)"));
-    points[v] = surface.vertices[v];
+    (*points)[v] = surface.vertices[v];
   }
-  std::vector<bool> used(points.size(), false);
+  std::vector<bool> used(points->size(), false);
   for (const auto &tet : tets)
     for (int32_t index : tet) used[index] = true;
   for (const std::vector<int32_t> &face : surface.faces)
     for (int32_t v : face)
       if (!used[v])
-        fail("left surface vertex " + std::to_string(v) + " (line " +
-             std::to_string(surface.vertex_lines[v]) +
-             ") out of every tetrahedron: the surface around it encloses no volume (is it open?)");
+        run.Fail("left surface vertex " + std::to_string(v) + " (line " +
+                 std::to_string(surface.vertex_lines[v]) +
+                 ") out of every tetrahedron: the surface around it encloses no volume (is it "
+                 "open?)");
+}
+
+// The mesh of TetGen's points and tets; none of its tets may be degenerate.
+TetMesh TetgenMesh(const std::string &path, const std::vector<Eigen::RowVector3d> &points,
+                   const std::vector<std::array<int32_t, 4>> &tets) {
   TetMesh mesh;
   mesh.vertices.resize(static_cast<Eigen::Index>(points.size()), 3);
   for (size_t v = 0; v < points.size(); ++v) mesh.vertices.row(v) = points[v];
@@ -546,6 +601,35 @@ TetMesh ReadOff(const std::string &path, const MeshingOptions &meshing) {
                              "TetGen made a degenerate tetrahedron (" + std::to_string(t + 1) +
                                  " of " + std::to_string(mesh.num_tets()) + ")"));
   return mesh;
+}
+
+}  // namespace
+
+TetMesh ReadOff(const std::string &path, const MeshingOptions &meshing) {
+  const OffSurface surface = ReadOffSurface(path);
+  const std::string bad_switches = CheckTetgenSwitches(meshing.tetgen_switches);
+  if (!bad_switches.empty()) throw InputError(Where(path, 0, "TetGen switches " + bad_switches));
+  if (!(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume)))
+    throw InputError(Where(path, 0, "the tetrahedron volume bound must be >= 0 and finite"));
+
+  // The surface as a .smesh file in a folder of our own, meshed by TetGen.
+  const TemporaryFolder folder(path);
+  const TetgenRun run{path, folder.path(), folder.path() / "surface.smesh",
+                      TetgenSwitches(meshing)};
+  WriteSmesh(surface, run.smesh, path);
+  const fs::path log = folder.path() / "tetgen.log";
+  const int status = RunTetgen(run.switches, run.smesh, log, path);
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    const std::string reason = LastMeaningfulLine(log);
+    run.Fail("failed (" + DescribeStatus(status) + ")" +
+             (reason.empty() ? "" : ", saying '" + reason + "'"));
+  }
+
+  std::vector<Eigen::RowVector3d> points;
+  std::vector<std::array<int32_t, 4>> tets;
+  ReadTetgenOutput(run, &points, &tets);
+  KeepSurfaceNumbering(run, surface, tets, &points);
+  return TetgenMesh(path, points, tets);
 }
 
 // -------------------------------------------------------------------- gmsh
@@ -559,8 +643,9 @@ int GmshNodesPerElement(long type) {
                                8, 20, 15, 13, 9, 10, 12, 15, 15, 21, 4, 5,  6,  20, 35, 56};
   if (type >= 1 && type < static_cast<long>(sizeof(kNodes) / sizeof(kNodes[0])))
     return kNodes[type];
-  if (type == 92) return 64;
-  if (type == 93) return 125;
+  constexpr long kCubicHexahedron = 92, kQuarticHexahedron = 93;  // 64 and 125 nodes
+  if (type == kCubicHexahedron) return 64;
+  if (type == kQuarticHexahedron) return 125;
   return 0;
 }
 

@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "common/errors.hpp"
+#include "common/number_format.hpp"
 #include "common/options.hpp"
 #include "common/text_reader.hpp"
 #include "fem/element.hpp"
@@ -88,6 +89,41 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
   return body;
 }
 
+// The optional velocity section: num_velocities, then lines "mesh vertex vx vy
+// vz"; velocities of fixed bodies are counted and then dropped.
+void ReadVelocitySection(TextReader &in, const std::vector<std::string_view> &count_line,
+                         Scene *scene) {
+  std::vector<std::string_view> fields;
+  if (count_line.size() != 1) in.Fail("expected one field, num_velocities");
+  const long num_velocities = in.ParseInteger(count_line[0], "num_velocities");
+  if (num_velocities < 0) in.Fail("num_velocities must be >= 0");
+  const long num_meshes = static_cast<long>(scene->bodies.size());
+  for (long i = 0; i < num_velocities; ++i) {
+    if (!in.NextLine(&fields))
+      in.Fail("expected " + std::to_string(num_velocities) + " velocity lines, found " +
+              std::to_string(i));
+    if (fields.size() != 5)
+      in.Fail("expected 5 fields 'mesh vertex vx vy vz', found " + std::to_string(fields.size()));
+    const long b = in.ParseInteger(fields[0], "mesh index");
+    if (b < 0 || b >= num_meshes)
+      in.Fail("mesh index " + std::to_string(b) + " out of range 0.." +
+              std::to_string(num_meshes - 1));
+    const Body &body = scene->bodies[b];
+    const long v = in.ParseInteger(fields[1], "vertex index");
+    if (v < 0 || v >= body.mesh.num_vertices())
+      in.Fail("vertex index " + std::to_string(v) + " out of range 0.." +
+              std::to_string(body.mesh.num_vertices() - 1) + " of mesh " + std::to_string(b));
+    for (int c = 0; c < 3; ++c)
+      scene->initial_velocities(body.first_vertex + v, c) = in.ParseReal(fields[2 + c], "velocity");
+    ++scene->num_velocity_entries;
+    if (body.fixed) ++scene->ignored_fixed_velocities;
+  }
+  if (in.NextLine(&fields)) in.Fail("unexpected content after the velocity section");
+  for (const Body &body : scene->bodies)
+    if (body.fixed)
+      scene->initial_velocities.middleRows(body.first_vertex, body.mesh.num_vertices()).setZero();
+}
+
 }  // namespace
 
 Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
@@ -113,33 +149,7 @@ Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
   scene.initial_velocities.setZero(first_vertex, 3);
 
   if (!in.NextLine(&fields)) return scene;  // no velocity section: all at rest
-  if (fields.size() != 1) in.Fail("expected one field, num_velocities");
-  const long num_velocities = in.ParseInteger(fields[0], "num_velocities");
-  if (num_velocities < 0) in.Fail("num_velocities must be >= 0");
-  for (long i = 0; i < num_velocities; ++i) {
-    if (!in.NextLine(&fields))
-      in.Fail("expected " + std::to_string(num_velocities) + " velocity lines, found " +
-              std::to_string(i));
-    if (fields.size() != 5)
-      in.Fail("expected 5 fields 'mesh vertex vx vy vz', found " + std::to_string(fields.size()));
-    const long b = in.ParseInteger(fields[0], "mesh index");
-    if (b < 0 || b >= num_meshes)
-      in.Fail("mesh index " + std::to_string(b) + " out of range 0.." +
-              std::to_string(num_meshes - 1));
-    const Body &body = scene.bodies[b];
-    const long v = in.ParseInteger(fields[1], "vertex index");
-    if (v < 0 || v >= body.mesh.num_vertices())
-      in.Fail("vertex index " + std::to_string(v) + " out of range 0.." +
-              std::to_string(body.mesh.num_vertices() - 1) + " of mesh " + std::to_string(b));
-    for (int c = 0; c < 3; ++c)
-      scene.initial_velocities(body.first_vertex + v, c) = in.ParseReal(fields[2 + c], "velocity");
-    ++scene.num_velocity_entries;
-    if (body.fixed) ++scene.ignored_fixed_velocities;
-  }
-  if (in.NextLine(&fields)) in.Fail("unexpected content after the velocity section");
-  for (const Body &body : scene.bodies)
-    if (body.fixed)
-      scene.initial_velocities.middleRows(body.first_vertex, body.mesh.num_vertices()).setZero();
+  ReadVelocitySection(in, fields, &scene);
   return scene;
 }
 
@@ -173,8 +183,8 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscCheck(bad_switches.empty(), comm, PETSC_ERR_USER_INPUT, "option -tetgen_switches: %s",
              bad_switches.c_str());
   PetscCheck(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume), comm,
-             PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %g)",
-             (double)meshing.max_volume);
+             PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %s)",
+             FormatNumber(meshing.max_volume).c_str());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -182,10 +192,12 @@ namespace {
 
 // FNV-1a hash of every body's vertices and tets.
 uint64_t HashMeshes(const Scene &scene) {
-  uint64_t hash = 14695981039346656037ull;
+  constexpr uint64_t kFnvOffsetBasis = 14695981039346656037ull;  // FNV-1a, 64 bits
+  constexpr uint64_t kFnvPrime = 1099511628211ull;
+  uint64_t hash = kFnvOffsetBasis;
   const auto add = [&hash](const void *data, size_t bytes) {
     for (size_t i = 0; i < bytes; ++i)
-      hash = (hash ^ static_cast<const unsigned char *>(data)[i]) * 1099511628211ull;
+      hash = (hash ^ static_cast<const unsigned char *>(data)[i]) * kFnvPrime;
   };
   for (const Body &body : scene.bodies) {
     add(body.mesh.vertices.data(), sizeof(double) * body.mesh.vertices.size());

@@ -8,9 +8,9 @@
 // Units: density kg/m^3, young Pa, positions m, velocities m/s. Mesh paths are
 // relative to the scene file; a mesh is a MEDIT .mesh, a gmsh .msh or an OFF
 // surface .off, tetrahedralised by TetGen on load (see mesh_io.hpp; the OFF
-// vertices stay the mesh's first vertices, so velocity indices refer to them). Placement: the
-// mesh's volume-weighted centroid is moved to the origin, rotated by the normalised quaternion (w,
-// x, y, z), then translated by p.
+// vertices stay the mesh's first vertices, so velocity indices refer to them).
+// Placement: the mesh's volume-weighted centroid is moved to the origin, rotated
+// by the normalised quaternion (w, x, y, z), then translated by p.
 //
 // Natural vertex order: body 0's vertices in file order, then body 1's, ...
 #pragma once
