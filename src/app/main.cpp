@@ -27,9 +27,9 @@
 static const char help[] =
     "softbody: implicit finite-element soft-body simulation (PETSc + MPI).\n"
     "Usage: mpirun -n 2 softbody -scene SCENE.txt [-output OUT.h5] [options] [PETSc options]\n"
-    "Solver presets: -options_file config/direct.opts (linear default), config/cg-warp.opts "
-    "(corotational\n"
-    "default), config/cg-gamg.opts, config/direct-mumps.opts, ...\n";
+    "Solver presets: -options_file config/direct.opts (linear default),\n"
+    "config/cg-warp.opts (corotational default), config/cg-gamg.opts,\n"
+    "config/direct-mumps.opts, ...\n";
 
 using namespace softbody;
 
