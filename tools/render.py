@@ -28,7 +28,7 @@ fixed bodies included. The view direction is -view ELEV,AZIM (degrees, about the
 
 Options are PETSc style, -name_with_underscores, each with a --name-with-dashes alias:
   -render_dir DIR (--render-dir, --out)   output folder (default RESULT_frames/ beside RESULT)
-  -frames all|N|0,10,50   -every k   -size 960x720   -color deformation|speed|displacement
+  -frames all|N|A:B|0,10,50   -every k   -size 960x720   -color deformation|speed|displacement
   -camera follow|fixed|scene   -view 20,-60   -up auto|x|y|z   -ground y0   -smooth 0.3
   -gif  -mp4  -fps 20  -gif_width 480   -title TEXT   -vmax V   -colormap coolwarm
   -fixed_opacity 0.3   -background R,G,B[:R,G,B]
@@ -137,15 +137,22 @@ def body_fixed(h5, rest, vertex_body, nbodies):
 
 
 def select_frames(spec, nframes, every=1):
-    """'all', 'N' (N frames evenly spaced, first and last included) or a list
-    '0,10,50' (a trailing comma makes a one-frame list: '7,'; negative indices count
-    from the end); then every k-th of those. Returns a list of frame indices."""
+    """'all', 'N' (N frames evenly spaced, first and last included), a range 'A:B' (A to B,
+    both included) or a list '0,10,50' (a trailing comma makes a one-frame list: '7,';
+    negative indices count from the end); then every k-th of those. Returns a list of
+    frame indices."""
     if isinstance(spec, (list, tuple, range)):
         items = [int(s) for s in spec]
     else:
         spec = str(spec).strip()
         if spec == "all":
             items = list(range(nframes))
+        elif ":" in spec:
+            try:
+                first, last = (int(s) for s in spec.split(":"))
+            except ValueError:
+                raise RenderError(f"-frames {spec!r}: a range is FIRST:LAST, e.g. 100:200")
+            items = list(range(first, last + 1))
         elif "," not in spec:
             try:
                 count = int(spec)
@@ -590,7 +597,8 @@ class Renderer:
 
     def __init__(self, result, frames, size=DEFAULT_SIZE, view=DEFAULT_VIEW, up="auto", title=None,
                  camera="follow", smooth=DEFAULT_SMOOTH, ground=None, colormap="coolwarm",
-                 fixed_opacity=DEFAULT_FIXED_OPACITY, background=DEFAULT_BACKGROUND, zoom=1.0):
+                 fixed_opacity=DEFAULT_FIXED_OPACITY, background=DEFAULT_BACKGROUND, zoom=1.0,
+                 antialias=True):
         self.vtk, self.np2vtk = import_vtk()
         vtk = self.vtk
         self.result = result
@@ -626,7 +634,7 @@ class Renderer:
         top, bottom = parse_background(background)
         self.renderer.SetBackground2(*top)
         self.renderer.SetBackground(*bottom)
-        self.renderer.UseFXAAOn()
+        self.renderer.SetUseFXAA(bool(antialias))
         self.renderer.SetTwoSidedLighting(False)
         self._lights()
         self.lut = self._lookup_table(colormap)
@@ -644,6 +652,7 @@ class Renderer:
         self.grabber = vtk.vtkWindowToImageFilter()
         self.grabber.SetInput(self.window)
         self.grabber.ReadFrontBufferOff()
+        self.grabber.ShouldRerenderOff()  # draw() has just rendered the frame
         self.grabber.SetInputBufferTypeToRGB()
         self.writer = vtk.vtkPNGWriter()
         self.writer.SetCompressionLevel(1)
@@ -736,7 +745,7 @@ class Renderer:
             if len(last):
                 lo, hi = np.minimum(lo, last.min(axis=0)), np.maximum(hi, last.max(axis=0))
         span = float(np.max((hi - lo)[[0, 2]])) if np.all(np.isfinite(hi - lo)) else 1.0
-        half = 1.5 * span + 1.0
+        half = 3.0 * span + 1.0  # wide enough to reach the horizon of most views
         centre = 0.5 * (lo + hi)
         step = nice_step(2 * half)
         x0 = math.floor((centre[0] - half) / step) * step
@@ -993,36 +1002,39 @@ class OneLineParser(argparse.ArgumentParser):
 
 def build_parser():
     p = OneLineParser(
-        prog="render.py", allow_abbrev=False,
+        prog="render.py", allow_abbrev=False, add_help=False,
         description="Render a softbody HDF5 result with VTK (off-screen): PNG frames, a GIF and "
                     "an MP4; lit smooth surfaces coloured by deformation or speed, fixed bodies "
                     "grey and translucent, the ground, a colour bar and a time stamp.")
     p.add_argument("result", metavar="RESULT.h5", help="softbody result file")
+    p.add_argument("-help", "--help", "-h", action="help", help="show this help and exit")
     p.add_argument("-render_dir", "--render-dir", "--out", dest="render_dir", metavar="DIR",
                    help="output folder (default: RESULT_frames/ beside the result file)")
     p.add_argument("-frames", "--frames", default="all",
-                   help="'all' (default), N (N frames evenly spaced, first and last included) or a "
-                        "list like 0,10,50 (negative counts from the end; '7,' is frame 7 alone)")
+                   help="'all' (default), N (N frames evenly spaced, first and last included), a "
+                        "range A:B (both included) or a list like 0,10,50 ('7,' is frame 7 alone; "
+                        "negative counts from the end: write -frames=-1,)")
     p.add_argument("-every", "--every", type=int, default=1, metavar="K",
                    help="render every K-th of the chosen frames (default 1)")
     p.add_argument("-color", "--color", "-colour", "--colour", dest="color",
-                   choices=sorted(COLOR_LABELS), default="deformation",
+                   choices=sorted(COLOR_LABELS), default="deformation", metavar="QUANTITY",
                    help="deformation: displacement without the body's best-fit rigid motion (m, "
                         "default); speed |v| (m/s); displacement |x - X| (m)")
     p.add_argument("-size", "--size", type=parse_size, default=DEFAULT_SIZE, metavar="WxH",
                    help="image size in pixels (default 960x720)")
     p.add_argument("-camera", "--camera", choices=("follow", "fixed", "scene"), default="follow",
+                   metavar="MODE",
                    help="follow: frame the free bodies of each frame, smoothly (default); fixed: "
                         "frame the free bodies of all frames; scene: frame everything")
     p.add_argument("-zoom", "--zoom", type=float, default=1.0,
                    help="scale of the framed bodies in the image (default 1: they fill "
-                        f"{FILL:.0%} of it; 0.5 shows more of the surroundings)")
+                        f"{FILL:.2f} of its height; 0.5 shows more of the surroundings)")
     p.add_argument("-smooth", "--smooth", type=float, default=DEFAULT_SMOOTH, metavar="SECONDS",
                    help=f"time window of the follow camera's smoothing (default {DEFAULT_SMOOTH} s; 0: none)")
     p.add_argument("-view", "--view", type=parse_view, default=DEFAULT_VIEW, metavar="ELEV,AZIM",
                    help="camera elevation and azimuth about the up axis in degrees (default 20,-60; "
                         "write a negative elevation as -view=-10,30)")
-    p.add_argument("-up", "--up", choices=("auto", "x", "y", "z"), default="auto",
+    p.add_argument("-up", "--up", choices=("auto", "x", "y", "z"), default="auto", metavar="AXIS",
                    help="vertical axis (default auto: against gravity if the file records it, "
                         "y when there is a ground, else z)")
     p.add_argument("-ground", "--ground", type=float, metavar="Y0",
@@ -1039,6 +1051,9 @@ def build_parser():
     p.add_argument("-vmax", "--vmax", type=float,
                    help="top of the colour scale (m or m/s; default: the largest vertex value "
                         "of the rendered frames)")
+    p.add_argument("-antialias", "--antialias", choices=("fxaa", "none"), default="fxaa", metavar="HOW",
+                   help="smooth the edges with FXAA (default; on Mesa's CPU renderer it costs about "
+                        "as much as drawing the frame) or not")
     p.add_argument("-colormap", "--colormap", default="coolwarm",
                    help="colour map: coolwarm (default), blue-red, or any matplotlib name")
     p.add_argument("-fixed_opacity", "--fixed-opacity", type=float, default=DEFAULT_FIXED_OPACITY,
@@ -1059,7 +1074,7 @@ def main(argv=None):
     if not args.zoom > 0:
         print("render.py: error: -zoom must be positive", file=sys.stderr)
         return 2
-    options = dict(zoom=args.zoom, smooth=args.smooth, ground=args.ground, colormap=args.colormap,
+    options = dict(antialias=args.antialias == "fxaa", zoom=args.zoom, smooth=args.smooth, ground=args.ground, colormap=args.colormap,
                    fixed_opacity=args.fixed_opacity)
     if args.background is not None:
         options["background"] = args.background
