@@ -53,6 +53,7 @@ import atexit
 import math
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time as _time
@@ -65,6 +66,7 @@ except ImportError as _error:  # pragma: no cover - depends on the interpreter
              "(apt-get install python3-numpy python3-h5py)")
 
 DEFAULT_SIZE = (960, 720)
+PR_SET_PDEATHSIG = 1  # prctl(2) option: signal this process when its parent dies
 # Camera elevation above the horizontal plane and azimuth about the up axis (degrees):
 # a three-quarter view from slightly above, the classic view of a 3-D scene.
 DEFAULT_VIEW = (20.0, -60.0)
@@ -472,6 +474,16 @@ def extreme_points(points, basis):
 # Off-screen display
 # --------------------------------------------------------------------------------------
 
+def _die_with_parent():
+    """In the child, before exec: ask Linux to send SIGTERM when this script dies, so that a
+    render killed by a signal (when atexit handlers do not run) leaves no Xvfb behind."""
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
+
+
 class VirtualDisplay:
     """An Xvfb server of our own when there is no X display (Debian's VTK renders through
     GLX only). Started on a free display number chosen by Xvfb (-displayfd)."""
@@ -489,7 +501,8 @@ class VirtualDisplay:
         read_end, write_end = os.pipe()
         self.process = subprocess.Popen(
             [xvfb, "-displayfd", str(write_end), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
-            pass_fds=(write_end,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            pass_fds=(write_end,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            preexec_fn=_die_with_parent)
         os.close(write_end)
         number = b""
         while not number.endswith(b"\n"):
@@ -829,10 +842,15 @@ class Renderer:
 
     # ---- per frame ----------------------------------------------------------------
     def _update_surface(self, surface, positions, values=None):
+        """New points (and colour values) of a surface; a surface whose points and values
+        have not changed (fixed bodies) is left alone, so its normals are not recomputed."""
         if surface is None:
             return
         p = np.ascontiguousarray(positions[surface["vertices"]])
         p[~np.isfinite(p)] = 0.0
+        if values is None and surface.get("last") is not None and np.array_equal(p, surface["last"]):
+            return
+        surface["last"] = p if values is None else None
         points = self.vtk.vtkPoints()
         points.SetData(self.np2vtk.numpy_to_vtk(p, deep=True))
         surface["poly"].SetPoints(points)
