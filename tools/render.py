@@ -14,7 +14,7 @@ What a frame shows (docs/rendering.md has pictures and the reasons behind each c
     speed        |v| (m/s);
     displacement |x - X| (m), rigid motion included;
   on ONE colour scale for all frames (0 .. -vmax, default the largest vertex value of the
-  rendered frames), shown by a colour bar with units;
+  rendered frames rounded up to a short number), shown by a colour bar with units;
 - fixed bodies grey and translucent (-fixed_opacity), so they do not hide the action;
 - the ground plane y = y0 with a grid when the file records it (root attribute "ground_y")
   or -ground y0 is given;
@@ -23,15 +23,16 @@ What a frame shows (docs/rendering.md has pictures and the reasons behind each c
 Camera (-camera): follow (default) frames the free bodies of each frame, the framing
 smoothed over -smooth seconds so the view glides after a falling body instead of jumping;
 fixed frames the free bodies of all rendered frames at once; scene frames everything,
-fixed bodies included. The view direction is -view ELEV,AZIM (degrees, about the up axis
--up x|y|z; the default up axis is y when the scene has a ground, else z).
+fixed bodies included; -zoom scales the framed bodies. The view direction is -view
+ELEV,AZIM (degrees, about the up axis -up; auto: against gravity when the file records
+it, y when the scene has a ground, else z).
 
 Options are PETSc style, -name_with_underscores, each with a --name-with-dashes alias:
   -render_dir DIR (--render-dir, --out)   output folder (default RESULT_frames/ beside RESULT)
   -frames all|N|A:B|0,10,50   -every k   -size 960x720   -color deformation|speed|displacement
   -camera follow|fixed|scene   -view 20,-60   -up auto|x|y|z   -ground y0   -smooth 0.3
   -gif  -mp4  -fps 20  -gif_width 480   -title TEXT   -vmax V   -colormap coolwarm
-  -fixed_opacity 0.3   -background R,G,B[:R,G,B]
+  -zoom 1   -fixed_opacity 0.3   -background R,G,B[:R,G,B]   -antialias fxaa|none
 (-help lists them all.) Errors (missing file, bad option, bad frame) print one line
 "render.py: error: ..." and exit non-zero.
 
@@ -1107,6 +1108,9 @@ def main(argv=None):
         return 1
     if not 0.0 <= args.fixed_opacity <= 1.0:
         print("render.py: error: -fixed_opacity must be in 0..1", file=sys.stderr)
+        return 2
+    if not args.fps > 0:
+        print("render.py: error: -fps must be positive", file=sys.stderr)
         return 2
     if not args.zoom > 0:
         print("render.py: error: -zoom must be positive", file=sys.stderr)
