@@ -1,24 +1,26 @@
 #!/usr/bin/env python3
-"""tools/render.py draws a result: PNG frames of the requested size that show something
-and change as the body moves.
+"""tools/render.py (VTK, off-screen) draws pictures worth looking at, and fails cleanly.
 
-Runs softbody (2 ranks, 10 steps) on a scene of its own in the work folder: a free
-unit cube (8 vertices, 6 Kuhn tets) with an initial velocity of 0.5 m/s on vertex 0,
-and a fixed copy of the cube beside it. Then renders 3 frames through the command
-line (tools/render.py RESULT --frames 3 --size 320x240 --out DIR) and checks:
-- the command exits 0, lists the files it wrote, and writes frame_00000.png,
-  frame_00005.png, frame_00010.png;
-- every PNG has the PNG signature and the requested size (IHDR width/height,
-  big-endian at bytes 16..24), decodes with matplotlib.image.imread, is not
-  blank (more than a handful of distinct colours) and shows the coloured body
-  (saturated pixels in the left half, where the free cube is drawn);
-- the first and last frames differ (the body moves, so shape and colours change);
-- the free body is found free and the fixed one fixed (render.Result.fixed), and
-  /mesh/body_fixed, when the file has it, takes precedence over the inference;
-- render.render_frame() (the function other scripts use) writes one PNG of the
-  requested size, with --color speed;
-- a frame index out of range fails with a one-line error, not a traceback.
-Needs Debian's python3-matplotlib: without it the test fails (./run installs it).
+Runs softbody (2 ranks) on the project's own scenes, nothing from ../shared:
+1. scenes/beam-scene.txt with gravity -y and a ground at y = -2 (40 steps: the beam is
+   struck, falls and lands). Renders 3 frames through the command line
+   (-frames 3 -size 320x240 -render_dir DIR -ground -2 -background 1,1,1 -gif -mp4) and
+   checks: exit 0, the PNGs listed and of the requested size, not blank; the coloured
+   body (saturated pixels left of the colour bar) covers a good part of the image
+   (> 5 % of it, bounding box > 40 % of the width or height: the follow camera frames
+   the body, not a speck); the first and last frames differ; animation.gif (GIF
+   header) and animation.mp4 (only when ffmpeg is on PATH) written and not empty;
+   the ground plane is drawn (the picture with -ground differs from the one without).
+2. A free unit cube (8 vertices, 6 Kuhn tets) with 0.5 m/s on vertex 0 beside a fixed
+   copy: the free body is found free and the fixed one fixed (render.Result.fixed),
+   /mesh/body_fixed takes precedence over that inference; render.render_frame() (the
+   function other scripts use) writes a PNG of the requested size with color="speed";
+   the --name-with-dashes aliases work (--out, --size, --frames, --camera fixed).
+3. render.deformation() is zero for a rigid motion (rotation + translation of the
+   rest shape) and not for a stretch.
+4. Bad input gives one line on stderr and a non-zero exit, no traceback: a missing
+   file, an unknown option, a bad -color, a frame index out of range.
+Skips (77) when python3-vtk9 is missing, or when there is no X display and no Xvfb.
 """
 import os
 import shutil
@@ -29,9 +31,11 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
 
-TOOLS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "tools")
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+TOOLS = os.path.join(ROOT, "tools")
 RENDER = os.path.join(TOOLS, "render.py")
 SIZE = (320, 240)
+BAR_ROOM = 0.16  # right part of the image holding the colour bar (render.BAR_ROOM)
 
 
 def write_cube_mesh(path):
@@ -62,29 +66,114 @@ def png_size(path):
     return struct.unpack(">II", head[16:24])
 
 
+def read_png(path):
+    """RGB image [rows][columns][3] in 0..1, top row first (read with VTK)."""
+    from vtkmodules.vtkIOImage import vtkPNGReader
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    reader = vtkPNGReader()
+    reader.SetFileName(path)
+    reader.Update()
+    image = reader.GetOutput()
+    width, height, _ = image.GetDimensions()
+    pixels = vtk_to_numpy(image.GetPointData().GetScalars()).reshape(height, width, -1)
+    return pixels[::-1, :, :3] / 255.0
+
+
 def distinct_colours(image):
     import numpy as np
-    pixels = np.round(np.asarray(image)[..., :3] * 255).astype(np.int64).reshape(-1, 3)
+    pixels = np.round(np.asarray(image) * 255).astype(np.int64).reshape(-1, 3)
     return len(np.unique(pixels[:, 0] * 65536 + pixels[:, 1] * 256 + pixels[:, 2]))
 
 
-def main():
-    args = harness.arguments()
-    checks = harness.Checks()
-    try:
-        import matplotlib  # noqa: F401
-        import matplotlib.image
-        import numpy as np
-        import h5py
-    except ImportError as error:
-        print(f"FAIL: {error}: tools/render.py needs Debian's python3-matplotlib "
-              "(apt-get install -y --no-install-recommends python3-matplotlib; ./run installs it) "
-              "with /usr/bin/python3")
-        sys.exit(1)
-    sys.path.insert(0, TOOLS)
-    import render  # noqa: E402
+def body_pixels(image):
+    """Mask of the coloured (saturated) pixels left of the colour bar: the free bodies
+    (the background, ground, fixed bodies and text are grey or nearly so)."""
+    import numpy as np
+    left = image[:, : int(image.shape[1] * (1 - BAR_ROOM)), :]
+    return (left.max(axis=-1) - left.min(axis=-1)) > 0.15
 
-    work = os.path.abspath(args.work)
+
+def run_render(arguments, timeout=300):
+    return subprocess.run([sys.executable, RENDER] + [str(a) for a in arguments],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def check_one_line_failure(checks, what, run, needle=None):
+    lines = [line for line in run.stderr.strip().splitlines() if line.strip()]
+    ok = (run.returncode != 0 and len(lines) == 1 and "Traceback" not in run.stderr
+          and (needle is None or needle in run.stderr))
+    checks.check(ok, f"{what} fails with one line (exit {run.returncode}: {run.stderr.strip()[:300]})")
+
+
+def check_falling_beam(args, checks, work):
+    import numpy as np
+    result = os.path.join(work, "beam.h5")
+    if os.path.exists(result):
+        os.remove(result)
+    harness.run(args, 2, ["-scene", os.path.join(ROOT, "scenes", "beam-scene.txt"), "-steps", 40,
+                          "-gravity", "0,-9.81,0", "-ground", -2, "-output", result])
+    out = os.path.join(work, "beam_frames")
+    shutil.rmtree(out, ignore_errors=True)
+    run = run_render([result, "-frames", 3, "-size", "%dx%d" % SIZE, "-render_dir", out,
+                      "-ground", -2, "-background", "1,1,1", "-title", "test_render", "-gif", "-mp4"])
+    checks.check(run.returncode == 0, f"render.py exits 0 (got {run.returncode})"
+                 + ("" if run.returncode == 0 else ": " + run.stderr.strip()[-2000:]))
+    print(run.stdout.strip())
+    images = []
+    for k in (0, 20, 40):
+        path = os.path.join(out, f"frame_{k:05d}.png")
+        name = os.path.basename(path)
+        if not checks.check(os.path.isfile(path), f"{name} written"):
+            images.append(None)
+            continue
+        checks.check(path in run.stdout, f"{name} listed in the output")
+        size = png_size(path)
+        checks.check(size == SIZE, f"{name} is a PNG of {SIZE[0]}x{SIZE[1]} pixels (header says {size})")
+        image = read_png(path)
+        colours = distinct_colours(image)
+        checks.check(colours > 50, f"{name} is not blank ({colours} distinct colours)")
+        body = body_pixels(image)
+        fraction = float(body.mean())
+        checks.check(fraction > 0.05, f"{name}: the body covers {100 * fraction:.1f}% of the image "
+                     "left of the colour bar (> 5%)")
+        if body.any():
+            rows, cols = np.nonzero(body)
+            width = (cols.max() - cols.min() + 1) / body.shape[1]
+            height = (rows.max() - rows.min() + 1) / body.shape[0]
+            checks.check(max(width, height) > 0.4, f"{name}: the body spans {100 * width:.0f}% of the "
+                         f"width and {100 * height:.0f}% of the height (one of them > 40%)")
+        images.append(image)
+    if images[0] is not None and images[-1] is not None:
+        changed = float(np.mean(np.any(np.abs(images[0] - images[-1]) > 1e-3, axis=-1)))
+        checks.check(changed > 0.01, f"frames 0 and 40 differ ({100 * changed:.1f}% of the pixels)")
+    gif = os.path.join(out, "animation.gif")
+    with open(gif, "rb") if os.path.isfile(gif) else open(os.devnull, "rb") as f:
+        head = f.read(6)
+    checks.check(head in (b"GIF89a", b"GIF87a"), f"animation.gif written (header {head!r})")
+    mp4 = os.path.join(out, "animation.mp4")
+    if shutil.which("ffmpeg"):
+        checks.check(os.path.isfile(mp4) and os.path.getsize(mp4) > 1000,
+                     "animation.mp4 written (ffmpeg is on PATH)")
+    else:
+        print("note: ffmpeg is not on PATH, the MP4 is not checked")
+
+    # The ground plane: the last frame without -ground differs below the body.
+    bare = os.path.join(work, "beam_bare")
+    shutil.rmtree(bare, ignore_errors=True)
+    run = run_render([result, "-frames", "40,", "-up", "y", "-size", "%dx%d" % SIZE, "-render_dir", bare,
+                      "-background", "1,1,1"])
+    path = os.path.join(bare, "frame_00040.png")
+    if checks.check(run.returncode == 0 and os.path.isfile(path), "render.py without -ground exits 0"):
+        without = read_png(path)
+        grounded = images[-1] if images[-1] is not None else without
+        changed = float(np.mean(np.any(np.abs(grounded - without) > 0.05, axis=-1)))
+        checks.check(changed > 0.05, f"-ground draws the ground ({100 * changed:.1f}% of the pixels change)")
+
+
+def check_cube_and_api(args, checks, work):
+    import numpy as np
+    import h5py
+    import render
     write_cube_mesh(os.path.join(work, "cube.mesh"))
     scene = os.path.join(work, "scene.txt")
     with open(scene, "w") as f:
@@ -97,47 +186,7 @@ def main():
     if os.path.exists(result):
         os.remove(result)
     harness.run(args, 2, ["-scene", scene, "-steps", 10, "-output", result])
-    checks.check(os.path.isfile(result), f"softbody wrote {result}")
-    data = harness.read_frames(result)
-    nframes = len(data["time"])
-    checks.check(nframes == 11, f"the result has 11 frames (has {nframes})")
 
-    # Command line: 3 frames evenly spaced.
-    out = os.path.join(work, "frames")
-    shutil.rmtree(out, ignore_errors=True)
-    command = [sys.executable, RENDER, result, "--frames", "3", "--size", "%dx%d" % SIZE,
-               "--out", out, "--title", "test_render"]
-    run = subprocess.run(command, capture_output=True, text=True, timeout=300)
-    checks.check(run.returncode == 0, f"render.py exits 0 (got {run.returncode})"
-                 + ("" if run.returncode == 0 else ": " + run.stderr.strip()[-2000:]))
-    print(run.stdout.strip())
-    expected = [os.path.join(out, f"frame_{k:05d}.png") for k in (0, 5, 10)]
-    images = []
-    for path in expected:
-        name = os.path.basename(path)
-        if not checks.check(os.path.isfile(path), f"{name} written"):
-            images.append(None)
-            continue
-        checks.check(path in run.stdout, f"{name} listed in the output")
-        size = png_size(path)
-        checks.check(size == SIZE, f"{name} is a PNG of {SIZE[0]}x{SIZE[1]} pixels (header says {size})")
-        image = matplotlib.image.imread(path)
-        checks.check(image.shape[:2] == (SIZE[1], SIZE[0]),
-                     f"{name} decodes to {SIZE[1]}x{SIZE[0]} pixels (got {image.shape[:2]})")
-        colours = distinct_colours(image)
-        checks.check(colours > 3, f"{name} is not blank ({colours} distinct colours)")
-        # The free cube is drawn in the left half (the colour bar is on the right):
-        # coloured (saturated) pixels there are the body, not text or grid.
-        left = image[:, : SIZE[0] // 2, :3]
-        saturated = float(np.mean(left.max(axis=-1) - left.min(axis=-1) > 0.2))
-        checks.check(saturated > 0.01, f"{name} shows the coloured body "
-                     f"({100 * saturated:.1f}% of the left half is coloured)")
-        images.append(image)
-    if images[0] is not None and images[-1] is not None and images[0].shape == images[-1].shape:
-        changed = float(np.mean(np.any(np.abs(images[0] - images[-1]) > 1e-6, axis=-1)))
-        checks.check(changed > 0.001, f"frames 0 and 10 differ ({100 * changed:.2f}% of the pixels)")
-
-    # Fixed bodies: inferred from motion, or read from /mesh/body_fixed.
     fixed = render.Result(result).fixed
     checks.check(list(fixed) == [False, True], f"free body found free, fixed body fixed ({list(fixed)})")
     flagged = os.path.join(work, "flagged.h5")
@@ -149,7 +198,6 @@ def main():
     fixed = render.Result(flagged).fixed
     checks.check(list(fixed) == [True, False], f"/mesh/body_fixed takes precedence ({list(fixed)})")
 
-    # The function other scripts use.
     single = os.path.join(work, "single.png")
     if os.path.exists(single):
         os.remove(single)
@@ -157,14 +205,69 @@ def main():
     size = png_size(single) if os.path.isfile(single) else None
     checks.check(size == (200, 150), f"render_frame(..., color='speed') wrote a 200x150 PNG (got {size})")
     if size:
-        colours = distinct_colours(matplotlib.image.imread(single))
+        colours = distinct_colours(read_png(single))
         checks.check(colours > 3, f"render_frame's PNG is not blank ({colours} distinct colours)")
 
-    # A bad frame index: one clear line, no traceback.
-    bad = subprocess.run([sys.executable, RENDER, result, "--frames", "0,99", "--out", out],
-                         capture_output=True, text=True, timeout=300)
-    checks.check(bad.returncode != 0 and "out of range" in bad.stderr and "Traceback" not in bad.stderr,
-                 f"--frames 0,99 fails cleanly (exit {bad.returncode}: {bad.stderr.strip()})")
+    out = os.path.join(work, "cube_frames")
+    shutil.rmtree(out, ignore_errors=True)
+    run = run_render([result, "--out", out, "--size", "160x120", "--frames", "0,10",
+                      "--camera", "fixed", "--color", "displacement"])
+    written = [os.path.join(out, f"frame_{k:05d}.png") for k in (0, 10)]
+    checks.check(run.returncode == 0 and all(png_size(p) == (160, 120) for p in written if os.path.isfile(p))
+                 and all(os.path.isfile(p) for p in written),
+                 f"--name-with-dashes aliases work (exit {run.returncode} {run.stderr.strip()[-300:]})")
+    return result
+
+
+def check_deformation(checks):
+    import numpy as np
+    import render
+    rng = np.random.default_rng(1)
+    rest = rng.normal(size=(40, 3))
+    body = np.repeat([0, 1], 20)
+    masses = rng.uniform(0.5, 2.0, size=40)
+    angle = 0.7
+    rotation = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    moved = rest @ rotation.T + np.array([3.0, -1.0, 2.0])
+    rigid = render.deformation(moved, rest, masses, body, 2)
+    checks.check(float(rigid.max()) < 1e-9, f"deformation of a rigid motion is 0 (max {rigid.max():.2e})")
+    stretched = moved.copy()
+    stretched[:20, 0] *= 1.2
+    values = render.deformation(stretched, rest, masses, body, 2)
+    checks.check(float(values[:20].max()) > 0.05 and float(values[20:].max()) < 1e-9,
+                 f"deformation sees a stretch of body 0 only (max {values[:20].max():.3f} and "
+                 f"{values[20:].max():.1e})")
+
+
+def check_bad_input(checks, work, result):
+    check_one_line_failure(checks, "a missing file", run_render([os.path.join(work, "missing.h5")]),
+                           "no such file")
+    check_one_line_failure(checks, "an unknown option", run_render([result, "-no_such_option", 1]))
+    check_one_line_failure(checks, "-color purple", run_render([result, "-color", "purple"]))
+    check_one_line_failure(checks, "-frames 0,99", run_render([result, "-frames", "0,99", "-render_dir",
+                                                               os.path.join(work, "bad")]),
+                           "out of range")
+
+
+def main():
+    args = harness.arguments()
+    checks = harness.Checks()
+    try:
+        import numpy  # noqa: F401
+        import h5py  # noqa: F401
+        import vtkmodules.vtkRenderingOpenGL2  # noqa: F401
+    except ImportError as error:
+        print(f"SKIP: {error}: tools/render.py needs Debian's python3-vtk9 (./run installs it)")
+        sys.exit(harness.SKIP)
+    if not os.environ.get("DISPLAY") and shutil.which("Xvfb") is None:
+        print("SKIP: no X display and no Xvfb: tools/render.py needs the xvfb package to render off-screen")
+        sys.exit(harness.SKIP)
+    sys.path.insert(0, TOOLS)
+    work = os.path.abspath(args.work)
+    check_falling_beam(args, checks, work)
+    result = check_cube_and_api(args, checks, work)
+    check_deformation(checks)
+    check_bad_input(checks, work, result)
     checks.exit()
 
 
