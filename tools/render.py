@@ -582,6 +582,19 @@ def colormap_points(name):
     return [(s, *cmap(s)[:3]) for s in np.linspace(0, 1, 33)]
 
 
+NO_GROUND = "none"  # -ground none: no ground plane even when the file records one
+
+
+def parse_ground(text):
+    """-ground Y0 (m) or -ground none."""
+    if text.strip().lower() == NO_GROUND:
+        return NO_GROUND
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a height in m or 'none', got {text!r}")
+
+
 def parse_background(text):
     """'R,G,B' (0..1) or 'R,G,B:R,G,B' (top:bottom gradient)."""
     if isinstance(text, tuple):
@@ -627,7 +640,7 @@ class Renderer:
         self.result = result
         self.frames = list(frames)
         self.size = (int(size[0]), int(size[1]))
-        self.ground = ground if ground is not None else result.ground
+        self.ground = None if ground == NO_GROUND else ground if ground is not None else result.ground
         self.up = self._up_axis(up)
         self.basis = view_basis(float(view[0]), float(view[1]), self.up)
         self.vmax = result.colour_scale(self.frames)
@@ -1075,9 +1088,9 @@ def build_parser():
     p.add_argument("-up", "--up", choices=("auto", "x", "y", "z"), default="auto", metavar="AXIS",
                    help="vertical axis (default auto: against gravity if the file records it, "
                         "y when there is a ground, else z)")
-    p.add_argument("-ground", "--ground", type=float, metavar="Y0",
-                   help="draw the ground plane y = Y0 (default: the file's ground_y attribute, "
-                        "if any; the same value as the run's -ground)")
+    p.add_argument("-ground", "--ground", type=parse_ground, metavar="Y0",
+                   help="draw the ground plane y = Y0, or none with -ground none (default: the "
+                        "file's ground_y attribute, written when the run had -ground)")
     p.add_argument("-gif", "--gif", action="store_true", help="also write DIR/animation.gif")
     p.add_argument("-gif_width", "--gif-width", type=int, default=480, metavar="PIXELS",
                    help="width of the GIF (default 480, 0: the frames' width)")
@@ -1115,7 +1128,8 @@ def main(argv=None):
     if not args.zoom > 0:
         print("render.py: error: -zoom must be positive", file=sys.stderr)
         return 2
-    options = dict(antialias=args.antialias == "fxaa", zoom=args.zoom, smooth=args.smooth, ground=args.ground, colormap=args.colormap,
+    options = dict(antialias=args.antialias == "fxaa", zoom=args.zoom, smooth=args.smooth, ground=args.ground,
+                   colormap=args.colormap,
                    fixed_opacity=args.fixed_opacity)
     if args.background is not None:
         options["background"] = args.background

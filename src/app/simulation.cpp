@@ -181,6 +181,9 @@ PetscErrorCode Simulation::OpenOutput() {
   const Continuation continuation{options_.checkpoints.restart_path, start_.frames};
   PetscCall(writer_->Open(comm_, options_.output, scene_, layout_, state_.positions,
                           restart() ? &continuation : nullptr));
+  const Eigen::Vector3d &gravity = options_.integration.gravity;
+  const double ground_y = options_.contact.ground_y;
+  PetscCall(writer_->WriteWorld(gravity.data(), options_.contact.ground ? &ground_y : nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

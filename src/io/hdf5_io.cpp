@@ -177,6 +177,17 @@ bool SetAttribute(hid_t object, const char *name, hid_t type, const void *value)
   return ok;
 }
 
+bool SetAttribute(hid_t object, const char *name, const double *values, hsize_t count) {
+  if (H5Aexists(object, name) > 0) H5Adelete(object, name);
+  const hid_t space = H5Screate_simple(1, &count, nullptr);
+  const hid_t attribute =
+      H5Acreate2(object, name, H5T_NATIVE_DOUBLE, space, H5P_DEFAULT, H5P_DEFAULT);
+  const bool ok = attribute >= 0 && H5Awrite(attribute, H5T_NATIVE_DOUBLE, values) >= 0;
+  if (attribute >= 0) H5Aclose(attribute);
+  if (space >= 0) H5Sclose(space);
+  return ok;
+}
+
 bool SetAttribute(hid_t object, const char *name, double value) {
   return SetAttribute(object, name, H5T_NATIVE_DOUBLE, &value);
 }

@@ -43,9 +43,11 @@ template <typename T>
 bool ReadArray(hid_t location, const char *name, hid_t type, std::vector<T> *values,
                std::vector<hsize_t> *dims = nullptr);
 
-// A scalar attribute of an object (the file, a group), created or overwritten.
+// An attribute of an object (the file, a group), created or overwritten: a scalar,
+// or a 1-D array of `count` doubles.
 bool SetAttribute(hid_t object, const char *name, hid_t type, const void *value);
 bool SetAttribute(hid_t object, const char *name, double value);
+bool SetAttribute(hid_t object, const char *name, const double *values, hsize_t count);
 bool SetAttribute(hid_t object, const char *name, int64_t value);
 bool SetAttribute(hid_t object, const char *name, const std::string &value);
 // Reads a scalar attribute (converted to the type asked for); false if absent.

@@ -382,6 +382,17 @@ PetscErrorCode ResultWriter::Flush() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode ResultWriter::WriteWorld(const double gravity[3], const double *ground_y) {
+  PetscFunctionBeginUser;
+  bool ok = true;
+  if (rank_ == 0) {
+    ok = SetAttribute(file_, "gravity", gravity, 3);
+    if (ground_y) ok = ok && SetAttribute(file_, "ground_y", *ground_y);
+  }
+  PetscCall(AgreeOnSuccess(comm_, ok, "cannot write to '" + options_.path + "'"));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ResultWriter::Close(const std::vector<std::pair<std::string, double>> &statistics,
                                    int interrupted_by) {
   PetscFunctionBeginUser;

@@ -16,8 +16,9 @@
 // already on disk: a run killed at any moment leaves a file and an .xdmf that
 // open, with every frame up to the last flush. Root attributes: "complete" is 0
 // until the run has finished (1); "interrupted" is the signal that stopped the
-// run early (0: none); then the run's statistics (set-up and loop seconds,
-// solver iterations, ...).
+// run early (0: none); "gravity" [3] (m/s^2) and "ground_y" (m, only with a
+// ground plane); then the run's statistics (set-up and loop seconds, solver
+// iterations, ...).
 //
 // Matrices: PETSc binary files of M, K and D in the natural order of the free
 // vertices' coordinates (xyzxyz).
@@ -103,6 +104,10 @@ class ResultWriter {
   PetscErrorCode Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
                       const DofLayout &layout, Vec like,
                       const Continuation *continuation = nullptr);
+  // Collective. Root attributes describing the world the bodies move in, for
+  // readers such as tools/render.py: "gravity" (3 doubles, m/s^2) and, when
+  // the scene has a ground plane, "ground_y" (m).
+  PetscErrorCode WriteWorld(const double gravity[3], const double *ground_y);
   // Collective. Appends one frame; flushes every options.flush_every frames.
   PetscErrorCode WriteFrame(PetscReal time, Vec positions, Vec velocities,
                             const EnergySample &energy);

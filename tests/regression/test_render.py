@@ -106,6 +106,7 @@ def check_one_line_failure(checks, what, run, needle=None):
 
 
 def check_falling_beam(args, checks, work):
+    import h5py
     import numpy as np
     result = os.path.join(work, "beam.h5")
     if os.path.exists(result):
@@ -157,17 +158,28 @@ def check_falling_beam(args, checks, work):
     else:
         print("note: ffmpeg is not on PATH, the MP4 is not checked")
 
-    # The ground plane: the last frame without -ground differs below the body.
-    bare = os.path.join(work, "beam_bare")
-    shutil.rmtree(bare, ignore_errors=True)
-    run = run_render([result, "-frames", "40,", "-up", "y", "-size", "%dx%d" % SIZE, "-render_dir", bare,
-                      "-background", "1,1,1"])
-    path = os.path.join(bare, "frame_00040.png")
-    if checks.check(run.returncode == 0 and os.path.isfile(path), "render.py without -ground exits 0"):
-        without = read_png(path)
-        grounded = images[-1] if images[-1] is not None else without
-        changed = float(np.mean(np.any(np.abs(grounded - without) > 0.05, axis=-1)))
-        checks.check(changed > 0.05, f"-ground draws the ground ({100 * changed:.1f}% of the pixels change)")
+    # The ground plane: the file records it (root attribute ground_y), so a render
+    # without -ground draws it as -ground -2 does, and -ground none leaves it out.
+    with h5py.File(result, "r") as f:
+        recorded = (float(f.attrs.get("ground_y", np.nan)), list(f.attrs.get("gravity", [])))
+    checks.check(recorded == (-2.0, [0.0, -9.81, 0.0]),
+                 f"the result file records ground_y -2 and gravity (0, -9.81, 0) (got {recorded})")
+    renders = {}
+    for name, extra in (("given", ["-ground", -2]), ("recorded", []), ("none", ["-ground", "none"])):
+        folder = os.path.join(work, "beam_ground_" + name)
+        shutil.rmtree(folder, ignore_errors=True)
+        run = run_render([result, "-frames", "40,", "-up", "y", "-size", "%dx%d" % SIZE, "-render_dir",
+                          folder, "-background", "1,1,1", "-title", "test_render"] + extra)
+        path = os.path.join(folder, "frame_00040.png")
+        if checks.check(run.returncode == 0 and os.path.isfile(path),
+                        f"render.py with the ground {name} exits 0 ({run.stderr.strip()[-300:]})"):
+            renders[name] = read_png(path)
+    if len(renders) == 3:
+        same = float(np.mean(np.any(np.abs(renders["given"] - renders["recorded"]) > 0.05, axis=-1)))
+        checks.check(same < 0.01, f"the recorded ground is drawn as -ground -2 ({100 * same:.1f}% differ)")
+        changed = float(np.mean(np.any(np.abs(renders["recorded"] - renders["none"]) > 0.05, axis=-1)))
+        checks.check(changed > 0.05, f"-ground none leaves the ground out ({100 * changed:.1f}% of the "
+                     "pixels change)")
 
 
 def check_cube_and_api(args, checks, work):
