@@ -50,7 +50,7 @@ def run_until(out, ranks, options, sig, frames=6):
     command = ([args.softbody] if ranks == 1 else [args.mpiexec, "-n", str(ranks), args.softbody])
     command += ["-scene", scene, "-steps", "1000000", "-output", out] + options
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               env=harness.mpi_env())
+                               env=harness.mpi_environment())
     xdmf, deadline = out[:-3] + ".xdmf", time.time() + 120
     while time.time() < deadline and process.poll() is None:
         if os.path.exists(xdmf) and open(xdmf).read().count("<Time ") >= frames:
