@@ -94,14 +94,8 @@ def simulate(name, scene, options, ranks=2, check=True):
 
 
 def lumped_masses(r, densities):
-    tets, rest = r["mesh/tets"], r["mesh/rest_positions"]
-    corners = rest[tets]
-    volumes = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6.0
-    rho = np.asarray(densities)[r["mesh/vertex_body"][tets[:, 0]]]
-    masses = np.zeros(len(rest))
-    for k in range(4):
-        np.add.at(masses, tets[:, k], rho * volumes / 4.0)
-    return masses
+    """Lumped vertex masses of a result's mesh (rho V / 4 per tet corner)."""
+    return harness.lumped_masses(r["mesh/tets"], r["mesh/rest_positions"], r["mesh/vertex_body"], densities)
 
 
 def depth_inside(points, positions, tets):
