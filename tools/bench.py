@@ -45,7 +45,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import box_mesh  # noqa: E402
 from softbody_tools import (CONFIG_DIR, ROOT, add_option, comma_list, flatten, mpi_environment,  # noqa: E402
-                            one_line_error)
+                            one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
 BEAM_SIZE = (4.0, 1.0, 1.0)
@@ -77,11 +77,6 @@ def _count(text):
 
 
 def parse_arguments(argv):
-    if "--" in argv:
-        cut = argv.index("--")
-        argv, passthrough = argv[:cut], argv[cut + 1:]
-    else:
-        passthrough = []
     parser = argparse.ArgumentParser(
         prog="bench.py", allow_abbrev=False,
         description="softbody performance ladder: beams of about N tets, both modes, direct and iterative "
@@ -108,10 +103,7 @@ def parse_arguments(argv):
                help="run every point N times and keep the fastest step (default 1)")
     add_option(parser, "bench_timeout", "--timeout", dest="timeout", metavar="S", type=float, default=7200,
                help="seconds after which a run is stopped and recorded as failed (default 7200)")
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        parser.error(f"unrecognized arguments: {' '.join(unknown)} (softbody options go after `--`)")
-    args.extra = passthrough
+    args = parse_with_passthrough(parser, argv)
     args.tets = flatten(args.tets)
     args.modes = flatten(args.modes)
     args.solvers = flatten(args.solvers)

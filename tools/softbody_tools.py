@@ -7,7 +7,8 @@ Import it with the tools folder on the path:
 What is here:
 - add_option: one option in the tools' convention (PETSc style -tool_name, the
   GNU spelling --tool-name and older spellings as aliases), comma_list and
-  flatten for options that take lists;
+  flatten for options that take lists, parse_with_passthrough for a command
+  line whose part after `--` goes to softbody;
 - running softbody under MPI: mpi_environment, softbody_command, one_line_error;
 - softbody's files: write_scene (the scene format of src/io/scene.hpp),
   read_frames / read_all_datasets (the HDF5 result), read_medit (MEDIT .mesh),
@@ -48,6 +49,22 @@ def add_option(parser, name, *aliases, **kwargs):
     taken for the option."""
     kwargs.setdefault("dest", name)
     return parser.add_argument(*option_spellings(name, *aliases), **kwargs)
+
+
+def parse_with_passthrough(parser, argv):
+    """Parses argv up to a `--`; what follows it is returned in args.extra (the
+    softbody options study.py and bench.py pass to every run). An unknown option
+    before `--` is an error that says where softbody options go."""
+    if "--" in argv:
+        cut = argv.index("--")
+        argv, passthrough = argv[:cut], argv[cut + 1:]
+    else:
+        passthrough = []
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        parser.error(f"unrecognized arguments: {' '.join(unknown)} (softbody options go after `--`)")
+    args.extra = passthrough
+    return args
 
 
 def comma_list(kind):

@@ -55,7 +55,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from softbody_tools import (CONFIG_DIR, ROOT, add_option, comma_list, flatten, mpi_environment,  # noqa: E402
-                            one_line_error)
+                            one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
 # Options the study sets itself on every run; passing them after `--` would break it.
@@ -70,11 +70,6 @@ SOLVER_LABELS = {"direct": "direct (CHOLMOD Cholesky)", "cg-gamg": "CG + GAMG", 
 # ----------------------------------------------------------------------------- arguments
 
 def parse_arguments(argv):
-    if "--" in argv:
-        cut = argv.index("--")
-        argv, passthrough = argv[:cut], argv[cut + 1:]
-    else:
-        passthrough = []
     parser = argparse.ArgumentParser(
         prog="study.py", allow_abbrev=False,
         description="Work-precision study of softbody: runs SCENE to a fixed end time over time "
@@ -115,10 +110,7 @@ def parse_arguments(argv):
                     "point's fastest time loop; the references run once (default 1)")
     add_option(parser, "study_timeout", "--timeout", dest="timeout", metavar="S", type=float, default=3600,
                help="seconds after which a run is stopped and recorded as failed (default 3600)")
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        parser.error(f"unrecognized arguments: {' '.join(unknown)} (softbody options go after `--`)")
-    args.extra = passthrough
+    args = parse_with_passthrough(parser, argv)
     args.modes = flatten(args.modes)
     args.solvers = flatten(args.solvers)
     args.rtols = flatten(args.rtols)

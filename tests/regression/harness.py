@@ -61,6 +61,25 @@ def run(args, ranks, options, timeout=300, check=True):
     return result
 
 
+def fresh_result(work, name):
+    """work/NAME.h5, with any .h5 and .xdmf of that name from an earlier run deleted."""
+    path = os.path.join(work, name + ".h5")
+    for old in (path, path[:-3] + ".xdmf"):
+        if os.path.exists(old):
+            os.remove(old)
+    return path
+
+
+def png_size(path):
+    """(width, height) of a PNG file from its IHDR chunk, or None when it is not a PNG."""
+    import struct
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return struct.unpack(">II", head[16:24])
+
+
 def box_mesh(args, name, size, cells):
     """Writes a box mesh (tools/box_mesh.py) into the work folder; returns its path."""
     path = os.path.join(args.work, name)

@@ -37,11 +37,7 @@ STOPPED = re.compile(r"softbody: stopped by (SIG\w+) after step (\d+) of 1000000
 
 
 def fresh(name):
-    path = os.path.join(work, name + ".h5")
-    for p in (path, path[:-3] + ".xdmf"):
-        if os.path.exists(p):
-            os.remove(p)
-    return path
+    return harness.fresh_result(work, name)
 
 
 def run_until(out, ranks, options, sig, frames=6):

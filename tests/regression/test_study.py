@@ -29,7 +29,6 @@ given in the other spellings the tools accept (GNU --study-modes, the older
 import csv
 import math
 import os
-import struct
 import subprocess
 import sys
 import time
@@ -85,15 +84,6 @@ def read_csv(path):
 
 def slope(dts, errors):
     return float(np.polyfit(np.log(dts), np.log(errors), 1)[0])
-
-
-def png_size(path):
-    """(width, height) of a PNG file, or None when it is not one."""
-    with open(path, "rb") as f:
-        head = f.read(33)
-    if len(head) < 33 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return struct.unpack(">II", head[16:24])
 
 
 def final_positions(path):
@@ -193,7 +183,7 @@ def main():
 
     # Picture and report.
     png = os.path.join(study_dir, "study.png")
-    size = png_size(png) if os.path.exists(png) else None
+    size = harness.png_size(png) if os.path.exists(png) else None
     checks.check(size is not None and size[0] >= 600 and size[1] >= 300
                  and os.path.getsize(png) < 500_000,
                  f"study.png is a valid PNG ({size}, {os.path.getsize(png) if os.path.exists(png) else 0} bytes)")
