@@ -44,8 +44,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import box_mesh  # noqa: E402
-from softbody_tools import (CONFIG_DIR, ROOT, add_option, comma_list, flatten, mpi_environment,  # noqa: E402
-                            one_line_error, parse_with_passthrough)
+from softbody_tools import (CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+                            mpi_environment, one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
 BEAM_SIZE = (4.0, 1.0, 1.0)
@@ -91,10 +91,7 @@ def parse_arguments(argv):
                help="solver presets config/NAME.opts (default direct,cg-warp,cg-gamg)")
     add_option(parser, "bench_ranks", "--ranks", dest="ranks", metavar="N", nargs="+", type=comma_list(int),
                default=[[1, 2]], help="MPI rank counts (default 1,2)")
-    add_option(parser, "study_dir", metavar="DIR", default="bench", help="output folder (default bench/)")
-    add_option(parser, "softbody", metavar="PATH", default=os.path.join(ROOT, "build", "softbody"),
-               help="softbody executable (default: build/softbody of this project)")
-    add_option(parser, "mpiexec", metavar="CMD", default="mpirun", help="MPI launcher (default: mpirun)")
+    add_run_options(parser, "bench", "output folder for bench.csv, bench.md, meshes/ and runs/")
     add_option(parser, "bench_steps", "--steps", dest="steps", metavar="N", type=int, default=12,
                help="time steps per run; the step time is their median (default 12, at least 10)")
     add_option(parser, "bench_dt", "--dt", dest="dt", metavar="S", type=float, default=0.01,

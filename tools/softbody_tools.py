@@ -6,7 +6,8 @@ Import it with the tools folder on the path:
 
 What is here:
 - add_option: one option in the tools' convention (PETSc style -tool_name, the
-  GNU spelling --tool-name and older spellings as aliases), comma_list and
+  GNU spelling --tool-name and older spellings as aliases), add_run_options
+  for -softbody, -mpiexec and -study_dir, comma_list and
   flatten for options that take lists, parse_with_passthrough for a command
   line whose part after `--` goes to softbody;
 - running softbody under MPI: mpi_environment, softbody_command, one_line_error;
@@ -49,6 +50,18 @@ def add_option(parser, name, *aliases, **kwargs):
     taken for the option."""
     kwargs.setdefault("dest", name)
     return parser.add_argument(*option_spellings(name, *aliases), **kwargs)
+
+
+def add_run_options(parser, study_dir=None, study_dir_help="output folder"):
+    """The options every tool that runs softbody shares: -softbody PATH (default
+    build/softbody of this project), -mpiexec CMD (default mpirun) and, with a
+    default folder `study_dir`, -study_dir DIR."""
+    add_option(parser, "softbody", metavar="PATH", default=os.path.join(ROOT, "build", "softbody"),
+               help="softbody executable (default: build/softbody of this project)")
+    add_option(parser, "mpiexec", metavar="CMD", default="mpirun", help="MPI launcher (default: mpirun)")
+    if study_dir is not None:
+        add_option(parser, "study_dir", metavar="DIR", default=study_dir,
+                   help=f"{study_dir_help} (default: {study_dir})")
 
 
 def parse_with_passthrough(parser, argv):

@@ -54,8 +54,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from softbody_tools import (CONFIG_DIR, ROOT, add_option, comma_list, flatten, mpi_environment,  # noqa: E402
-                            one_line_error, parse_with_passthrough)
+from softbody_tools import (CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+                            mpi_environment, one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
 # Options the study sets itself on every run; passing them after `--` would break it.
@@ -80,11 +80,7 @@ def parse_arguments(argv):
                "Lists take commas or spaces: -study_ranks 1,2 or -study_ranks 1 2. Every option "
                "also has its GNU spelling (--study-ranks) and its older one (--ranks).")
     parser.add_argument("scene", help="softbody scene file")
-    add_option(parser, "softbody", metavar="PATH", default=os.path.join(ROOT, "build", "softbody"),
-               help="softbody executable (default: build/softbody of this project)")
-    add_option(parser, "mpiexec", metavar="CMD", default="mpirun", help="MPI launcher (default: mpirun)")
-    add_option(parser, "study_dir", metavar="DIR", default="study",
-               help="output folder for study.csv, study.md, study.png and runs/ (default: study)")
+    add_run_options(parser, "study", "output folder for study.csv, study.md, study.png and runs/")
     add_option(parser, "study_end_time", "--end-time", dest="end_time", metavar="T", type=float, default=0.2,
                help="end time T (s) at which errors are measured (default 0.2)")
     add_option(parser, "study_dt0", "--dt0", dest="dt0", metavar="DT", type=float, default=0.02,

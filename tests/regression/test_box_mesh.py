@@ -32,7 +32,9 @@ def generate(path, size, cells=None, tets=None, spelling=("-box_size", "-box_cel
 
 
 def read_medit(path):
-    """Vertices (#V x 3), triangles (#B x 3, 0-based), their refs (#B), tets (#T x 4, 0-based)."""
+    """Vertices (#V x 3), triangles (#B x 3, 0-based), their refs (#B), tets (#T x 4, 0-based).
+    Stricter than softbody_tools.read_medit, as a test of the writer: the vertex and
+    tet refs must be 0."""
     tokens = open(path).read().split()
     sections, pos = {}, 0
     widths = {"Vertices": 4, "Triangles": 4, "Tetrahedra": 5}
