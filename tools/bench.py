@@ -10,7 +10,7 @@ runs softbody on it over the grid
                            cg-gamg)
   ranks    -bench_ranks    1, 2
 with -bench, which makes softbody measure itself (src/benchmark.hpp): median
-step time over --steps steps, one assembly of A (median of 5), the largest
+step time over -bench_steps steps, one assembly of A (median of 5), the largest
 factorisation / preconditioner set-up, solver iterations per step, the largest
 resident set of any rank, a STREAM triad run on all ranks in the same run, and
 the memory traffic a step needs at least (the nonzeros of K or A and of the
@@ -21,13 +21,13 @@ runs with their error line), bench.md (the table, the targets of issue 6 with a
 verdict each, the reference figures), meshes/ (the meshes and scenes, reused
 when present) and runs/ (one log per run).
 
-Usage (from the project root; ./run bench calls this with --softbody build/softbody):
+Usage (from the project root; ./run bench calls this with -softbody build/softbody):
   ./run bench                                   # ladder 1e4,1e5
   ./run bench -bench_tets 1e6 -bench_ranks 2    # the million-tet rung
   ./run bench -bench_tets 1e4 -study_dir /tmp/b -bench_solvers direct,cg-warp,cg-gamg
 Options after `--` go to every softbody run. Lists take commas or spaces.
 Timings on a shared machine are noisy: the bandwidth is measured in the same
-run for that reason, and --repeat N keeps each point's fastest of N runs.
+run for that reason, and -bench_repeat N keeps each point's fastest of N runs.
 Needs Debian's /usr/bin/python3 with python3-numpy.
 """
 import argparse
@@ -42,11 +42,10 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CONFIG_DIR = os.path.join(ROOT, "config")
-sys.path.insert(0, os.path.join(ROOT, "tools"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import box_mesh  # noqa: E402
-from study import _environment, _flatten, _list, _one_line_error  # noqa: E402  (shared helpers)
+from softbody_tools import (CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+                            mpi_environment, one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
 BEAM_SIZE = (4.0, 1.0, 1.0)
@@ -78,45 +77,34 @@ def _count(text):
 
 
 def parse_arguments(argv):
-    if "--" in argv:
-        cut = argv.index("--")
-        argv, passthrough = argv[:cut], argv[cut + 1:]
-    else:
-        passthrough = []
     parser = argparse.ArgumentParser(
         prog="bench.py", allow_abbrev=False,
         description="softbody performance ladder: beams of about N tets, both modes, direct and iterative "
                     "presets, 1 and 2 ranks; writes bench.csv and bench.md.",
         epilog="Options after `--` go to every softbody run. Lists take commas or spaces.")
-    parser.add_argument("-bench_tets", "--tets", dest="tets", metavar="N", nargs="+", type=_list(_count),
-                        default=[[10000, 100000]], help="tet counts of the ladder (default 1e4,1e5; 1e6 on request)")
-    parser.add_argument("-bench_modes", "--modes", dest="modes", metavar="MODE", nargs="+", type=_list(str),
-                        default=[list(MODES)], help="elasticity modes (default linear,corotational)")
-    parser.add_argument("-bench_solvers", "--solvers", dest="solvers", metavar="NAME", nargs="+", type=_list(str),
-                        default=[["direct", "cg-warp", "cg-gamg"]],
-                        help="solver presets config/NAME.opts (default direct,cg-warp,cg-gamg)")
-    parser.add_argument("-bench_ranks", "--ranks", dest="ranks", metavar="N", nargs="+", type=_list(int),
-                        default=[[1, 2]], help="MPI rank counts (default 1,2)")
-    parser.add_argument("-study_dir", "--study-dir", dest="study_dir", metavar="DIR", default="bench",
-                        help="output folder (default bench/)")
-    parser.add_argument("--softbody", metavar="PATH", default=os.path.join(ROOT, "build", "softbody"),
-                        help="softbody executable (default: build/softbody of this project)")
-    parser.add_argument("--mpiexec", metavar="CMD", default="mpirun", help="MPI launcher (default: mpirun)")
-    parser.add_argument("--steps", metavar="N", type=int, default=12,
-                        help="time steps per run; the step time is their median (default 12, at least 10)")
-    parser.add_argument("--dt", metavar="S", type=float, default=0.01, help="time step (s, default 0.01)")
-    parser.add_argument("--repeat", metavar="N", type=int, default=1,
-                        help="run every point N times and keep the fastest step (default 1)")
-    parser.add_argument("--timeout", metavar="S", type=float, default=7200,
-                        help="seconds after which a run is stopped and recorded as failed (default 7200)")
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        parser.error(f"unrecognized arguments: {' '.join(unknown)} (softbody options go after `--`)")
-    args.extra = passthrough
-    args.tets = _flatten(args.tets)
-    args.modes = _flatten(args.modes)
-    args.solvers = _flatten(args.solvers)
-    args.ranks = _flatten(args.ranks)
+    add_option(parser, "bench_tets", "--tets", dest="tets", metavar="N", nargs="+", type=comma_list(_count),
+               default=[[10000, 100000]], help="tet counts of the ladder (default 1e4,1e5; 1e6 on request)")
+    add_option(parser, "bench_modes", "--modes", dest="modes", metavar="MODE", nargs="+", type=comma_list(str),
+               default=[list(MODES)], help="elasticity modes (default linear,corotational)")
+    add_option(parser, "bench_solvers", "--solvers", dest="solvers", metavar="NAME", nargs="+",
+               type=comma_list(str), default=[["direct", "cg-warp", "cg-gamg"]],
+               help="solver presets config/NAME.opts (default direct,cg-warp,cg-gamg)")
+    add_option(parser, "bench_ranks", "--ranks", dest="ranks", metavar="N", nargs="+", type=comma_list(int),
+               default=[[1, 2]], help="MPI rank counts (default 1,2)")
+    add_run_options(parser, "bench", "output folder for bench.csv, bench.md, meshes/ and runs/")
+    add_option(parser, "bench_steps", "--steps", dest="steps", metavar="N", type=int, default=12,
+               help="time steps per run; the step time is their median (default 12, at least 10)")
+    add_option(parser, "bench_dt", "--dt", dest="dt", metavar="S", type=float, default=0.01,
+               help="time step (s, default 0.01)")
+    add_option(parser, "bench_repeat", "--repeat", dest="repeat", metavar="N", type=int, default=1,
+               help="run every point N times and keep the fastest step (default 1)")
+    add_option(parser, "bench_timeout", "--timeout", dest="timeout", metavar="S", type=float, default=7200,
+               help="seconds after which a run is stopped and recorded as failed (default 7200)")
+    args = parse_with_passthrough(parser, argv)
+    args.tets = flatten(args.tets)
+    args.modes = flatten(args.modes)
+    args.solvers = flatten(args.solvers)
+    args.ranks = flatten(args.ranks)
     for mode in args.modes:
         if mode not in MODES:
             parser.error(f"-bench_modes: unknown mode {mode!r} (choose from {', '.join(MODES)})")
@@ -126,11 +114,11 @@ def parse_arguments(argv):
     if any(n < 1 for n in args.ranks):
         parser.error("-bench_ranks must be positive")
     if args.steps < 10:
-        parser.error("--steps must be at least 10 (the step time is a median over them)")
+        parser.error("-bench_steps must be at least 10 (the step time is a median over them)")
     if not (args.dt > 0 and math.isfinite(args.dt)):
-        parser.error("--dt must be positive")
+        parser.error("-bench_dt must be positive")
     if args.repeat < 1:
-        parser.error("--repeat must be at least 1")
+        parser.error("-bench_repeat must be at least 1")
     args.softbody = os.path.abspath(args.softbody)
     if not (os.path.isfile(args.softbody) and os.access(args.softbody, os.X_OK)):
         parser.error(f"softbody executable {args.softbody} not found (build first: ./run build)")
@@ -199,7 +187,7 @@ def run_point(args, scene, tets, mode, solver, ranks):
     row = {"tets": tets, "mode": mode, "solver": solver, "ranks": ranks, "status": "failed", "message": ""}
     try:
         proc = subprocess.run(command, capture_output=True, text=True, timeout=args.timeout,
-                              env=_environment(), cwd=ROOT)
+                              env=mpi_environment(), cwd=ROOT)
         output, code = proc.stdout + proc.stderr, proc.returncode
     except subprocess.TimeoutExpired:
         output, code = f"(timed out after {args.timeout:g} s)", None
@@ -209,7 +197,7 @@ def run_point(args, scene, tets, mode, solver, ranks):
         row["message"] = f"timed out after {args.timeout:g} s"
         return row
     if code != 0:
-        row["message"] = _one_line_error(output, code)
+        row["message"] = one_line_error(output, code)
         return row
     values = parse_bench_line(output)
     if values is None:

@@ -19,17 +19,22 @@ outward normals (b-a) x (c-a); ref = side of the box: 1 x=0, 2 x=Lx, 3 y=0,
 4 y=Ly, 5 z=0, 6 z=Lz), Tetrahedra (ref 0), End.
 
 Usage:
-  box_mesh.py OUT.mesh --size 4 1 1 --cells 24 6 6
-  box_mesh.py OUT.mesh --size 4 1 1 --tets 5000
+  box_mesh.py OUT.mesh -box_size 4 1 1 -box_cells 24 6 6
+  box_mesh.py OUT.mesh -box_size 4 1 1 -box_tets 5000
+(--box-size, --box-cells, --box-tets and the older --size, --cells, --tets work too.)
 Only numpy is needed (Debian's /usr/bin/python3 + python3-numpy); a million
 tets take a few seconds.
 """
 import argparse
 import itertools
 import math
+import os
 import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from softbody_tools import add_option  # noqa: E402
 
 # The six Kuhn tets of the unit cube: (0,0,0) -> +e_a -> +e_b -> +e_c = (1,1,1)
 # for every permutation (a, b, c) of the axes; odd permutations are negatively
@@ -151,28 +156,29 @@ def write_medit(path, vertices, tets, faces, refs):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         description="Structured tetrahedral mesh of the box [0,Lx]x[0,Ly]x[0,Lz] "
                     "(6 Kuhn tets per hexahedral cell), written as MEDIT .mesh.")
     parser.add_argument("output", metavar="OUT.mesh", help="MEDIT file to write")
-    parser.add_argument("--size", nargs=3, type=float, metavar=("LX", "LY", "LZ"),
-                        default=[1.0, 1.0, 1.0], help="box edge lengths in metres (default 1 1 1)")
+    add_option(parser, "box_size", "--size", dest="size", nargs=3, type=float, metavar=("LX", "LY", "LZ"),
+               default=[1.0, 1.0, 1.0], help="box edge lengths in metres (default 1 1 1)")
     group = parser.add_mutually_exclusive_group(required=True)
-    group.add_argument("--cells", nargs=3, type=int, metavar=("NX", "NY", "NZ"),
-                       help="number of hexahedral cells along x, y, z (6 tets each)")
-    group.add_argument("--tets", type=int, metavar="N",
-                       help="choose the cells for about N tets, with cells as close to cubes as possible")
+    add_option(group, "box_cells", "--cells", dest="cells", nargs=3, type=int, metavar=("NX", "NY", "NZ"),
+               help="number of hexahedral cells along x, y, z (6 tets each)")
+    add_option(group, "box_tets", "--tets", dest="tets", type=int, metavar="N",
+               help="choose the cells for about N tets, with cells as close to cubes as possible")
     args = parser.parse_args(argv)
 
     size = args.size
     if not all(s > 0 and math.isfinite(s) for s in size):
-        parser.error("--size: every edge length must be positive")
+        parser.error("-box_size: every edge length must be positive")
     if args.cells is not None:
         cells = args.cells
         if not all(n >= 1 for n in cells):
-            parser.error("--cells: every count must be >= 1")
+            parser.error("-box_cells: every count must be >= 1")
     else:
         if args.tets < 1:
-            parser.error("--tets: N must be >= 1")
+            parser.error("-box_tets: N must be >= 1")
         cells = cells_for_tets(size, args.tets)
 
     vertices, tets = box_mesh(size, cells)

@@ -3,11 +3,13 @@
 
 Meshes a 1 m cube (750 tets), gives every vertex the velocity omega x r of one
 turn per second about z, runs one turn in both modes and renders the cube at
-quarter turns, with one colour scale for both modes. Writes into --out
+quarter turns, with one colour scale for both modes. Writes into -spin_dir
 (default docs/spin): spin-linear.h5, spin-corotational.h5 and
 {linear,corotational}-tNNN.png, and prints the volume change of each mode.
 
-  /usr/bin/python3 tools/spin_demo.py [--softbody build/softbody] [--ranks 2] [--out docs/spin]
+  /usr/bin/python3 tools/spin_demo.py [-softbody build/softbody] [-mpiexec mpirun] [-spin_ranks 2]
+                                      [-spin_dir docs/spin]
+(--spin-ranks, --spin-dir and the older --ranks, --out work too.)
 """
 import argparse
 import os
@@ -20,36 +22,37 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import render  # noqa: E402
+from softbody_tools import add_option, mpi_environment, read_medit, softbody_command  # noqa: E402
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--softbody", default="build/softbody", help="the softbody executable")
-    parser.add_argument("--ranks", type=int, default=2, help="MPI ranks")
-    parser.add_argument("--out", default="docs/spin", help="output folder")
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     allow_abbrev=False)
+    add_option(parser, "softbody", default="build/softbody", help="the softbody executable")
+    add_option(parser, "mpiexec", default="mpirun", help="MPI launcher (default mpirun)")
+    add_option(parser, "spin_ranks", "--ranks", dest="ranks", type=int, default=2, help="MPI ranks (default 2)")
+    add_option(parser, "spin_dir", "--out", dest="out", default="docs/spin", help="output folder (default docs/spin)")
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
 
     mesh = os.path.join(args.out, "cube.mesh")
-    subprocess.run([sys.executable, os.path.join(HERE, "box_mesh.py"), mesh, "--size", "1", "1", "1",
-                    "--cells", "5", "5", "5"], check=True, capture_output=True)
-    tokens = open(mesh).read().split()
-    i = tokens.index("Vertices")
-    n = int(tokens[i + 1])
-    X = np.array(tokens[i + 2:i + 2 + 4 * n], float).reshape(n, 4)[:, :3]
+    subprocess.run([sys.executable, os.path.join(HERE, "box_mesh.py"), mesh, "-box_size", "1", "1", "1",
+                    "-box_cells", "5", "5", "5"], check=True, capture_output=True)
+    X = read_medit(mesh)[0]
+    n = len(X)
     velocity = np.cross([0.0, 0.0, 2 * np.pi], X - X.mean(axis=0))  # one turn per second
     scene = os.path.join(args.out, "spin-scene.txt")
     with open(scene, "w") as f:
         f.write("1\ncube.mesh 1000 1e7 0.3 0  0 0 0  1 0 0 0\n%d\n" % n)
         f.writelines("0 %d %.17g %.17g %.17g\n" % (k, *velocity[k]) for k in range(n))
 
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     results = {}
     for mode in ("linear", "corotational"):
         out = os.path.join(args.out, f"spin-{mode}.h5")
-        subprocess.run(["mpirun", "-n", str(args.ranks), args.softbody, "-scene", scene, "-mode", mode,
-                        "-dt", "0.01", "-steps", "100", "-alpha", "0", "-beta", "0.01", "-output", out],
-                       check=True, env=env, stdout=subprocess.DEVNULL)
+        options = ["-scene", scene, "-mode", mode, "-dt", "0.01", "-steps", "100", "-alpha", "0", "-beta", "0.01",
+                   "-output", out]
+        subprocess.run(softbody_command(args.mpiexec, args.ranks, args.softbody, options), check=True,
+                       env=mpi_environment(), stdout=subprocess.DEVNULL)
         results[mode] = out
 
     vmax = 0.0

@@ -55,12 +55,12 @@ An expected rejection passes when the program exits non-zero with exactly one
 line "softbody: error: ..." naming the parameter, and no PETSc traceback.
 
 Writes STUDY_DIR/stability.md and STUDY_DIR/stability.csv (one row per case,
-with the command that reproduces it); meshes, scenes and (with --keep) result
+with the command that reproduces it); meshes, scenes and (with -stability_keep) result
 files go to STUDY_DIR/work. Exit status 0 when every case passes, 1 otherwise.
 
   ./run stability                      # the whole matrix, both modes (a few minutes)
-  ./run stability --quick              # the representative fast subset (~40 s)
-  /usr/bin/python3 tools/stability.py --softbody build/softbody --modes corotational --only 'nu='
+  ./run stability -stability_quick     # the representative fast subset (~40 s)
+  /usr/bin/python3 tools/stability.py -softbody build/softbody -stability_modes corotational -stability_only 'nu='
 """
 import argparse
 import csv
@@ -77,6 +77,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import box_mesh  # noqa: E402
+from softbody_tools import add_option, error_lines, lumped_masses, mpi_environment, read_medit  # noqa: E402
 
 MODES = ("linear", "corotational")
 PRESET = {"linear": "CHOLMOD Cholesky (config/direct.opts)", "corotational": "CG + warp (config/cg-warp.opts)"}
@@ -139,17 +140,6 @@ MESHES = {
     "needle": ("2 x 0.001 x 0.001 m needle, 2 x 1 x 1 cells, 12 needle tets",
                lambda p: write_box(p, (2.0, SLIVER_HEIGHT, SLIVER_HEIGHT), (2, 1, 1))),
 }
-
-
-def read_medit_vertices_tets(path):
-    tokens = open(path).read().split()
-    i = tokens.index("Vertices")
-    n = int(tokens[i + 1])
-    vertices = np.array(tokens[i + 2:i + 2 + 4 * n], float).reshape(n, 4)[:, :3]
-    j = tokens.index("Tetrahedra")
-    m = int(tokens[j + 1])
-    tets = np.array(tokens[j + 2:j + 2 + 5 * m], np.int64).reshape(m, 5)[:, :4] - 1
-    return vertices, tets
 
 
 # ----------------------------------------------------------------------------- cases
@@ -293,7 +283,8 @@ def prepare(case, work, mesh_cache):
         if name not in mesh_cache:
             path = os.path.join(work, name + ".mesh")
             MESHES[name][1](path)
-            mesh_cache[name] = read_medit_vertices_tets(path)
+            vertices, _, _, tets = read_medit(path)
+            mesh_cache[name] = (vertices, tets)
     scene = os.path.join(work, re.sub(r"[^A-Za-z0-9_.@=+-]", "_", case.key) + ".txt")
     lines = [f"{len(meshes)}"]
     for i, name in enumerate(meshes):
@@ -316,20 +307,6 @@ def prepare(case, work, mesh_cache):
 
 
 # ----------------------------------------------------------------------------- running and judging
-
-def lumped_masses(tets, rest, vertex_body, densities):
-    p = rest[tets]
-    volumes = np.abs(np.linalg.det(p[:, 1:] - p[:, :1])) / 6.0
-    rho = np.asarray(densities)[vertex_body[tets[:, 0]]]
-    masses = np.zeros(len(rest))
-    for corner in range(4):
-        np.add.at(masses, tets[:, corner], rho * volumes / 4.0)
-    return masses
-
-
-def error_lines(stderr):
-    return [line.strip() for line in stderr.splitlines() if line.strip().startswith("softbody: error:")]
-
 
 def first_message(stderr):
     """The first stderr line that is not part of mpirun's boxed banners."""
@@ -458,11 +435,7 @@ def run_case(case, mode, prepared, args, work):
             os.remove(os.path.join(work, stem + suffix))
     command = [args.mpiexec, "-n", str(args.ranks), os.path.abspath(args.softbody), "-scene", prepared.scene,
                "-mode", mode] + case.options(args.steps) + shlex.split(args.options or "") + ["-output", output]
-    env = dict(os.environ)
-    env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
-    if os.geteuid() == 0:
-        env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
-        env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
+    env = mpi_environment()
     start = time.monotonic()
     try:
         p = subprocess.run(command, capture_output=True, text=True, timeout=args.timeout, env=env)
@@ -553,7 +526,7 @@ def write_reports(rows, args, elapsed):
                 f"({len(rows) // max(len(modes), 1)} cases x {len(modes)} modes), {args.steps} steps each, "
                 f"{args.ranks} ranks, {elapsed:.0f} s in total. Solvers: "
                 + "; ".join(f"{m}: {PRESET[m]}" for m in modes) + ". Written by `tools/stability.py"
-                + (" --quick" if args.quick else "") + f"` on {time.strftime('%Y-%m-%d %H:%M')}."
+                + (" -stability_quick" if args.quick else "") + f"` on {time.strftime('%Y-%m-%d %H:%M')}."
                 + (f" Extra options on every run: `{args.options}`." if args.options else "") + "\n\n")
         f.write("\n".join(summary_table(rows, modes)) + "\n\n")
         f.write("Baseline: 1 m cube (162 tets), density 1000 kg/m^3, E = 1e6 Pa, nu = 0.3, dt = 0.01 s, "
@@ -593,35 +566,42 @@ def parse_modes(text):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--softbody", default="build/softbody", help="the softbody executable (default build/softbody)")
-    parser.add_argument("--mpiexec", default="mpirun", help="MPI launcher (default mpirun)")
-    parser.add_argument("--ranks", type=int, default=2, help="MPI ranks per run (default 2)")
-    parser.add_argument("--quick", action="store_true",
-                        help="only the representative fast subset (E/nu/dt extremes, fast strike and spin, "
-                             "sliver, plate, inverted tet, all fixed, single tet, no damping, combined extreme, "
-                             "four expected rejections)")
-    parser.add_argument("--modes", type=parse_modes, action="extend", nargs="+", metavar="MODE",
-                        help="modes to run: linear, corotational, or both (default both; "
-                             "'--modes linear corotational' or '--modes linear,corotational')")
-    parser.add_argument("--study-dir", "--study_dir", "-study_dir", dest="study_dir", default="study",
-                        help="folder for stability.md, stability.csv and work/ (default study/)")
-    parser.add_argument("--work", help="folder for meshes, scenes and result files (default STUDY_DIR/work)")
-    parser.add_argument("--keep", action="store_true", help="keep the result files (.h5/.xdmf) in the work folder")
-    parser.add_argument("--steps", type=int, default=20, help="time steps per run (default 20)")
-    parser.add_argument("--only", metavar="REGEX", help="only the cases whose name matches REGEX (re.search)")
-    parser.add_argument("--timeout", type=float, default=120.0, help="seconds before a run counts as hung (default 120)")
-    parser.add_argument("--options", metavar="'OPTS'",
-                        help="extra softbody/PETSc options appended to every run, e.g. to try a fix: "
-                             "--options '-pc_gamg_reuse_interpolation false' (the reports record them)")
-    parser.add_argument("--list", action="store_true", help="list the cases and exit")
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     allow_abbrev=False)
+    add_option(parser, "softbody", default="build/softbody", help="the softbody executable (default build/softbody)")
+    add_option(parser, "mpiexec", default="mpirun", help="MPI launcher (default mpirun)")
+    add_option(parser, "stability_ranks", "--ranks", dest="ranks", type=int, default=2,
+               help="MPI ranks per run (default 2)")
+    add_option(parser, "stability_quick", "--quick", dest="quick", action="store_true",
+               help="only the representative fast subset (E/nu/dt extremes, fast strike and spin, sliver, plate, "
+                    "inverted tet, all fixed, single tet, no damping, combined extreme, four expected rejections)")
+    add_option(parser, "stability_modes", "--modes", dest="modes", type=parse_modes, action="extend", nargs="+",
+               metavar="MODE", help="modes to run: linear, corotational, or both (default both; "
+                                    "'-stability_modes linear corotational' or '-stability_modes linear,corotational')")
+    add_option(parser, "study_dir", "--study_dir", default="study",
+               help="folder for stability.md, stability.csv and work/ (default study/)")
+    add_option(parser, "stability_work", "--work", dest="work",
+               help="folder for meshes, scenes and result files (default STUDY_DIR/work)")
+    add_option(parser, "stability_keep", "--keep", dest="keep", action="store_true",
+               help="keep the result files (.h5/.xdmf) in the work folder")
+    add_option(parser, "stability_steps", "--steps", dest="steps", type=int, default=20,
+               help="time steps per run (default 20)")
+    add_option(parser, "stability_only", "--only", dest="only", metavar="REGEX",
+               help="only the cases whose name matches REGEX (re.search)")
+    add_option(parser, "stability_timeout", "--timeout", dest="timeout", type=float, default=120.0,
+               help="seconds before a run counts as hung (default 120)")
+    add_option(parser, "stability_options", "--options", dest="options", metavar="'OPTS'",
+               help="extra softbody/PETSc options appended to every run, e.g. to try a fix: "
+                    "-stability_options '-pc_gamg_reuse_interpolation false' (the reports record them)")
+    add_option(parser, "stability_list", "--list", dest="list", action="store_true",
+               help="list the cases and exit")
     args = parser.parse_args(argv)
     modes = []
     for group in args.modes or [list(MODES)]:
         modes += [m for m in group if m not in modes]
     args.modes = modes
     if args.steps < 1 or args.ranks < 1:
-        parser.error("--steps and --ranks must be >= 1")
+        parser.error("-stability_steps and -stability_ranks must be >= 1")
 
     cases = [c for c in matrix() if (c.quick or not args.quick) and (not args.only or re.search(args.only, c.key))]
     if args.list:
@@ -631,7 +611,7 @@ def main(argv=None):
     if not cases:
         parser.error("no case selected")
     if not os.path.isfile(args.softbody):
-        parser.error(f"--softbody {args.softbody}: no such file (build first: ./run build)")
+        parser.error(f"-softbody {args.softbody}: no such file (build first: ./run build)")
     work = os.path.abspath(args.work or os.path.join(args.study_dir, "work"))
     os.makedirs(work, exist_ok=True)
 

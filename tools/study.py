@@ -2,11 +2,11 @@
 """Work-precision study: accuracy against cost of softbody runs.
 
 Runs one scene to a fixed end time T over a grid of
-  time steps   dt0, dt0/2, dt0/4, ... (--levels of them; steps = round(T / dt)),
+  time steps   dt0, dt0/2, dt0/4, ... (-study_levels of them; steps = round(T / dt)),
   modes        linear, corotational,
   solvers      direct (config/direct.opts: CHOLMOD Cholesky), CG + GAMG
                (config/cg-gamg.opts), CG + Jacobi (config/cg-jacobi.opts); the
-               iterative ones at every -ksp_rtol of --rtols,
+               iterative ones at every -ksp_rtol of -study_rtols,
   ranks        1 and 2,
 and compares the positions at T with a reference run of the same mode (by default
 dt ten times smaller than the finest level, direct solver, the largest rank
@@ -18,7 +18,7 @@ count). Per run:
              result file; set-up, which includes the linear mode's factorisation,
              is setup_s and not counted), iterations = solver_iterations.
 
-Writes into --study-dir DIR (also spelt -study_dir DIR; default study/):
+Writes into -study_dir DIR (default study/):
   study.csv  one row per run (failed runs too, with their one-line error),
   study.md   the tables, the observed order in dt of every configuration
              (least-squares slope of log error_l2 against log dt over its levels),
@@ -29,10 +29,10 @@ Writes into --study-dir DIR (also spelt -study_dir DIR; default study/):
   runs/      the result files (HDF5) and logs of every run; old ones are deleted
              first, nothing is reused.
 
-Usage (from the project root; ./run study calls this with --softbody build/softbody):
+Usage (from the project root; ./run study calls this with -softbody build/softbody):
   ./run study scenes/default-scene.txt
-  ./run study SCENE --levels 6 --modes linear --ranks 2 --study-dir /tmp/s -- -alpha 0 -beta 0
-Timings on a shared machine are noisy: --repeat N runs the grid N times and keeps
+  ./run study SCENE -study_levels 6 -study_modes linear -study_ranks 2 -study_dir /tmp/s -- -alpha 0 -beta 0
+Timings on a shared machine are noisy: -study_repeat N runs the grid N times and keeps
 each point's fastest time loop. Everything after `--` is passed to every softbody run (the reference included),
 e.g. -alpha 0 -beta 0 or -shear_scale 0.25. A run that fails (non-zero exit, e.g.
 an iterative solve that does not converge; a time-out; an incomplete file) is
@@ -53,8 +53,10 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CONFIG_DIR = os.path.join(ROOT, "config")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from softbody_tools import (CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+                            mpi_environment, one_line_error, parse_with_passthrough)
+
 MODES = ("linear", "corotational")
 # Options the study sets itself on every run; passing them after `--` would break it.
 CONTROLLED = ("-scene", "-mode", "-dt", "-dt_schedule", "-steps", "-output", "-output_every",
@@ -67,31 +69,7 @@ SOLVER_LABELS = {"direct": "direct (CHOLMOD Cholesky)", "cg-gamg": "CG + GAMG", 
 
 # ----------------------------------------------------------------------------- arguments
 
-def _list(kind):
-    """argparse type: comma- or space-separated values (nargs='+' joins them)."""
-    def parse(text):
-        try:
-            return [kind(item) for item in text.split(",") if item.strip()]
-        except ValueError as error:
-            raise argparse.ArgumentTypeError(str(error))
-    return parse
-
-
-def _flatten(lists):
-    out = []
-    for item in lists:
-        for value in item:
-            if value not in out:
-                out.append(value)
-    return out
-
-
 def parse_arguments(argv):
-    if "--" in argv:
-        cut = argv.index("--")
-        argv, passthrough = argv[:cut], argv[cut + 1:]
-    else:
-        passthrough = []
     parser = argparse.ArgumentParser(
         prog="study.py", allow_abbrev=False,
         description="Work-precision study of softbody: runs SCENE to a fixed end time over time "
@@ -99,74 +77,65 @@ def parse_arguments(argv):
                     "against a fine reference and its run time, and writes study.csv, study.md "
                     "and study.png.",
         epilog="Options after `--` go to every softbody run, e.g. `-- -alpha 0 -beta 0`. "
-               "Lists take commas or spaces: --ranks 1,2 or --ranks 1 2.")
+               "Lists take commas or spaces: -study_ranks 1,2 or -study_ranks 1 2. Every option "
+               "also has its GNU spelling (--study-ranks) and its older one (--ranks).")
     parser.add_argument("scene", help="softbody scene file")
-    parser.add_argument("--softbody", metavar="PATH", default=os.path.join(ROOT, "build", "softbody"),
-                        help="softbody executable (default: build/softbody of this project)")
-    parser.add_argument("--mpiexec", metavar="CMD", default="mpirun", help="MPI launcher (default: mpirun)")
-    parser.add_argument("--study-dir", "-study_dir", dest="study_dir", metavar="DIR", default="study",
-                        help="output folder for study.csv, study.md, study.png and runs/ "
-                             "(default: study)")
-    parser.add_argument("--end-time", metavar="T", type=float, default=0.2,
-                        help="end time T (s) at which errors are measured (default 0.2)")
-    parser.add_argument("--dt0", metavar="DT", type=float, default=0.02,
-                        help="largest time step (s); the levels are dt0, dt0/2, dt0/4, ... (default 0.02)")
-    parser.add_argument("--levels", metavar="N", type=int, default=5,
-                        help="number of time-step levels (default 5; at least 2 for an order)")
-    parser.add_argument("--modes", metavar="MODE", nargs="+", type=_list(str), default=[list(MODES)],
-                        help="elasticity modes (default: linear,corotational)")
-    parser.add_argument("--solvers", metavar="NAME", nargs="+", type=_list(str),
-                        default=[["direct", "cg-gamg", "cg-jacobi"]],
-                        help="solver presets, names of config/NAME.opts; a preset with "
-                             "-ksp_type preonly is direct, the others are run at every --rtols "
-                             "(default: direct,cg-gamg,cg-jacobi)")
-    parser.add_argument("--rtols", metavar="RTOL", nargs="+", type=_list(float), default=[[1e-4, 1e-8]],
-                        help="-ksp_rtol values of the iterative solvers (default: 1e-4,1e-8)")
-    parser.add_argument("--ranks", metavar="N", nargs="+", type=_list(int), default=[[1, 2]],
-                        help="MPI rank counts (default: 1,2)")
-    parser.add_argument("--reference-dt", metavar="DT", type=float, default=None,
-                        help="time step (s) of the reference runs (default: the finest level's dt / 10)")
-    parser.add_argument("--reference-ranks", metavar="N", type=int, default=None,
-                        help="rank count of the reference runs (default: the largest of --ranks)")
-    parser.add_argument("--repeat", metavar="N", type=int, default=1,
-                        help="run the grid this many times (passes alternately forwards and "
-                             "backwards) and keep each point's fastest time loop; the references run "
-                             "once (default 1)")
-    parser.add_argument("--timeout", metavar="S", type=float, default=3600,
-                        help="seconds after which a run is stopped and recorded as failed (default 3600)")
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        parser.error(f"unrecognized arguments: {' '.join(unknown)} (softbody options go after `--`)")
-    args.extra = passthrough
-    args.modes = _flatten(args.modes)
-    args.solvers = _flatten(args.solvers)
-    args.rtols = _flatten(args.rtols)
-    args.ranks = _flatten(args.ranks)
+    add_run_options(parser, "study", "output folder for study.csv, study.md, study.png and runs/")
+    add_option(parser, "study_end_time", "--end-time", dest="end_time", metavar="T", type=float, default=0.2,
+               help="end time T (s) at which errors are measured (default 0.2)")
+    add_option(parser, "study_dt0", "--dt0", dest="dt0", metavar="DT", type=float, default=0.02,
+               help="largest time step (s); the levels are dt0, dt0/2, dt0/4, ... (default 0.02)")
+    add_option(parser, "study_levels", "--levels", dest="levels", metavar="N", type=int, default=5,
+               help="number of time-step levels (default 5; at least 2 for an order)")
+    add_option(parser, "study_modes", "--modes", dest="modes", metavar="MODE", nargs="+", type=comma_list(str),
+               default=[list(MODES)], help="elasticity modes (default: linear,corotational)")
+    add_option(parser, "study_solvers", "--solvers", dest="solvers", metavar="NAME", nargs="+",
+               type=comma_list(str), default=[["direct", "cg-gamg", "cg-jacobi"]],
+               help="solver presets, names of config/NAME.opts; a preset with -ksp_type preonly is direct, "
+                    "the others are run at every -study_rtols (default: direct,cg-gamg,cg-jacobi)")
+    add_option(parser, "study_rtols", "--rtols", dest="rtols", metavar="RTOL", nargs="+", type=comma_list(float),
+               default=[[1e-4, 1e-8]], help="-ksp_rtol values of the iterative solvers (default: 1e-4,1e-8)")
+    add_option(parser, "study_ranks", "--ranks", dest="ranks", metavar="N", nargs="+", type=comma_list(int),
+               default=[[1, 2]], help="MPI rank counts (default: 1,2)")
+    add_option(parser, "study_reference_dt", "--reference-dt", dest="reference_dt", metavar="DT", type=float,
+               default=None, help="time step (s) of the reference runs (default: the finest level's dt / 10)")
+    add_option(parser, "study_reference_ranks", "--reference-ranks", dest="reference_ranks", metavar="N", type=int,
+               default=None, help="rank count of the reference runs (default: the largest of -study_ranks)")
+    add_option(parser, "study_repeat", "--repeat", dest="repeat", metavar="N", type=int, default=1,
+               help="run the grid this many times (passes alternately forwards and backwards) and keep each "
+                    "point's fastest time loop; the references run once (default 1)")
+    add_option(parser, "study_timeout", "--timeout", dest="timeout", metavar="S", type=float, default=3600,
+               help="seconds after which a run is stopped and recorded as failed (default 3600)")
+    args = parse_with_passthrough(parser, argv)
+    args.modes = flatten(args.modes)
+    args.solvers = flatten(args.solvers)
+    args.rtols = flatten(args.rtols)
+    args.ranks = flatten(args.ranks)
 
     def fail(message):
         parser.error(message)
 
     for mode in args.modes:
         if mode not in MODES:
-            fail(f"--modes: unknown mode {mode!r} (choose from {', '.join(MODES)})")
+            fail(f"-study_modes: unknown mode {mode!r} (choose from {', '.join(MODES)})")
     args.direct = {}
     for solver in args.solvers:
         path = os.path.join(CONFIG_DIR, solver + ".opts")
         if not os.path.isfile(path):
-            fail(f"--solvers: no preset {path}")
+            fail(f"-study_solvers: no preset {path}")
         args.direct[solver] = _is_direct(path)
     if any(r <= 0 or not math.isfinite(r) for r in args.rtols):
-        fail("--rtols must be positive")
+        fail("-study_rtols must be positive")
     if any(n < 1 for n in args.ranks):
-        fail("--ranks must be positive")
+        fail("-study_ranks must be positive")
     if not (args.end_time > 0 and math.isfinite(args.end_time)):
-        fail("--end-time must be positive")
+        fail("-study_end_time must be positive")
     if not (args.dt0 > 0 and math.isfinite(args.dt0)):
-        fail("--dt0 must be positive")
+        fail("-study_dt0 must be positive")
     if args.levels < 1:
-        fail("--levels must be at least 1")
+        fail("-study_levels must be at least 1")
     if args.repeat < 1:
-        fail("--repeat must be at least 1")
+        fail("-study_repeat must be at least 1")
     args.dts = [args.dt0 / 2 ** level for level in range(args.levels)]
     if args.reference_dt is None:
         args.reference_dt = args.dts[-1] / 10
@@ -176,7 +145,7 @@ def parse_arguments(argv):
         steps = round(args.end_time / dt)
         if steps < 1 or abs(steps * dt - args.end_time) > 1e-9 * args.end_time:
             fail(f"time step {dt:g} s does not divide the end time {args.end_time:g} s "
-                 f"(choose --end-time, --dt0 or --reference-dt so that T / dt is a whole number)")
+                 f"(choose -study_end_time, -study_dt0 or -study_reference_dt so that T / dt is a whole number)")
     for option in args.extra:
         if option in CONTROLLED:
             fail(f"{option} is set by the study itself and cannot be passed after --")
@@ -199,32 +168,6 @@ def _is_direct(path):
 
 # ----------------------------------------------------------------------------- runs
 
-def _environment():
-    env = dict(os.environ)
-    env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
-    if os.geteuid() == 0:
-        env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
-        env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
-    return env
-
-
-def _one_line_error(text, returncode):
-    """The run's own error line (softbody: error: ...), else the last informative line."""
-    lines = [line.strip() for line in text.splitlines() if line.strip()]
-    for line in lines:
-        if line.startswith("softbody: error"):
-            return line
-    noise = ("---", "Primary job", "a non-zero exit code", "mpirun detected", "the job to be",
-             "Process name", "Exit code", "Per user-direction")
-    informative = [l for l in lines if not any(l.startswith(n) or n in l for n in noise)]
-    for line in informative:
-        if "error" in line.lower() or "signal" in line.lower():
-            return line
-    if informative:
-        return informative[-1]
-    return f"exit status {returncode}"
-
-
 def run_softbody(args, name, mode, solver, rtol, ranks, dt):
     """Runs softbody once; returns a dict with status, message, attributes and final positions."""
     import h5py
@@ -246,7 +189,7 @@ def run_softbody(args, name, mode, solver, rtol, ranks, dt):
             os.remove(path)
     try:
         proc = subprocess.run(command, capture_output=True, text=True, timeout=args.timeout,
-                              env=_environment(), cwd=ROOT)
+                              env=mpi_environment(), cwd=ROOT)
         output, code = proc.stdout + proc.stderr, proc.returncode
     except subprocess.TimeoutExpired as expired:
         output = ((expired.stdout or b"").decode(errors="replace") if isinstance(expired.stdout, bytes)
@@ -258,7 +201,7 @@ def run_softbody(args, name, mode, solver, rtol, ranks, dt):
         result["message"] = f"timed out after {args.timeout:g} s"
         return result
     if code != 0:
-        result["message"] = _one_line_error(output, code)
+        result["message"] = one_line_error(output, code)
         return result
     try:
         with h5py.File(out, "r") as f:
@@ -435,7 +378,7 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md.append("")
     md.append(f"Study wall time {elapsed:.0f} s"
               + (f"; every grid point ran {args.repeat} times and keeps its fastest time loop." if args.repeat > 1
-                 else "; every grid point ran once (timings on a shared machine are noisy: --repeat)."))
+                 else "; every grid point ran once (timings on a shared machine are noisy: -study_repeat)."))
     md.append("")
     md.append("## References")
     md.append("")

@@ -1,22 +1,32 @@
-"""Shared helpers for the softbody ctest scripts.
+"""Helpers of the softbody ctest scripts (the ones the tools share are in tools/softbody_tools.py).
 
 Every script is run by ctest as
-    python3 tests/<script>.py --softbody BUILD/softbody --mpiexec MPIEXEC --shared ../shared --work DIR
-and exits 0 (pass), 1 (fail) or 77 (skipped: ctest's SKIP_RETURN_CODE).
+    python3 tests/regression/test_NAME.py --softbody BUILD/softbody --mpiexec MPIEXEC --work DIR [--shared ../shared]
+and exits 0 (pass), 1 (fail) or 77 (skipped: ctest's SKIP_RETURN_CODE). Only
+the tests that compare with the seed coursework data, test_seed_*.py, get
+--shared (tests/regression/CMakeLists.txt); they call seed(), which skips the
+test when the data is absent. Every other test runs on the project's own
+scenes and meshes (scenes/, tests/data/, meshes written by tools/box_mesh.py).
 """
 import argparse
 import os
 import subprocess
 import sys
 
+TOOLS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools")
+sys.path.insert(0, TOOLS)
+from softbody_tools import (lumped_masses, mpi_environment, read_all_datasets, read_frames,  # noqa: E402,F401
+                            read_medit, read_petsc_aij, softbody_command, write_scene)
+
 SKIP = 77
 
 
 def arguments(extra=None):
-    parser = argparse.ArgumentParser()
+    """The command line ctest gives every script (and `extra(parser)`'s own options)."""
+    parser = argparse.ArgumentParser(allow_abbrev=False)
     parser.add_argument("--softbody", required=True)
     parser.add_argument("--mpiexec", required=True)
-    parser.add_argument("--shared", required=True)
+    parser.add_argument("--shared", default=None, help="the seed data's parent folder (test_seed_*.py only)")
     parser.add_argument("--work", required=True)
     if extra:
         extra(parser)
@@ -26,7 +36,11 @@ def arguments(extra=None):
 
 
 def seed(args, *parts):
-    """Path inside ../shared/seed-data; skips the test when it is absent."""
+    """Path inside ../shared/seed-data; skips the test when it is absent (or when
+    the test was not given --shared)."""
+    if args.shared is None:
+        print("SKIP: no --shared folder given (only test_seed_*.py read the seed data)")
+        sys.exit(SKIP)
     path = os.path.join(args.shared, "seed-data", *parts)
     if not os.path.exists(path):
         print(f"SKIP: {path} not found (tests that need ../shared skip without it)")
@@ -35,14 +49,10 @@ def seed(args, *parts):
 
 
 def run(args, ranks, options, timeout=300, check=True):
-    """Runs softbody on `ranks` ranks; returns the CompletedProcess (text output)."""
-    env = dict(os.environ)
-    env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
-    if os.geteuid() == 0:
-        env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
-        env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
-    command = [args.mpiexec, "-n", str(ranks), args.softbody] + [str(o) for o in options]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=env)
+    """Runs softbody on `ranks` ranks; returns the CompletedProcess (text output).
+    With check, a non-zero exit prints the command and its output and fails the test."""
+    command = softbody_command(args.mpiexec, ranks, args.softbody, options)
+    result = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=mpi_environment())
     if check and result.returncode != 0:
         print("command failed:", " ".join(command))
         print(result.stdout)
@@ -51,57 +61,31 @@ def run(args, ranks, options, timeout=300, check=True):
     return result
 
 
-def write_scene(path, bodies, velocities=None):
-    """bodies: list of (mesh, density, young, poisson, fixed, (px,py,pz), (qw,qx,qy,qz));
-    velocities: list of (mesh, vertex, (vx,vy,vz)) or None for no section."""
-    with open(path, "w") as f:
-        f.write(f"{len(bodies)}\n")
-        for mesh, rho, young, nu, fixed, p, q in bodies:
-            f.write(f"{mesh} {rho!r} {young!r} {nu!r} {int(fixed)} "
-                    + " ".join(repr(float(c)) for c in p) + " "
-                    + " ".join(repr(float(c)) for c in q) + "\n")
-        if velocities is not None:
-            f.write(f"{len(velocities)}\n")
-            for m, v, vel in velocities:
-                f.write(f"{m} {v} " + " ".join(repr(float(c)) for c in vel) + "\n")
+def fresh_result(work, name):
+    """work/NAME.h5, with any .h5 and .xdmf of that name from an earlier run deleted."""
+    path = os.path.join(work, name + ".h5")
+    for old in (path, path[:-3] + ".xdmf"):
+        if os.path.exists(old):
+            os.remove(old)
     return path
 
 
-def read_frames(path):
-    """Returns a dict of numpy arrays from a softbody HDF5 result, and its
-    "complete" attribute (0 or 1)."""
-    import h5py
-    with h5py.File(path, "r") as f:
-        frames = {name: f[name][()] for name in
-                  ("time", "positions", "velocities", "energy/kinetic", "energy/elastic",
-                   "energy/gravitational", "mesh/tets", "mesh/boundary_triangles", "mesh/vertex_body",
-                   "mesh/rest_positions", "mesh/body_fixed")}
-        frames["complete"] = int(f.attrs["complete"])
-    return frames
+def png_size(path):
+    """(width, height) of a PNG file from its IHDR chunk, or None when it is not a PNG."""
+    import struct
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return struct.unpack(">II", head[16:24])
 
 
 def box_mesh(args, name, size, cells):
     """Writes a box mesh (tools/box_mesh.py) into the work folder; returns its path."""
-    tools = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools")
     path = os.path.join(args.work, name)
-    subprocess.run([sys.executable, os.path.join(tools, "box_mesh.py"), path, "--size", *map(str, size),
-                    "--cells", *map(str, cells)], check=True, capture_output=True)
+    subprocess.run([sys.executable, os.path.join(TOOLS, "box_mesh.py"), path, "-box_size", *map(str, size),
+                    "-box_cells", *map(str, cells)], check=True, capture_output=True)
     return path
-
-
-def read_petsc_aij(path):
-    """Reads a PETSc binary AIJ matrix file into a scipy-free dense-or-COO triple
-    (rows, cols, values, shape). Big-endian int32 header, as PETSc writes it."""
-    import numpy as np
-    with open(path, "rb") as f:
-        header = np.fromfile(f, dtype=">i4", count=4)
-        assert header[0] == 1211216, f"{path}: not a PETSc Mat file"
-        m, n, nnz = int(header[1]), int(header[2]), int(header[3])
-        row_lengths = np.fromfile(f, dtype=">i4", count=m)
-        cols = np.fromfile(f, dtype=">i4", count=nnz)
-        values = np.fromfile(f, dtype=">f8", count=nnz)
-    rows = np.repeat(np.arange(m), row_lengths)
-    return rows, cols.astype(np.int64), values.astype(np.float64), (m, n)
 
 
 def relative_difference(ours, reference):
@@ -131,27 +115,6 @@ class Checks:
     def exit(self):
         print(f"{self.passed} passed, {self.failed} failed")
         sys.exit(1 if self.failed or not self.passed else 0)
-
-
-def mpi_env():
-    """The environment `run` gives mpirun (root allowed, oversubscription), for
-    scripts that start softbody themselves (signals, pseudo-terminals)."""
-    env = dict(os.environ)
-    env.setdefault("OMPI_MCA_rmaps_base_oversubscribe", "1")
-    if os.geteuid() == 0:
-        env["OMPI_ALLOW_RUN_AS_ROOT"] = "1"
-        env["OMPI_ALLOW_RUN_AS_ROOT_CONFIRM"] = "1"
-    return env
-
-
-def read_all_datasets(path):
-    """Every dataset of an HDF5 file as {name: numpy array}."""
-    import h5py
-    found = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda name, item: found.__setitem__(name, item[()]) if isinstance(item, h5py.Dataset)
-                     else None)
-    return found
 
 
 def xdmf_frames(xdmf_path):

@@ -103,8 +103,8 @@ PERIOD = 1.0 / FREQUENCY                 # 63.2 ms
 
 def box_mesh(path, cells):
     subprocess.run([sys.executable, os.path.join(TOOLS, "box_mesh.py"), path,
-                    "--size", str(LENGTH), str(WIDTH), str(WIDTH),
-                    "--cells", str(cells), str(ACROSS), str(ACROSS)], check=True, capture_output=True)
+                    "-box_size", str(LENGTH), str(WIDTH), str(WIDTH),
+                    "-box_cells", str(cells), str(ACROSS), str(ACROSS)], check=True, capture_output=True)
 
 
 def rest_vertices(mesh):

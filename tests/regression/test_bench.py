@@ -28,23 +28,6 @@ sys.path.insert(0, TOOLS)
 import bench  # noqa: E402
 
 
-def read_medit(path):
-    tokens = open(path).read().split()
-    sections, pos = {}, 0
-    widths = {"Vertices": 4, "Triangles": 4, "Tetrahedra": 5}
-    while pos < len(tokens) and tokens[pos] != "End":
-        word = tokens[pos]
-        pos += 1
-        if word in ("MeshVersionFormatted", "Dimension"):
-            pos += 1
-        elif word in widths:
-            n = int(tokens[pos])
-            pos += 1
-            sections[word] = np.array(tokens[pos:pos + n * widths[word]], dtype=float).reshape(n, widths[word])
-            pos += n * widths[word]
-    return sections["Vertices"][:, :3], sections["Tetrahedra"][:, :4].astype(np.int64) - 1
-
-
 def check_mesh(checks, target):
     vertices, tets, cells = bench.beam_mesh(target)
     X = vertices[tets]
@@ -88,7 +71,7 @@ def main():
     for name in os.listdir(folder) if os.path.isdir(folder) else []:
         os.remove(os.path.join(folder, name))
     scene = bench.write_beam(folder, 10000)
-    vertices, tets = read_medit(os.path.join(folder, "beam-10000.mesh"))
+    vertices, _, _, tets = harness.read_medit(os.path.join(folder, "beam-10000.mesh"))
     expected_vertices, expected_tets, _ = bench.beam_mesh(10000)
     checks.check(np.array_equal(tets, expected_tets) and np.allclose(vertices, expected_vertices, rtol=0, atol=1e-15),
                  "beam-10000.mesh reads back to the generated mesh")
@@ -102,7 +85,7 @@ def main():
     checks.check(abs(velocities.sum(axis=0)).max() < 1e-12, "the strike carries no net momentum (equal end faces)")
 
     study = os.path.join(args.work, "bench")
-    command = [sys.executable, os.path.join(TOOLS, "bench.py"), "--softbody", args.softbody, "--mpiexec",
+    command = [sys.executable, os.path.join(TOOLS, "bench.py"), "-softbody", args.softbody, "-mpiexec",
                args.mpiexec, "-bench_tets", "1e4", "-study_dir", study]
     result = subprocess.run(command, capture_output=True, text=True, timeout=540)
     print(result.stdout)

@@ -18,9 +18,11 @@ import harness
 TOOL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools", "box_mesh.py")
 
 
-def generate(path, size, cells=None, tets=None):
-    command = [sys.executable, TOOL, path, "--size"] + [repr(float(s)) for s in size]
-    command += ["--cells"] + [str(n) for n in cells] if cells else ["--tets", str(tets)]
+def generate(path, size, cells=None, tets=None, spelling=("-box_size", "-box_cells", "-box_tets")):
+    """Runs tools/box_mesh.py; `spelling` names its three options (PETSc style by default)."""
+    size_option, cells_option, tets_option = spelling
+    command = [sys.executable, TOOL, path, size_option] + [repr(float(s)) for s in size]
+    command += [cells_option] + [str(n) for n in cells] if cells else [tets_option, str(tets)]
     result = subprocess.run(command, capture_output=True, text=True, timeout=300)
     if result.returncode != 0:
         print("command failed:", " ".join(command))
@@ -30,7 +32,9 @@ def generate(path, size, cells=None, tets=None):
 
 
 def read_medit(path):
-    """Vertices (#V x 3), triangles (#B x 3, 0-based), their refs (#B), tets (#T x 4, 0-based)."""
+    """Vertices (#V x 3), triangles (#B x 3, 0-based), their refs (#B), tets (#T x 4, 0-based).
+    Stricter than softbody_tools.read_medit, as a test of the writer: the vertex and
+    tet refs must be 0."""
     tokens = open(path).read().split()
     sections, pos = {}, 0
     widths = {"Vertices": 4, "Triangles": 4, "Tetrahedra": 5}
@@ -146,7 +150,7 @@ def main():
         generate(path, size, tets=target)
         vertices, _, _, tets = read_medit(path)
         checks.check(target / 1.5 <= len(tets) <= target * 1.5,
-                     f"--size {size} --tets {target}: {len(tets)} tets (within a factor 1.5)")
+                     f"-box_size {size} -box_tets {target}: {len(tets)} tets (within a factor 1.5)")
         # The chosen cell counts, recovered from the vertex coordinates.
         cells = tuple(len(np.unique(vertices[:, c])) - 1 for c in range(3))
         check_mesh(checks, f"tets{target}", path, size, cells)
@@ -155,10 +159,12 @@ def main():
     committed = os.path.join(os.path.dirname(TOOL), "..", "scenes", "beam.mesh")
     if os.path.exists(committed):
         path = os.path.join(work, "scenes-beam.mesh")
-        generate(path, (4, 1, 1), cells=(24, 6, 6))
-        with open(path, "rb") as a, open(committed, "rb") as b:
-            checks.check(a.read() == b.read(),
-                         "scenes/beam.mesh = box_mesh.py --size 4 1 1 --cells 24 6 6, byte for byte")
+        for spelling in (("-box_size", "-box_cells", "-box_tets"), ("--box-size", "--box-cells", "--box-tets"),
+                         ("--size", "--cells", "--tets")):
+            generate(path, (4, 1, 1), cells=(24, 6, 6), spelling=spelling)
+            with open(path, "rb") as a, open(committed, "rb") as b:
+                checks.check(a.read() == b.read(), f"scenes/beam.mesh = box_mesh.py {spelling[0]} 4 1 1 "
+                                                   f"{spelling[1]} 24 6 6, byte for byte")
 
     # The program accepts a generated mesh and runs it; vertex 8 = (i, j, k) = (8, 0, 0)
     # is a corner of the beam's x = Lx end.

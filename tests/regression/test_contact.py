@@ -31,7 +31,10 @@ at 0.75 m, a 0.75 m fall to the ground).
     away.
 (d) A cube dropped onto a fixed cube (no ground): rests on it, no penetration,
     the fixed cube bit-for-bit still; the fixed cube's sharp edges met it (run
-    summary). Dropped beside a fixed cube 5 m away onto the ground: no
+    summary). A coarse plank (1 x 0.125 x 0.75 m, 2 x 1 x 1 cells) dropped across
+    the fixed cube with none of its vertices over the cube's top face: held by
+    the cube's top edges alone, it rests on them, no edge point ever inside it
+    (0.01 barycentric); with -sharp_edges 0 it falls past the cube. Dropped beside a fixed cube 5 m away onto the ground: no
     sharp-edge contact and the free body's grids never built (its state is
     gathered only while its box meets a fixed body with sharp edges).
 (e) Sliding with Coulomb friction 0.5: decelerates at mu g (+ mass damping,
@@ -94,14 +97,8 @@ def simulate(name, scene, options, ranks=2, check=True):
 
 
 def lumped_masses(r, densities):
-    tets, rest = r["mesh/tets"], r["mesh/rest_positions"]
-    corners = rest[tets]
-    volumes = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6.0
-    rho = np.asarray(densities)[r["mesh/vertex_body"][tets[:, 0]]]
-    masses = np.zeros(len(rest))
-    for k in range(4):
-        np.add.at(masses, tets[:, k], rho * volumes / 4.0)
-    return masses
+    """Lumped vertex masses of a result's mesh (rho V / 4 per tet corner)."""
+    return harness.lumped_masses(r["mesh/tets"], r["mesh/rest_positions"], r["mesh/vertex_body"], densities)
 
 
 def depth_inside(points, positions, tets):
@@ -324,6 +321,35 @@ builds = re.search(r"grids built in (\d+) passes.*gathered (\d+) times", out_bes
 checks.check(builds is not None and int(builds.group(1)) == 0 and int(builds.group(2)) == 0 and
              "sharp-edge contacts" not in out_beside,
              f"(d) a fixed cube 5 m away: no sharp-edge contact, {builds.group(0) if builds else None}")
+
+# Held by edges alone: a plank across the fixed cube whose vertices all lie beside
+# its top face (x = -0.5, 0, 0.5 and z = +-0.375 around a face of |x|, |z| <= 0.25):
+# only the cube's top edges can catch it. With sharp edges it comes to rest on them
+# and no point of those edges (sampled every 2.5 cm) is ever inside a plank tet;
+# with -sharp_edges 0 nothing holds it and it falls past the cube.
+box_mesh("plank.mesh", (1.0, 0.125, 0.75), (2, 1, 1))
+plank_scene = harness.write_scene(os.path.join(args.work, "plank.txt"),
+                                  [("cube.mesh", RHO, YOUNG, NU, 1, (0, 0, 0), (1, 0, 0, 0)),
+                                   ("plank.mesh", RHO, 2e4, NU, 0, (0, 0.6, 0), (1, 0, 0, 0))])
+z = np.linspace(-half, half, 21)
+top_edges = np.concatenate([np.c_[np.full_like(z, x), np.full_like(z, half), z] for x in (-half, half)]
+                           + [np.c_[z, np.full_like(z, half), np.full_like(z, c)] for c in (-half, half)])
+for sharp in (1, 0):
+    e, out_e, _, _, _ = simulate(f"plank_sharp{sharp}", plank_scene, ["-gravity", "0,-9.81,0", "-dt", "0.01",
+                                                                    "-steps", "200", "-sharp_edges", str(sharp)])
+    body, tets, P = e["mesh/vertex_body"], e["mesh/tets"], e["positions"]
+    plank_tets = tets[body[tets[:, 0]] == 1]
+    edge_depth = max(depth_inside(top_edges, P[f], plank_tets).max() for f in range(len(P)))
+    ke, lowest = e["energy/kinetic"], P[-1, body == 1, 1].min()
+    if sharp:
+        checks.check(edge_depth < DEPTH and ke[-1] < 0.01 * ke.max() and lowest > half - PENETRATION,
+                     f"(d) a plank held only by the fixed cube's edges rests on them: edge points at most "
+                     f"{edge_depth:+.1e} (barycentric) inside it (< {DEPTH}), final KE {ke[-1]:.2e} J < 1 % of "
+                     f"peak {ke.max():.4g} J, lowest plank vertex y = {lowest:.4f} m (top face {half} m)")
+    else:
+        checks.check(lowest < -1.0 and "sharp-edge contacts" not in out_e,
+                     f"(d) with -sharp_edges 0 nothing holds the plank: it falls to y = {lowest:.2f} m "
+                     f"(edge points up to {edge_depth:+.2f} inside it on the way)")
 
 # ---------------------------------------------------------------- (e) friction
 print("(e) sliding on the ground")

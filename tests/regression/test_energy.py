@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """Energy behaviour and bookkeeping of the implicit Euler integrator.
 
-Scene (written into the work dir, seed meshes): two free bunnies of different
-density and stiffness with the initial velocities of bunny-scene.txt, and a
-fixed cube86 between them in the file (so the free vertices are not contiguous).
+Scene (written into the work dir with meshes of tools/box_mesh.py): two free
+2 x 1 x 1 m blocks (6 x 3 x 3 cells, 112 vertices each) of different density
+and stiffness, turned by 90 degrees about y, struck on three vertices each, and
+a fixed 1 m cube between them in the file (so the free vertices are not
+contiguous) and in space (2 m from each, out of their way).
 
 (a) -alpha 0 -beta 0, 100 steps: the total energy (kinetic + elastic) never
     increases between frames (round-off allowance 1e-12 of the initial energy)
@@ -14,8 +16,9 @@ fixed cube86 between them in the file (so the free vertices are not contiguous).
     M); kinetic energy 0.5 sum m |v|^2 and elastic energy 0.5 u^T K u (K from
     -export_matrices of the same run, u over the free vertices) on every frame;
     elastic energy 0 at frame 0.
-(d) one free tetrahedron with a uniform velocity, no damping, 1 rank: rigid
-    translation x(t) = X + v t, v constant, energies constant (1e-12).
+(d) one free tetrahedron (the unit corner tet, written here) with a uniform
+    velocity, no damping, 1 rank: rigid translation x(t) = X + v t, v constant,
+    energies constant (1e-12).
 """
 import os
 import sys
@@ -30,24 +33,20 @@ ROUNDOFF = 1e-12
 BOOKKEEPING = 1e-10
 RIGID = 1e-12
 
+# Meshes: name -> (size in m, cells); block vertex (i, j, k) has index i + 7 (j + 4 k).
+MESHES = {"block.mesh": ((2.0, 1.0, 1.0), (6, 3, 3)), "cube.mesh": ((1.0, 1.0, 1.0), (3, 3, 3))}
 # (mesh, density, young, poisson, fixed, position, quaternion)
 BODIES = [
-    ("bunny.mesh", 100.0, 50000.0, 0.3, False, (0, 60, 0), (1, 0, 1, 0)),
-    ("cube86.mesh", 300.0, 2000.0, 0.1, True, (0, 20, 0), (1, 0, 0, 0)),
-    ("bunny.mesh", 250.0, 5000.0, 0.45, False, (0, 80, 0), (1, 0, 1, 0)),
+    ("block.mesh", 100.0, 50000.0, 0.3, False, (0, 2, 0), (1, 0, 1, 0)),
+    ("cube.mesh", 300.0, 2000.0, 0.1, True, (0, 0, 0), (1, 0, 0, 0)),
+    ("block.mesh", 250.0, 5000.0, 0.45, False, (0, -2, 0), (1, 0, 1, 0)),
 ]
-VELOCITIES = [(0, 43, (0, 20, 0)), (2, 43, (0, 20, 0)), (0, 32, (0, 0, 20)),
-              (2, 32, (0, 0, 20)), (0, 28, (-10, 0, 20)), (2, 28, (-10, 0, 20))]
-
-
-def lumped_masses(tets, rest, vertex_body, densities):
-    corners = rest[tets]  # T x 4 x 3
-    volumes = np.abs(np.linalg.det(corners[:, 1:] - corners[:, :1])) / 6.0
-    rho = np.asarray(densities)[vertex_body[tets[:, 0]]]
-    masses = np.zeros(len(rest))
-    for corner in range(4):
-        np.add.at(masses, tets[:, corner], rho * volumes / 4.0)
-    return masses
+# A corner (0, 0, 0), a vertex inside an end face (6, 2, 2), the middle of a long edge (3, 3, 0),
+# struck away from the fixed cube and across (m/s).
+VELOCITIES = [(0, 0, (0, 1, 0)), (2, 0, (0, -1, 0)), (0, 76, (0, 0, 1)),
+              (2, 76, (0, 0, 1)), (0, 24, (-0.5, 0, 1)), (2, 24, (-0.5, 0, 1))]
+TETRAHEDRON = "MeshVersionFormatted 1\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n" \
+              "Tetrahedra\n1\n1 2 3 4 0\nEnd\n"
 
 
 def matvec(matrix, x):
@@ -58,9 +57,9 @@ def matvec(matrix, x):
 def main():
     args = harness.arguments()
     checks = harness.Checks()
-    folder = harness.seed(args, "cggs-cw2")
-    bodies = [(os.path.join(folder, b[0]),) + b[1:] for b in BODIES]
-    scene = harness.write_scene(os.path.join(args.work, "scene.txt"), bodies, VELOCITIES)
+    for name, (size, cells) in MESHES.items():
+        harness.box_mesh(args, name, size, cells)
+    scene = harness.write_scene(os.path.join(args.work, "scene.txt"), BODIES, VELOCITIES)
 
     def simulate(label, ranks, scene_path, extra, steps=STEPS):
         out = os.path.join(args.work, f"{label}.h5")
@@ -100,7 +99,7 @@ def main():
     tets = undamped["mesh/tets"].astype(np.int64)
     rest = undamped["mesh/rest_positions"]
     vertex_body = undamped["mesh/vertex_body"].astype(np.int64)
-    masses = lumped_masses(tets, rest, vertex_body, [b[1] for b in BODIES])
+    masses = harness.lumped_masses(tets, rest, vertex_body, [b[1] for b in BODIES])
     fixed = np.array([b[4] for b in BODIES])[vertex_body]
     free = ~fixed
     m_export = harness.read_petsc_aij(os.path.join(matrices, "M.bin"))
@@ -151,9 +150,11 @@ def main():
 
     # (d) A single free tetrahedron in uniform motion translates rigidly.
     velocity = np.array([0.3, -1.2, 0.7])
+    with open(os.path.join(args.work, "tetrahedron.mesh"), "w") as f:
+        f.write(TETRAHEDRON)
     tet_scene = harness.write_scene(
         os.path.join(args.work, "tet-scene.txt"),
-        [(os.path.join(folder, "tetrahedron.mesh"), 2.5, 10000.0, 0.3, False, (1, 2, 3), (1, 0, 0, 0))],
+        [("tetrahedron.mesh", 2.5, 10000.0, 0.3, False, (1, 2, 3), (1, 0, 0, 0))],
         [(0, i, velocity) for i in range(4)])
     rigid = simulate("tet", 1, tet_scene, ["-alpha", 0, "-beta", 0], steps=50)
     times = rigid["time"]
@@ -166,7 +167,7 @@ def main():
                  f"max abs diff {error_x:.3e} m = {error_x / scale:.3e} of max |x| {scale:.4g} m")
     checks.check(error_v <= RIGID * np.abs(velocity).max(),
                  f"(d) tet: velocity stays v: max abs diff {error_v:.3e} m/s")
-    tet_mass = lumped_masses(rigid["mesh/tets"].astype(np.int64), rigid["mesh/rest_positions"],
+    tet_mass = harness.lumped_masses(rigid["mesh/tets"].astype(np.int64), rigid["mesh/rest_positions"],
                              rigid["mesh/vertex_body"].astype(np.int64), [2.5]).sum()
     kinetic_exact = 0.5 * tet_mass * velocity @ velocity
     drift_k = np.abs(rigid["energy/kinetic"] - kinetic_exact).max() / kinetic_exact

@@ -50,14 +50,16 @@ cases = [
     ("input error", 2, ["-scene", bad], False),
     ("bad option", 1, ["-scene", valid, "-mode", "bogus"], False),
 ]
-cylinder = os.path.join(args.shared, "seed-data", "cggs-cw2-2024", "cylinder-scene.txt")
-if os.path.exists(cylinder):
-    cases.append(("distance constraints", 2,
-                  ["-scene", cylinder, "-constraints",
-                   os.path.join(os.path.dirname(cylinder), "cylinder-constraints.txt"),
-                   "-options_file", practical3, "-steps", "5"], True))
-else:
-    print(f"note: {cylinder} not found, the constraints case is left out")
+# Distance constraints: tests/data/constraints/hang.txt (two cubes hanging from a
+# fixed one, as in test_constraints.py (b)), on cubes of tools/box_mesh.py.
+harness.box_mesh(args, "cube.mesh", (0.5, 0.5, 0.5), (4, 4, 4))
+hang = harness.write_scene(os.path.join(args.work, "hang.txt"),
+                           [("cube.mesh", 1000.0, 1e6, 0.3, 1, (0, 0, 0), (1, 0, 0, 0)),
+                            ("cube.mesh", 1000.0, 1e6, 0.3, 0, (0, -0.75, 0), (1, 0, 0, 0)),
+                            ("cube.mesh", 1000.0, 1e6, 0.3, 0, (0, -1.5, 0), (1, 0, 0, 0))])
+cases.append(("distance constraints", 2,
+              ["-scene", hang, "-constraints", os.path.join(HERE, "..", "data", "constraints", "hang.txt"),
+               "-gravity", "0,-9.81,0", "-steps", "5"], True))
 
 failed = 0
 for name, ranks, options, succeeds in cases:

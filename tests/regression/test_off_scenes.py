@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Scenes with OFF surfaces (tetrahedralised by TetGen on load) and gmsh meshes.
 
-- ../shared/seed-data/infomgp-p3/bunny-scene.txt (one bunny.off), 2 ranks, 2 steps
-  (skipped without ../shared);
+- tests/data/meshes/torus-scene.txt (one torus.off: a curved surface of genus 1,
+  576 triangles), 2 ranks, 2 steps (the seed bunny.off scene is
+  test_seed_off_scenes.py);
 - tests/data/meshes/mixed-scene.txt: box_quads.off, cube.mesh, cube-4.1.msh and
   cube-2.2.msh (fixed), 2 ranks, 2 steps;
 - the same with -tetgen_max_volume 0.01 and with -tetgen_switches pY;
@@ -161,16 +162,29 @@ def main():
                                      [(os.path.join(MESHES, "open_box.off"), 1000, 1e5, 0.3, 0, (0, 0, 0), (1, 0, 0, 0))])
     expect_error(checks, args, "open surface", ["-scene", open_scene], "open_box.off: TetGen")
 
-    # 4. The seed bunny (infomgp-p3: OFF objects, tetrahedralised on load).
-    scene = harness.seed(args, "infomgp-p3", "bunny-scene.txt")
-    bunny = os.path.join(os.path.dirname(scene), "bunny.off")
-    out = os.path.join(args.work, "bunny.h5")
+    # 4. A curved surface of genus 1 (its tets must fill the torus, not its hole).
+    torus = os.path.join(MESHES, "torus.off")
+    frames = check_off_scene(checks, args, "torus", os.path.join(MESHES, "torus-scene.txt"), torus, folder)
+    vertices, faces = read_off(torus)
+    a, b, c = (vertices[[f[k] for f in faces]] for k in range(3))
+    enclosed = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6  # divergence theorem, outward faces
+    volumes = tet_volumes(frames["mesh/rest_positions"], frames["mesh/tets"])
+    checks.check(volumes.min() > 0 and abs(volumes.sum() / enclosed - 1) < 1e-10,
+                 f"torus: {len(volumes)} positive tets whose volumes sum to the surface's enclosed volume "
+                 f"{enclosed:.12g} (relative difference {volumes.sum() / enclosed - 1:.1e}, < 1e-10)")
+    checks.exit()
+
+
+def check_off_scene(checks, args, label, scene, off, folder):
+    """A one-body OFF scene, 2 ranks, STEPS steps: TetGen's vertex count, the OFF
+    vertices first; returns the frames."""
+    out = os.path.join(args.work, label + ".h5")
     result = harness.run(args, 2, ["-scene", scene, "-steps", STEPS, "-output", out])
-    check_run(checks, "infomgp-p3 bunny", harness.read_frames(out),
-              [tetgen_vertex_count(bunny, "pq1.414", folder)], [(0, bunny)])
+    frames = harness.read_frames(out)
+    check_run(checks, label, frames, [tetgen_vertex_count(off, "pq1.414", folder)], [(0, off)])
     summary = next((l.strip() for l in result.stdout.splitlines() if l.strip().startswith("scene")), "")
     print("   ", summary)
-    checks.exit()
+    return frames
 
 
 if __name__ == "__main__":

@@ -41,11 +41,11 @@ def launch(ranks, options, terminal, steps=STEPS):
     command += ["-scene", scene, "-steps", str(steps)] + [str(o) for o in options]
     start = time.time()
     if not terminal:
-        r = subprocess.run(command, capture_output=True, env=harness.mpi_env(), timeout=300)
+        r = subprocess.run(command, capture_output=True, env=harness.mpi_environment(), timeout=300)
         return r.returncode, r.stdout.decode(), r.stderr, time.time() - start
     master, slave = pty.openpty()
     process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=slave,
-                               env=harness.mpi_env())
+                               env=harness.mpi_environment())
     os.close(slave)
     err = b""
     while True:

@@ -42,11 +42,7 @@ beam = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "sce
 
 
 def path(name):
-    p = os.path.join(work, name + ".h5")
-    for q in (p, p[:-3] + ".xdmf"):
-        if os.path.exists(q):
-            os.remove(q)
-    return p
+    return harness.fresh_result(work, name)
 
 
 def compare(label, reference, result, exact=True, tolerance=0.0):

@@ -37,11 +37,7 @@ STOPPED = re.compile(r"softbody: stopped by (SIG\w+) after step (\d+) of 1000000
 
 
 def fresh(name):
-    path = os.path.join(work, name + ".h5")
-    for p in (path, path[:-3] + ".xdmf"):
-        if os.path.exists(p):
-            os.remove(p)
-    return path
+    return harness.fresh_result(work, name)
 
 
 def run_until(out, ranks, options, sig, frames=6):
@@ -50,7 +46,7 @@ def run_until(out, ranks, options, sig, frames=6):
     command = ([args.softbody] if ranks == 1 else [args.mpiexec, "-n", str(ranks), args.softbody])
     command += ["-scene", scene, "-steps", "1000000", "-output", out] + options
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               env=harness.mpi_env())
+                               env=harness.mpi_environment())
     xdmf, deadline = out[:-3] + ".xdmf", time.time() + 120
     while time.time() < deadline and process.poll() is None:
         if os.path.exists(xdmf) and open(xdmf).read().count("<Time ") >= frames:

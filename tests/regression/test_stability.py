@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The quick stability matrix passes: tools/stability.py --quick.
+"""The quick stability matrix passes: tools/stability.py -stability_quick.
 
 Runs the representative fast subset of the stability matrix (E = 1e2 and 1e12 Pa,
 nu = 0.4999, dt = 1e-4 and 1 s, strike and spin at 1e4 body sizes per second, a
@@ -40,24 +40,25 @@ def main():
         if os.path.exists(os.path.join(study, name)):
             os.remove(os.path.join(study, name))
 
-    listing = subprocess.run([sys.executable, TOOL, "--quick", "--list"], capture_output=True, text=True)
+    listing = subprocess.run([sys.executable, TOOL, "-stability_quick", "-stability_list"], capture_output=True,
+                             text=True)
     cases = [line.split()[0] for line in listing.stdout.splitlines() if line.strip()]
     checks.check(listing.returncode == 0 and len(cases) >= 10,
-                 f"--quick --list names {len(cases)} cases")
+                 f"-stability_quick -stability_list names {len(cases)} cases")
 
-    command = [sys.executable, TOOL, "--softbody", args.softbody, "--mpiexec", args.mpiexec, "--quick",
-               "--study-dir", study]
+    command = [sys.executable, TOOL, "-softbody", args.softbody, "-mpiexec", args.mpiexec, "-stability_quick",
+               "-study_dir", study]
     start = time.monotonic()
     try:
         result = subprocess.run(command, capture_output=True, text=True, timeout=LIMIT)
     except subprocess.TimeoutExpired:
-        checks.check(False, f"tools/stability.py --quick finished within {LIMIT} s")
+        checks.check(False, f"tools/stability.py -stability_quick finished within {LIMIT} s")
         checks.exit()
     seconds = time.monotonic() - start
     print(result.stdout)
     if result.stderr.strip():
         print(result.stderr)
-    print(f"tools/stability.py --quick: {seconds:.1f} s")
+    print(f"tools/stability.py -stability_quick: {seconds:.1f} s")
 
     csv_path, md_path = os.path.join(study, "stability.csv"), os.path.join(study, "stability.md")
     checks.check(os.path.isfile(csv_path) and os.path.isfile(md_path), "stability.csv and stability.md written")
@@ -83,7 +84,7 @@ def main():
         checks.check(ok, message)
     all_known = all((row["verdict"] == "pass") != ((row["case"], row["mode"]) in KNOWN_FAILURES) for row in rows)
     checks.check(result.returncode == (1 if any(r["verdict"] != "pass" for r in rows) else 0) and all_known,
-                 f"tools/stability.py --quick exits {result.returncode}: non-zero exactly when a case fails")
+                 f"tools/stability.py -stability_quick exits {result.returncode}: non-zero exactly when a case fails")
     if os.path.isfile(md_path):
         text = open(md_path).read()
         checks.check("| group |" in text and "| case | mode |" in text

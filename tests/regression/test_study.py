@@ -22,12 +22,13 @@ tool's own analysis:
 - study.png is a valid PNG (signature, IHDR, a sensible size), study.md has the
   orders and the Pareto front.
 Then a study whose iterative runs cannot converge (-ksp_max_it 1) must finish
-and record those runs as failed with softbody's one-line error.
+and record those runs as failed with softbody's one-line error; its options are
+given in the other spellings the tools accept (GNU --study-modes, the older
+--solvers and --ranks, -name=value), so they are checked too.
 """
 import csv
 import math
 import os
-import struct
 import subprocess
 import sys
 import time
@@ -54,8 +55,8 @@ RANK_AGREEMENT = 1e-6
 
 def make_scene(work):
     mesh = os.path.join(work, "beam.mesh")
-    subprocess.run([sys.executable, BOX_MESH, mesh, "--size", str(LENGTH), "0.4", "0.4",
-                    "--cells", str(NX), str(NY), str(NZ)], check=True, capture_output=True)
+    subprocess.run([sys.executable, BOX_MESH, mesh, "-box_size", str(LENGTH), "0.4", "0.4",
+                    "-box_cells", str(NX), str(NY), str(NZ)], check=True, capture_output=True)
     velocities = []
     for k in range(NZ + 1):
         for j in range(NY + 1):
@@ -68,7 +69,7 @@ def make_scene(work):
 
 
 def run_study(args, scene, study_dir, options, passthrough):
-    command = [sys.executable, STUDY, scene, "--softbody", args.softbody, "--mpiexec", args.mpiexec,
+    command = [sys.executable, STUDY, scene, "-softbody", args.softbody, "-mpiexec", args.mpiexec,
                "-study_dir", study_dir] + options + ["--"] + passthrough
     start = time.time()
     result = subprocess.run(command, capture_output=True, text=True, timeout=900)
@@ -85,15 +86,6 @@ def slope(dts, errors):
     return float(np.polyfit(np.log(dts), np.log(errors), 1)[0])
 
 
-def png_size(path):
-    """(width, height) of a PNG file, or None when it is not one."""
-    with open(path, "rb") as f:
-        head = f.read(33)
-    if len(head) < 33 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return struct.unpack(">II", head[16:24])
-
-
 def final_positions(path):
     frames = harness.read_frames(path)
     return frames["positions"][-1], frames["mesh/rest_positions"]
@@ -106,8 +98,8 @@ def main():
     study_dir = os.path.join(args.work, "study")
 
     result, seconds = run_study(args, scene, study_dir,
-                                ["--modes", "linear,corotational", "--solvers", "direct,cg-gamg",
-                                 "--rtols", "1e-8", "--ranks", "1,2", "--levels", "5"], PASSTHROUGH)
+                                ["-study_modes", "linear,corotational", "-study_solvers", "direct,cg-gamg",
+                                 "-study_rtols", "1e-8", "-study_ranks", "1,2", "-study_levels", "5"], PASSTHROUGH)
     if not checks.check(result.returncode == 0, f"study.py exits 0 (took {seconds:.1f} s)"):
         print(result.stdout[-3000:])
         print(result.stderr[-3000:])
@@ -191,7 +183,7 @@ def main():
 
     # Picture and report.
     png = os.path.join(study_dir, "study.png")
-    size = png_size(png) if os.path.exists(png) else None
+    size = harness.png_size(png) if os.path.exists(png) else None
     checks.check(size is not None and size[0] >= 600 and size[1] >= 300
                  and os.path.getsize(png) < 500_000,
                  f"study.png is a valid PNG ({size}, {os.path.getsize(png) if os.path.exists(png) else 0} bytes)")
@@ -206,8 +198,8 @@ def main():
     # A study with runs that fail: recorded, not a crash.
     failing_dir = os.path.join(args.work, "study-failing")
     result, seconds = run_study(args, scene, failing_dir,
-                                ["--modes", "linear", "--solvers", "direct", "cg-jacobi", "--rtols", "1e-8",
-                                 "--ranks", "1", "--levels", "2"], PASSTHROUGH + ["-ksp_max_it", "1"])
+                                ["--study-modes", "linear", "--solvers", "direct", "cg-jacobi", "-study_rtols=1e-8",
+                                 "--ranks", "1", "--study-levels=2"], PASSTHROUGH + ["-ksp_max_it", "1"])
     checks.check(result.returncode == 0, f"study with unconverging runs exits 0 ({seconds:.1f} s)")
     if os.path.exists(os.path.join(failing_dir, "study.csv")):
         _, rows = read_csv(os.path.join(failing_dir, "study.csv"))

@@ -71,7 +71,7 @@ else:
 # (b) A run killed by SIGKILL: the .xdmf lists the frames in the file, no more.
 out = result("killed")
 process = subprocess.Popen([args.softbody, "-scene", scene, "-steps", "1000000", "-output", out, "-quiet"],
-                           env=harness.mpi_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                           env=harness.mpi_environment(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 deadline = time.time() + 60
 while time.time() < deadline and (not os.path.exists(out[:-3] + ".xdmf") or
                                   open(out[:-3] + ".xdmf").read().count("<Time ") < 6):

@@ -1,6 +1,11 @@
 #!/usr/bin/env python3
 """The official coursework grader's reference data (../shared/seed-data/cggs-cw2).
 
+Seed data only (skipped without ../shared): the references are the grader's.
+The matrices and the integrator are checked against independent python
+computations on the project's own meshes by test_energy.py (M, K, energies)
+and the C++ unit tests (element stiffness, shear scale).
+
 1. For every <mesh>-section1.data: a one-mesh scene (density 2.5, Young 10000,
    Poisson 0.3, free, identity placement) run on 2 ranks with -steps 0
    -shear_scale 0.25 -export_matrices: M, K and D must equal the reference to

@@ -1,5 +1,10 @@
 """The "Practical 3" seed scenes: OFF bodies falling on the ground, and the stairway.
 
+Seed data only (skipped without ../shared): these are the seed scenes
+themselves. Ground and body contact, friction and fixed obstacles' sharp edges
+are checked on the project's own meshes by test_contact.py ((d): a plank
+held by a fixed cube's edges alone, and the -sharp_edges 0 control).
+
 (a) ../shared/seed-data/infomgp-p3/{bunny,epcot,fertility}-scene.txt with
     -options_file config/practical3.opts (gravity, ground at y = 0), 2 ranks,
     -output_every 10: no NaN in positions, velocities or energies; every vertex
