@@ -7,9 +7,9 @@ namespace softbody {
 
 namespace {
 
-// Impacts closing slower than this many times |g| dt (what gravity adds in a
-// step) are resting contacts and do not bounce: 2 lets a body resting on an
-// obstacle gain one step of gravity, with margin, without jittering.
+// Impacts closing slower than this many times |g| dt are resting contacts and
+// do not bounce: a resting body approaches by about what gravity adds in one
+// step, |g| dt; twice that separates impacts from resting contact with margin.
 constexpr double kBounceSpeedInGravitySteps = 2;
 
 }  // namespace

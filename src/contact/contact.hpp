@@ -100,10 +100,10 @@ class ContactSolver {
   PetscErrorCode EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions, bool *changed);
 
   // Checkpoints: the resting contacts carried into the next step, as (natural
-  // vertex, obstacle body; -1 the ground). Gather: collective, every rank's in
-  // rank order, on rank 0 (empty elsewhere). Restore: not collective, each rank
-  // keeps its own vertices' entries in the list's order (entries this run's
-  // obstacles do not have are dropped).
+  // vertex, obstacle: body, -1 the ground, -2 - f sharp-edge point f). Gather: collective, every
+  // rank's in rank order, on rank 0 (empty elsewhere). Restore: not collective, each rank keeps its
+  // own vertices' entries in the list's order (entries this run's obstacles do not have are
+  // dropped).
   PetscErrorCode GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const;
   void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all);
 

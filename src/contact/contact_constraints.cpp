@@ -7,8 +7,9 @@ namespace softbody {
 namespace {
 
 // A feature contact moves the triangle's vertices whose barycentric weight at
-// the contact point is at least this: a vertex of weight near 0 would need a
-// push of d / w_k (kMovingWeight: at most a thousand times the depth).
+// the contact point is at least this: a vertex the point barely touches (the
+// point lies on the opposite edge) would get a constraint that hardly pushes
+// it and only holds it.
 constexpr double kMovingWeight = 1e-3;
 // A feature point within this fraction of the free body's mean edge length of
 // its surface touches it (a fixed edge flush with a free face) and does not

@@ -12,10 +12,11 @@ namespace softbody {
 namespace {
 
 // Sweeps stop once every constraint holds to this fraction of its upper bound:
-// round-off level, so a resolved chain is exact to the printed digits.
+// a few thousand times double round-off, as exact as the positions allow.
 constexpr double kConstraintTolerance = 1e-12;
-// At most this many sweeps per step: a long chain converges in a few tens;
-// an unsatisfiable set (bounds that contradict each other) stops here.
+// At most this many sweeps per step: bounds the work of a set that converges
+// slowly or contradicts itself (the run summary reports the sweeps and the
+// violation left).
 constexpr PetscInt kMaxConstraintSweeps = 500;
 
 }  // namespace

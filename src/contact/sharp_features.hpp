@@ -25,8 +25,8 @@ namespace softbody {
 
 // Faces meeting at more than this angle form a sharp edge; a fixed surface
 // facing within it of a feature's push holds a vertex along nearly that push.
-// 30 degrees: a cube's and a step's edges (90) count, the facets of a smooth
-// curved surface at the seed meshes' resolution do not.
+// 30 degrees: a box's or a step's edges (90) count, while neighbouring facets
+// of a finely meshed smooth surface meet at far less.
 constexpr double kFeatureAngle = 30.0 * M_PI / 180.0;
 
 class SharpFeatures {
