@@ -86,6 +86,9 @@ void Obstacles::EnsureFreeGrids() const {
   ++free_grid_builds_;
 }
 
+// ClosestOnBody and EntryOnBody fill the hit inside their grid visits, not in
+// a shared helper: the compiler's fused multiply-adds follow the code's shape,
+// and a helper changed the last bits of the normals.
 bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
   if (obstacle < 0) {  // the ground
     *hit = {Point(p[0], ground_y_, p[2]), Point(0, 1, 0), Point::Zero(), 0.0, -1, -1,

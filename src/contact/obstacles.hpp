@@ -44,7 +44,8 @@ struct VertexObstacles {
 
 class Obstacles {
  public:
-  // The ground (when `ground`, at height ground_y in m) alone.
+  // First: the scene, the state the queries read, and the ground (an obstacle
+  // when `ground`, at height ground_y in m).
   void SetupGround(const Scene &scene, const FreeState &state, bool ground, double ground_y);
   // The bodies: fixed ones always, free ones when `track_free` (they are
   // obstacles to each other or meet sharp edges); builds the fixed grids.
