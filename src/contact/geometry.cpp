@@ -6,6 +6,20 @@
 
 namespace softbody {
 
+namespace {
+
+// A segment and a triangle count as parallel when the determinant of their
+// system is below this fraction of the product of their lengths: round-off level.
+constexpr double kParallelTolerance = 1e-12;
+// The grid's cell size is at least this fraction of its extent (or of 1 m):
+// keeps the cell count finite when every box is a point.
+constexpr double kMinCellFraction = 1e-12;
+// At most this many cells per item on average: keeps memory bounded for odd
+// inputs (a few huge boxes among tiny ones).
+constexpr double kMaxCellsPerItem = 64.0;
+
+}  // namespace
+
 Eigen::Vector4d Barycentric(const Point &p, const Point &a, const Point &b, const Point &c,
                             const Point &d) {
   // Cramer's rule with triple products: l_b = det[p-a, c-a, d-a] / det[b-a, c-a, d-a], ...
@@ -56,7 +70,7 @@ bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, cons
   const Point h = d.cross(ac);
   const double det = ab.dot(h);
   const double scale = ab.norm() * ac.norm() * d.norm();
-  if (!(std::abs(det) > 1e-12 * scale)) return false;
+  if (!(std::abs(det) > kParallelTolerance * scale)) return false;
   const Point s = p - a;
   const double u = s.dot(h) / det;
   if (u < 0 || u > 1) return false;
@@ -69,6 +83,19 @@ bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, cons
   return true;
 }
 
+std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh) {
+  const auto triangles = BoundaryTriangles(mesh);
+  std::vector<std::pair<int32_t, int32_t>> edges;
+  for (Eigen::Index t = 0; t < triangles.rows(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = triangles(t, k), b = triangles(t, (k + 1) % 3);
+      edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  return edges;
+}
+
 void UniformGrid::Build(const std::vector<Box> &boxes) {
   bounds_ = Box();
   double edge_sum = 0;
@@ -79,9 +106,8 @@ void UniformGrid::Build(const std::vector<Box> &boxes) {
   item_start_.assign(1, 0);
   if (boxes.empty()) return;
   const Eigen::Array3d extent = (bounds_.upper - bounds_.lower).array();
-  h_ = std::max(edge_sum / boxes.size(), 1e-12 * std::max(1.0, extent.maxCoeff()));
-  // At most ~64 cells per item on average: keeps memory bounded for odd inputs.
-  const double max_cells = 64.0 * boxes.size() + 64;
+  h_ = std::max(edge_sum / boxes.size(), kMinCellFraction * std::max(1.0, extent.maxCoeff()));
+  const double max_cells = kMaxCellsPerItem * boxes.size() + kMaxCellsPerItem;
   while ((extent / h_ + 1).prod() > max_cells) h_ *= 1.5;
   cells_ = (extent / h_).floor().cast<int>() + 1;
   // Count, then fill (CSR).

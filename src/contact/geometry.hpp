@@ -1,17 +1,27 @@
-// Geometric queries for contact: point-in-tet, closest point on a triangle, and a
-// uniform grid that bins boxes for fast candidate look-up. Not collective.
+// Geometric queries for contact: point-in-tet, closest point on a triangle, a
+// segment crossing a triangle, a mesh's boundary edges, and a uniform grid that
+// bins boxes for fast candidate look-up. Lengths in metres. Not collective.
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <utility>
 #include <vector>
+
+#include "fem/mesh.hpp"
 
 namespace softbody {
 
 using Point = Eigen::Vector3d;
 
+// Stands for infinity in boxes and nearest-point searches: larger than any
+// coordinate or distance of a scene, yet finite, so that sums and differences
+// with it stay finite.
+constexpr double kUnbounded = 1e300;
+
+// Axis-aligned box; the default one is empty (lower above upper).
 struct Box {
-  Point lower = Point::Constant(1e300), upper = Point::Constant(-1e300);
+  Point lower = Point::Constant(kUnbounded), upper = Point::Constant(-kUnbounded);
   void Extend(const Point &p) {
     lower = lower.cwiseMin(p);
     upper = upper.cwiseMax(p);
@@ -45,6 +55,10 @@ Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, con
 // coordinates of the crossing. False when it misses or runs parallel to the plane.
 bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, const Point &b,
                             const Point &c, double *t, Eigen::Vector3d *weights);
+
+// Edges of the boundary triangles of a mesh, each once, as (smaller, larger)
+// local vertex index, sorted.
+std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh);
 
 // Uniform grid over the boxes of a set of items (tets or triangles): each item is
 // listed in every cell its box overlaps. Cell size h: the mean box edge, so an

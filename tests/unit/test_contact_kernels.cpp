@@ -2,9 +2,9 @@
 // triangle crossing (geometry.hpp) against the plane intersection computed by
 // hand, and the combination of one vertex's velocity constraints
 // (projected_solve.hpp) against the exact solution for independent directions
-// and the bound |p| <= max |c_k| / cos(angle) for near-parallel ones (before the
-// combination, the least-norm solution of both gave (c_1 - c_2) / sin(angle):
-// 1.2e3 m/s prescribed in the fertility scene, the seed of its blow-up).
+// and the bound |p| <= max |c_k| / cos(angle) for near-parallel ones (the
+// least-norm solution of both would prescribe (c_1 - c_2) / sin(angle); see
+// docs/design/contact.md).
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -1,0 +1,130 @@
+// The contact constraints of one step, built vertex by vertex for the solve
+// (owned vertices, local numbering; see solvers/projected_solve.hpp).
+//
+// Vertex contact: a free vertex that the step would take from x0 to x0 + dt v
+// inside an obstacle gets the normal velocity constraint
+//   n . v = n . (s - x0) / dt,
+// s its closest surface point (against a fixed body, where its path enters it)
+// and n that surface's outward normal, so that it ends the step on the
+// surface; against a free body s is the plane where the two sides meet, the
+// overlap split by inverse mass. A vertex already inside at the start of the
+// step leaves at most kMaxRecoveryPerStep edge lengths per step faster than
+// the obstacle; more than that deep inside another free body, it only stops
+// sinking. The contact leaves with the two sides' momentum-weighted normal
+// velocity (Contact::normal_velocity).
+//
+// Feature contact: a fixed body's sharp-edge point p (SharpFeatures) that the
+// solve would take into a free body's surface triangle (closest point q,
+// outward normal n, barycentric weights w) pushes the triangle away along
+// m = -n by d = m . (p - q): vertex k of the triangle gets
+//   m . v_k = m . v_k' + d_k / dt,  d_k = w_k d / sum_j w_j^2
+// (v' the solve's velocity; the sum over the vertices that move), the least
+// displacement that moves the triangle's point under p by d. One feature
+// constraint per vertex (the larger d_k).
+//
+// Combine lists the normals in contact order, then the friction tangents, and
+// counts them on all ranks. Not collective except Combine.
+#pragma once
+
+#include <petscsys.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "contact/free_state.hpp"
+#include "contact/obstacles.hpp"
+#include "contact/sharp_features.hpp"
+#include "fem/partition.hpp"
+#include "io/scene.hpp"
+#include "solvers/projected_solve.hpp"
+
+namespace softbody {
+
+// The most a vertex found inside an obstacle is moved out per step, as a
+// fraction of its body's mean boundary edge length: deeper overlaps come out
+// over several steps, since a jump of the whole depth would be a huge strain.
+constexpr double kMaxRecoveryPerStep = 0.1;
+
+// A constrained vertex (parallel to the normal constraints).
+struct Contact {
+  int32_t natural;
+  int32_t body;            // obstacle, -1 for the ground
+  double normal_velocity;  // n . v after the step's velocity response
+  bool impact;             // new this step and closing faster than the bounce speed
+  int32_t feature = -1;    // a fixed body's feature point pressing on the vertex's face
+};
+
+class ContactConstraints {
+ public:
+  void Setup(const Scene &scene, const DofLayout &layout, const FreeState &state,
+             const Obstacles &obstacles, const SharpFeatures &features);
+  // A new step: no constraints; impacts closing slower than bounce_speed (m/s)
+  // do not bounce.
+  void Clear(PetscReal bounce_speed);
+
+  // Constrains owned vertex `local` (at x0, velocity `velocity` from the solve)
+  // when x0 + dt velocity lies inside an obstacle it is not yet held by;
+  // returns whether it did.
+  bool AddVertexPenetration(PetscInt local, int32_t natural, const Point &x0, const Point &velocity,
+                            PetscReal dt);
+  // Constrains owned vertex `local` (at x0, heading for `predicted`) against the
+  // hit (see the file comment); `fresh`: a new contact, which may bounce.
+  void Constrain(PetscInt local, int32_t natural, const Point &x0, const Point &predicted,
+                 const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh);
+  // After a solve: the feature points each free body's predicted surface passes
+  // over (the free state gathered at x0 + dt v); returns the constraints added
+  // or changed on this rank.
+  PetscInt AddFeaturePenetrations(PetscReal dt);
+  // Feature point `feature` against the free triangle of the hit, d at most
+  // kMaxRecoveryPerStep edge lengths when `limit`; constrains this rank's
+  // vertices of the triangle; returns how many constraints it added or changed.
+  PetscInt ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt, bool fresh,
+                            bool limit);
+
+  bool feature_held(int32_t feature) const { return feature_held_[feature]; }
+  void hold_feature(int32_t feature) { feature_held_[feature] = 1; }
+  // The vertex's feature contact this step (-1: none).
+  ptrdiff_t feature_contact(PetscInt local) const { return feature_contact_[local]; }
+  const std::vector<Contact> &contacts() const { return contacts_; }
+  const std::vector<VelocityConstraint> &normals() const { return normals_; }
+  const VertexObstacles &obstacles_of(PetscInt local) const { return constrained_[local]; }
+
+  // Collective. The solve's constraints: the normals, then `tangents`.
+  PetscErrorCode Combine(MPI_Comm comm, const std::vector<VelocityConstraint> &tangents);
+  const std::vector<VelocityConstraint> &solve_constraints() const { return solve_constraints_; }
+  PetscInt global_count() const { return global_count_; }
+
+ private:
+  // Whether x0's path to `predicted` enters a fixed obstacle through a face
+  // other than the closest one; then *hit becomes that entry.
+  void PreferEntry(const Point &x0, const Point &predicted, SurfaceHit *hit) const;
+  // The normal velocity that takes x0 to target, limited for a vertex already inside.
+  double RecoveryVelocity(int32_t natural, const Point &x0, const Point &target, PetscReal dt,
+                          const SurfaceHit &hit) const;
+  // Which vertices of the triangle a feature contact moves.
+  std::array<bool, 3> MovingVertices(const std::array<int32_t, 4> &triangle, const SurfaceHit &hit,
+                                     const Point &m) const;
+  // Adds the vertex's feature constraint (push: d_k / dt), or replaces the
+  // one it has when pushing harder; returns whether it did.
+  bool PlaceFeatureConstraint(const VelocityConstraint &constraint, const Contact &contact,
+                              const Point &velocity, double push);
+  // Feature points of fixed body f inside free body b; returns constraints changed.
+  PetscInt AddFeaturePenetrationsOf(size_t f, size_t b, PetscReal dt);
+
+  const Scene *scene_ = nullptr;
+  const DofLayout *layout_ = nullptr;
+  const FreeState *state_ = nullptr;
+  const Obstacles *obstacles_ = nullptr;
+  const SharpFeatures *features_ = nullptr;
+  double bounce_speed_ = 0;                  // slower impacts do not bounce (m/s)
+  std::vector<VelocityConstraint> normals_;  // parallel to contacts_
+  std::vector<Contact> contacts_;
+  std::vector<VertexObstacles> constrained_;  // per local vertex
+  std::vector<char> feature_held_;            // per feature point: constrained this step
+  std::vector<ptrdiff_t> feature_contact_;    // per local vertex: its feature contact (-1: none)
+  std::vector<VelocityConstraint> solve_constraints_;  // normals, then tangents
+  PetscInt global_count_ = 0;
+};
+
+}  // namespace softbody

@@ -1,0 +1,121 @@
+#include "contact/distance_constraints.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/errors.hpp"
+#include "common/text_reader.hpp"
+#include "contact/geometry.hpp"
+
+namespace softbody {
+
+namespace {
+
+// Sweeps stop once every constraint holds to this fraction of its upper bound:
+// a few thousand times double round-off, as exact as the positions allow.
+constexpr double kConstraintTolerance = 1e-12;
+// At most this many sweeps per step: bounds the work of a set that converges
+// slowly or contradicts itself (the run summary reports the sweeps and the
+// violation left).
+constexpr PetscInt kMaxConstraintSweeps = 500;
+
+}  // namespace
+
+std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene) {
+  TextReader in(path);
+  std::vector<std::string_view> fields;
+  std::vector<DistanceConstraint> constraints;
+  if (!in.NextLine(&fields)) return constraints;  // an empty file: no constraints
+  if (fields.size() != 1) in.Fail("expected one field, the number of constraints");
+  const long n = in.ParseInteger(fields[0], "number of constraints");
+  if (n < 0) in.Fail("number of constraints must be >= 0");
+  auto vertex = [&](std::string_view mesh_field, std::string_view vertex_field) {
+    const long m = in.ParseInteger(mesh_field, "mesh index");
+    if (m < 0 || m >= static_cast<long>(scene.bodies.size()))
+      in.Fail("mesh index " + std::to_string(m) + " out of range 0.." +
+              std::to_string(scene.bodies.size() - 1));
+    const TetMesh &mesh = scene.bodies[m].mesh;
+    const long v = in.ParseInteger(vertex_field, "vertex index");
+    if (v < 0 || v >= mesh.num_vertices())
+      in.Fail("vertex index " + std::to_string(v) + " out of range 0.." +
+              std::to_string(mesh.num_vertices() - 1) + " of mesh " + std::to_string(m));
+    return std::pair<int32_t, Point>(scene.bodies[m].first_vertex + static_cast<int32_t>(v),
+                                     mesh.vertices.row(v).transpose());
+  };
+  for (long i = 0; i < n; ++i) {
+    if (!in.NextLine(&fields))
+      in.Fail("expected " + std::to_string(n) + " constraint lines, found " + std::to_string(i));
+    if (fields.size() != 4 && fields.size() != 6)
+      in.Fail("expected 'm1 v1 m2 v2' or 'm1 v1 m2 v2 lo hi', found " +
+              std::to_string(fields.size()) + " fields");
+    const auto [a, xa] = vertex(fields[0], fields[1]);
+    const auto [b, xb] = vertex(fields[2], fields[3]);
+    const double rest = (xb - xa).norm();
+    if (!(rest > 0)) in.Fail("the two vertices coincide: no rest distance to keep");
+    double lo = 1, hi = 1;
+    if (fields.size() == 6) {
+      lo = in.ParseReal(fields[4], "lower bound");
+      hi = in.ParseReal(fields[5], "upper bound");
+      if (!(lo >= 0 && lo <= hi)) in.Fail("need 0 <= lo <= hi");
+    }
+    constraints.push_back({a, b, lo * rest, hi * rest});
+  }
+  if (in.NextLine(&fields)) in.Fail("unexpected content after the constraints");
+  return constraints;
+}
+
+PetscErrorCode DistanceConstraints::Setup(MPI_Comm comm, const Scene &scene,
+                                          const ContactOptions &options) {
+  PetscFunctionBeginUser;
+  if (!options.constraints_path.empty())
+    SOFTBODY_CATCH_INPUT(comm, constraints_ = ReadConstraints(options.constraints_path, scene));
+  if (!options.edge_bounds) PetscFunctionReturn(PETSC_SUCCESS);
+  for (const Body &body : scene.bodies) {
+    if (body.fixed) continue;
+    for (const auto &[a, b] : BoundaryEdges(body.mesh)) {
+      const double rest = (body.mesh.vertices.row(b) - body.mesh.vertices.row(a)).norm();
+      constraints_.push_back({body.first_vertex + a, body.first_vertex + b,
+                              options.edge_lower * rest, options.edge_upper * rest});
+    }
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+DistanceConstraints::Resolution DistanceConstraints::Resolve(FreeState *state) const {
+  double violation = 0;
+  PetscInt sweep = 0;
+  for (; sweep < kMaxConstraintSweeps; ++sweep) {
+    violation = Sweep(state);
+    if (violation < kConstraintTolerance) break;
+  }
+  return {sweep + 1, violation};
+}
+
+double DistanceConstraints::Sweep(FreeState *state) const {
+  double violation = 0;
+  for (const DistanceConstraint &c : constraints_) {
+    const double wa = state->inverse_mass(c.a), wb = state->inverse_mass(c.b), w = wa + wb;
+    Eigen::Map<Point> xa = state->position_ref(c.a), xb = state->position_ref(c.b);
+    const Point d = xb - xa;
+    const double length = d.norm();
+    if (w == 0 || !(length > 0)) continue;
+    const double target = std::clamp(length, c.lower, c.upper);
+    violation = std::max(violation, std::abs(length - target) / c.upper);
+    const Point n = d / length;
+    // Positions: both ends move along n, inversely to their masses.
+    const double error = length - target;
+    xa += (wa / w) * error * n;
+    xb -= (wb / w) * error * n;
+    // Velocities: no relative motion further out of the bounds.
+    Eigen::Map<Point> va = state->velocity_ref(c.a), vb = state->velocity_ref(c.b);
+    const double separating = (vb - va).dot(n);
+    if ((target == c.upper && separating > 0 && length >= c.upper) ||
+        (target == c.lower && separating < 0 && length <= c.lower)) {
+      va += (wa / w) * separating * n;
+      vb -= (wb / w) * separating * n;
+    }
+  }
+  return violation;
+}
+
+}  // namespace softbody

@@ -1,0 +1,62 @@
+// Distance constraints: pairs of vertices kept within [lower, upper] of each
+// other (-constraints FILE), and every boundary edge of the free bodies within
+// [lo, hi] x its rest length (-edge_bounds lo,hi).
+//
+// Resolved after the step on the world arrays of FreeState, identically on
+// every rank: Gauss-Seidel sweeps of mass-weighted projections. For a
+// constraint a-b with inverse masses w_a, w_b (0: fixed or stray), length
+// l = |x_b - x_a|, unit direction n = (x_b - x_a) / l and target
+// t = clamp(l, lower, upper):
+//   x_a += w_a / (w_a + w_b) (l - t) n,   x_b -= w_b / (w_a + w_b) (l - t) n,
+// and when the relative velocity s = n . (v_b - v_a) points further out of the
+// bounds (s > 0 at the upper bound, s < 0 at the lower one) it is removed the
+// same way. Sweeps stop once every constraint holds to kConstraintTolerance
+// relative to its upper bound, or after kMaxConstraintSweeps.
+#pragma once
+
+#include <petscsys.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "contact/contact_options.hpp"
+#include "contact/free_state.hpp"
+#include "io/scene.hpp"
+
+namespace softbody {
+
+// A distance constraint between natural vertices a and b: lower <= |x_b - x_a| <= upper (m).
+struct DistanceConstraint {
+  int32_t a, b;
+  double lower, upper;
+};
+
+// Reads a constraints file: n, then n lines "m1 v1 m2 v2" (rest distance kept)
+// or "m1 v1 m2 v2 lo hi" (within [lo, hi] x rest distance), 0-based mesh and
+// vertex indices. Not collective; throws InputError naming file and line.
+std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene);
+
+class DistanceConstraints {
+ public:
+  // What one resolution did: its sweeps and the largest relative violation left.
+  struct Resolution {
+    PetscInt sweeps;
+    double violation;
+  };
+  // Collective (an unreadable file is an error on comm). The file's
+  // constraints, then the edge bounds of each free body's boundary edges.
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const ContactOptions &options);
+  bool empty() const { return constraints_.empty(); }
+  size_t size() const { return constraints_.size(); }
+  // Not collective; every rank must call it on the same gathered state.
+  Resolution Resolve(FreeState *state) const;
+
+ private:
+  // One Gauss-Seidel sweep; returns the largest relative violation met.
+  double Sweep(FreeState *state) const;
+
+  std::vector<DistanceConstraint> constraints_;
+};
+
+}  // namespace softbody

@@ -1,0 +1,243 @@
+#include "contact/obstacles.hpp"
+
+#include <Eigen/Geometry>
+
+namespace softbody {
+
+namespace {
+
+// A point counts as inside a tet when all its barycentric coordinates are at
+// least -kInsideTolerance: faces count (a point on a face shared by two tets is
+// in both), round-off does not decide.
+constexpr double kInsideTolerance = 1e-12;
+// Margin (m) of the cheap box rejection before a barycentric test, so that the
+// box never rejects a point the test would accept.
+constexpr double kBoxMargin = 1e-12;
+// Where an entry search starts: beyond the segment's fraction range [0, 1].
+constexpr double kNoCrossing = 2;
+
+}  // namespace
+
+void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool ground,
+                            double ground_y) {
+  scene_ = &scene;
+  state_ = &state;
+  ground_ = ground;
+  ground_y_ = ground_y;
+}
+
+void Obstacles::SetupBodies(bool track_free) {
+  for (size_t b = 0; b < scene_->bodies.size(); ++b)
+    if (scene_->bodies[b].fixed || track_free) AddBody(b);
+  BuildBodyBoxes(true);
+  BuildGrids(fixed_tets_, fixed_triangles_, &fixed_tet_box_, &fixed_tet_grid_,
+             &fixed_triangle_grid_);
+}
+
+void Obstacles::AddBody(size_t b) {
+  const Body &body = scene_->bodies[b];
+  const auto boundary = BoundaryTriangles(body.mesh);
+  auto &tets = body.fixed ? fixed_tets_ : free_tets_;
+  auto &triangles = body.fixed ? fixed_triangles_ : free_triangles_;
+  for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
+    tets.push_back({body.first_vertex + body.mesh.tets(t, 0),
+                    body.first_vertex + body.mesh.tets(t, 1),
+                    body.first_vertex + body.mesh.tets(t, 2),
+                    body.first_vertex + body.mesh.tets(t, 3), static_cast<int32_t>(b)});
+  for (Eigen::Index f = 0; f < boundary.rows(); ++f)
+    triangles.push_back({body.first_vertex + boundary(f, 0), body.first_vertex + boundary(f, 1),
+                         body.first_vertex + boundary(f, 2), static_cast<int32_t>(b)});
+}
+
+void Obstacles::MoveFreeBodies() {
+  BuildBodyBoxes(false);
+  free_grids_current_ = false;
+}
+
+void Obstacles::BuildBodyBoxes(bool fixed_part) {
+  body_box_.resize(scene_->bodies.size());
+  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
+    const Body &body = scene_->bodies[b];
+    if (body.fixed != fixed_part) continue;
+    body_box_[b] = Box();
+    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
+      body_box_[b].Extend(WorldPoint(body.first_vertex + v));
+  }
+}
+
+void Obstacles::BuildGrids(const std::vector<std::array<int32_t, 5>> &tets,
+                           const std::vector<std::array<int32_t, 4>> &triangles,
+                           std::vector<Box> *tet_boxes, UniformGrid *tet_grid,
+                           UniformGrid *triangle_grid) const {
+  tet_boxes->assign(tets.size(), Box());
+  for (size_t t = 0; t < tets.size(); ++t)
+    for (int a = 0; a < 4; ++a) (*tet_boxes)[t].Extend(WorldPoint(tets[t][a]));
+  tet_grid->Build(*tet_boxes);
+  std::vector<Box> boxes(triangles.size(), Box());
+  for (size_t t = 0; t < triangles.size(); ++t)
+    for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(triangles[t][a]));
+  triangle_grid->Build(boxes);
+}
+
+void Obstacles::EnsureFreeGrids() const {
+  if (free_grids_current_) return;
+  BuildGrids(free_tets_, free_triangles_, &free_tet_box_, &free_tet_grid_, &free_triangle_grid_);
+  free_grids_current_ = true;
+  ++free_grid_builds_;
+}
+
+// ClosestOnBody and EntryOnBody fill the hit inside their grid visits, not in
+// a shared helper: the compiler's fused multiply-adds follow the code's shape,
+// and a helper changed the last bits of the normals.
+bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
+  if (obstacle < 0) {  // the ground
+    *hit = {Point(p[0], ground_y_, p[2]), Point(0, 1, 0), Point::Zero(), 0.0, -1, -1,
+            Eigen::Vector3d::Zero()};
+    return true;
+  }
+  const bool fixed_part = scene_->bodies[obstacle].fixed;
+  if (!fixed_part) EnsureFreeGrids();
+  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
+  const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
+  if (grid.empty()) return false;
+  const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
+                       (grid.bounds().upper - p).norm() + (grid.bounds().lower - p).norm();
+  double best = kUnbounded;
+  // Growing neighbourhoods until the closest point found lies within the searched one.
+  for (double radius = grid.cell_size(); best > radius && radius < 2 * limit; radius *= 2)
+    grid.ForEachNear(p, radius, [&](int32_t t) {
+      const auto &tri = triangles[t];
+      if (tri[3] != obstacle) return;
+      const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
+      Eigen::Vector3d w;
+      const Point q = ClosestPointOnTriangle(p, a, b, c, &w);
+      const double distance = (q - p).norm();
+      const Point normal = (b - a).cross(c - a);
+      if (distance >= best || !(normal.norm() > 0)) return;
+      best = distance;
+      hit->point = q;
+      hit->normal = normal.normalized();
+      hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
+                      w[2] * state_->velocity(tri[2]);
+      hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) +
+                          w[1] * state_->inverse_mass(tri[1]) + w[2] * state_->inverse_mass(tri[2]);
+      hit->body = obstacle;
+      hit->triangle = t;
+      hit->weights = w;
+    });
+  return best < kUnbounded;
+}
+
+bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
+  const bool fixed_part = scene_->bodies[obstacle].fixed;
+  if (!fixed_part) EnsureFreeGrids();
+  const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
+  const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
+  bool inside = false;
+  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
+    const auto &tet = tets[t];
+    if (inside || tet[4] != obstacle || !tet_boxes[t].Contains(p, kBoxMargin)) return;
+    inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                         WorldPoint(tet[3]))
+                 .minCoeff() >= -kInsideTolerance;
+  });
+  return inside;
+}
+
+bool Obstacles::LocateInFreeBody(const Point &p, int32_t body, double margin,
+                                 Point *velocity) const {
+  EnsureFreeGrids();
+  bool found = false;
+  free_tet_grid_.ForEachNear(p, 0.0, [&](int32_t t) {
+    const auto &tet = free_tets_[t];
+    if (found || tet[4] != body || !free_tet_box_[t].Contains(p, kBoxMargin)) return;
+    const Eigen::Vector4d w = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]),
+                                          WorldPoint(tet[2]), WorldPoint(tet[3]));
+    if (!(w.minCoeff() > margin)) return;
+    found = true;
+    *velocity = Point::Zero();
+    for (int k = 0; k < 4; ++k) *velocity += w[k] * state_->velocity(tet[k]);
+  });
+  return found;
+}
+
+bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstacle,
+                            SurfaceHit *hit) const {
+  const bool fixed_part = scene_->bodies[obstacle].fixed;
+  if (!fixed_part) EnsureFreeGrids();
+  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
+  const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
+  const Point direction = end - start;
+  double first = kNoCrossing;
+  grid.ForEachNear(0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(), [&](int32_t t) {
+    const auto &tri = triangles[t];
+    if (tri[3] != obstacle) return;
+    const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
+    const Point normal = (b - a).cross(c - a);
+    double along;
+    Eigen::Vector3d w;
+    if (normal.dot(direction) >= 0 || !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) ||
+        along >= first)
+      return;
+    first = along;
+    hit->point = start + along * direction;
+    hit->normal = normal.normalized();
+    hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
+                    w[2] * state_->velocity(tri[2]);
+    hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) + w[1] * state_->inverse_mass(tri[1]) +
+                        w[2] * state_->inverse_mass(tri[2]);
+    hit->body = obstacle;
+    hit->triangle = t;
+    hit->weights = w;
+  });
+  return first <= 1;
+}
+
+bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
+                                SurfaceHit *hit) const {
+  if (ground_ && p[1] < ground_y_ && !skip.Has(-1)) return ClosestOnBody(p, -1, hit);
+  // Broad phase: only bodies whose box holds p.
+  bool near_fixed = false, near_free = false;
+  for (size_t b = 0; b < body_box_.size(); ++b)
+    if (static_cast<int32_t>(b) != body && body_box_[b].Contains(p))
+      (scene_->bodies[b].fixed ? near_fixed : near_free) = true;
+  if (!near_fixed && !near_free) return false;
+  if (near_free) EnsureFreeGrids();
+  for (const bool fixed_part : {true, false}) {
+    if (!(fixed_part ? near_fixed : near_free)) continue;
+    const int32_t inside = BodyContaining(p, fixed_part, body, skip);
+    if (inside >= 0) return ClosestOnBody(p, inside, hit);
+  }
+  return false;
+}
+
+int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
+                                  const VertexObstacles &skip) const {
+  const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
+  const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
+  int32_t inside = -1;
+  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
+    const auto &tet = tets[t];
+    if (inside >= 0 || tet[4] == body || skip.Has(tet[4]) || !tet_boxes[t].Contains(p, kBoxMargin))
+      return;
+    if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                    WorldPoint(tet[3]))
+            .minCoeff() >= -kInsideTolerance)
+      inside = tet[4];
+  });
+  return inside;
+}
+
+bool Obstacles::OnFixedSurface(const Point &x, const Point &direction, double min_cosine) const {
+  if (ground_ && x[1] <= ground_y_ && direction[1] >= min_cosine) return true;
+  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
+    SurfaceHit hit;
+    const int32_t body = static_cast<int32_t>(b);
+    if (scene_->bodies[b].fixed && body_box_[b].Contains(x, kBoxMargin) && InsideBody(x, body) &&
+        ClosestOnBody(x, body, &hit) && hit.normal.dot(direction) >= min_cosine)
+      return true;
+  }
+  return false;
+}
+
+}  // namespace softbody

@@ -1,0 +1,116 @@
+// The obstacles a vertex can meet, and the geometric queries on them: the
+// ground half-space y < y0, and the bodies' tets (they tell inside) and
+// boundary triangles (they give the closest surface point and its outward
+// normal), binned in uniform grids so that no query visits all pairs.
+//
+// Broad phase: each body's bounding box. The fixed bodies' grids are built
+// once; the free bodies' boxes follow them (MoveFreeBodies) and their grids
+// are rebuilt lazily, when a query first needs them, so that a step whose
+// bodies' boxes stay apart builds none. Positions and velocities are read
+// from FreeState (world coordinates). Not collective.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "contact/free_state.hpp"
+#include "contact/geometry.hpp"
+#include "io/scene.hpp"
+
+namespace softbody {
+
+// Where a point meets an obstacle: closest surface point, outward normal, the
+// surface's velocity and inverse mass there (0: fixed or ground), the obstacle
+// (-1: the ground).
+struct SurfaceHit {
+  Point point, normal, velocity;
+  double inverse_mass;
+  int32_t body;
+  int32_t triangle = -1;  // index into the obstacle's triangle list (-1: the ground)
+  Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric coordinates of point in it
+};
+
+// The obstacles constraining one vertex in a step (-1: the ground); at most
+// three (a corner).
+struct VertexObstacles {
+  static constexpr int kMax = 3;
+  int count = 0;
+  int32_t obstacle[kMax];
+  bool Has(int32_t o) const { return std::find(obstacle, obstacle + count, o) != obstacle + count; }
+  bool full() const { return count == kMax; }
+};
+
+class Obstacles {
+ public:
+  // First: the scene, the state the queries read, and the ground (an obstacle
+  // when `ground`, at height ground_y in m).
+  void SetupGround(const Scene &scene, const FreeState &state, bool ground, double ground_y);
+  // The bodies: fixed ones always, free ones when `track_free` (they are
+  // obstacles to each other or meet sharp edges); builds the fixed grids.
+  void SetupBodies(bool track_free);
+
+  // The free bodies moved (FreeState holds their new positions): their boxes
+  // follow, their grids are stale.
+  void MoveFreeBodies();
+
+  // The first obstacle other than `body` and those in `skip` that contains p
+  // (the ground when p lies below it), with its closest surface point.
+  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
+                       SurfaceHit *hit) const;
+  // The closest point to p on the obstacle's surface (-1: the ground).
+  bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
+  // Whether p lies in one of the obstacle body's tets (faces included).
+  bool InsideBody(const Point &p, int32_t obstacle) const;
+  // The free body's tet holding p with all barycentric coordinates above
+  // `margin`, and the body's velocity there; false if none.
+  bool LocateInFreeBody(const Point &p, int32_t body, double margin, Point *velocity) const;
+  // Where the segment start -> end first enters the obstacle body through its
+  // surface (a boundary triangle crossed against its outward normal).
+  bool EntryOnBody(const Point &start, const Point &end, int32_t obstacle, SurfaceHit *hit) const;
+  // Whether x lies in or on a fixed body (or the ground) whose surface there
+  // faces direction within the angle of cosine min_cosine.
+  bool OnFixedSurface(const Point &x, const Point &direction, double min_cosine) const;
+
+  bool ground() const { return ground_; }
+  double ground_y() const { return ground_y_; }
+  const Box &body_box(size_t body) const { return body_box_[body]; }
+  // A free body's boundary triangle: natural vertices and body.
+  const std::array<int32_t, 4> &free_triangle(int32_t t) const { return free_triangles_[t]; }
+  size_t num_fixed_tets() const { return fixed_tets_.size(); }
+  size_t num_free_tets() const { return free_tets_.size(); }
+  // How often this rank built the free bodies' grids.
+  PetscInt free_grid_builds() const { return free_grid_builds_; }
+
+ private:
+  // A body's tets and boundary triangles, as natural vertices + body.
+  void AddBody(size_t b);
+  void BuildBodyBoxes(bool fixed_part);
+  void EnsureFreeGrids() const;
+  // Each tet's box, and the tets' and triangles' grids, at the world positions.
+  void BuildGrids(const std::vector<std::array<int32_t, 5>> &tets,
+                  const std::vector<std::array<int32_t, 4>> &triangles, std::vector<Box> *tet_boxes,
+                  UniformGrid *tet_grid, UniformGrid *triangle_grid) const;
+  // The first body other than `body` and those in `skip` in whose tets of the
+  // fixed or free part p lies; -1 if none.
+  int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
+                         const VertexObstacles &skip) const;
+  Point WorldPoint(int32_t n) const { return state_->position(n); }
+
+  const Scene *scene_ = nullptr;
+  const FreeState *state_ = nullptr;
+  bool ground_ = false;
+  double ground_y_ = 0;
+  std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
+  std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
+  UniformGrid fixed_tet_grid_, fixed_triangle_grid_;
+  mutable UniformGrid free_tet_grid_, free_triangle_grid_;
+  mutable bool free_grids_current_ = false;
+  mutable PetscInt free_grid_builds_ = 0;
+  std::vector<Box> body_box_;       // broad phase: each obstacle body's bounding box
+  std::vector<Box> fixed_tet_box_;  // each obstacle tet's box (cheap rejection)
+  mutable std::vector<Box> free_tet_box_;
+};
+
+}  // namespace softbody

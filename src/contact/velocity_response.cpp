@@ -1,0 +1,204 @@
+#include "contact/velocity_response.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace softbody {
+
+namespace {
+
+// A constrained vertex closer than this fraction of its body's mean edge
+// length to the surface ended the step on it (its constraint held, up to
+// round-off): no projection.
+constexpr double kOnSurface = 1e-6;
+// A projected vertex is put this fraction of its body's mean edge length
+// outside the surface, so that the next step finds it outside.
+constexpr double kProjectionClearance = 1e-9;
+// Numbers per collision when collisions travel between ranks: vertex, body,
+// position (3), dv (3).
+constexpr size_t kPackedCollision = 8;
+
+}  // namespace
+
+void VelocityResponse::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                             const FreeState &state, const Obstacles &obstacles,
+                             const ContactOptions &options) {
+  comm_ = comm;
+  scene_ = &scene;
+  layout_ = &layout;
+  state_ = &state;
+  obstacles_ = &obstacles;
+  options_ = options;
+}
+
+std::vector<Collision> VelocityResponse::Respond(const ContactConstraints &constraints,
+                                                 const Friction &friction,
+                                                 const std::vector<PetscReal> &reactions,
+                                                 const PetscScalar *x, const PetscScalar *v,
+                                                 RestingContacts *resting) const {
+  const auto &contacts = constraints.contacts();
+  const std::vector<char> friction_in_solve = friction.InSolve(contacts.size());
+  std::vector<Collision> collisions;
+  for (size_t i = 0; i < contacts.size(); ++i) {
+    const Contact &contact = contacts[i];
+    const VelocityConstraint &constraint = constraints.normals()[i];
+    const Point position(&x[3 * constraint.vertex]), velocity(&v[3 * constraint.vertex]);
+    collisions.push_back({contact.natural, state_->body_of(contact.natural), position,
+                          ContactVelocityChange(contact, constraint, reactions[i],
+                                                friction_in_solve[i], position, velocity)});
+    // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
+    if (reactions[i] >= 0 && !(options_.restitution > 0 && contact.impact))
+      resting->Add(constraint.vertex, contact);
+  }
+  return collisions;
+}
+
+// Relative normal velocity -e times the approach for a new contact, 0 for a
+// resting one (Contact::normal_velocity). Sliding friction, unless friction
+// acted in the solve: at most mu lambda / m of the tangential velocity
+// relative to the obstacle is lost. (One expression with the normal part:
+// the result stays bit for bit.)
+Point VelocityResponse::ContactVelocityChange(const Contact &contact,
+                                              const VelocityConstraint &constraint, double reaction,
+                                              bool friction_in_solve, const Point &position,
+                                              const Point &velocity) const {
+  const Point &n = constraint.normal;
+  Point dv = (contact.normal_velocity - n.dot(velocity)) * n;
+  SurfaceHit hit;
+  const double limit = options_.friction * std::max(reaction, 0.0);
+  if (!friction_in_solve && options_.friction > 0 &&
+      obstacles_->ClosestOnBody(position, contact.body, &hit)) {
+    const Point relative = velocity - hit.velocity;
+    const Point tangential = relative - n.dot(relative) * n;
+    const double slip = tangential.norm(), grip = limit * state_->inverse_mass(contact.natural);
+    if (slip > 0) dv -= std::min(1.0, grip / slip) * tangential;
+  }
+  return dv;
+}
+
+PetscInt VelocityResponse::ProjectRemaining(
+    const std::vector<std::pair<PetscInt, int32_t>> &checked, const ContactConstraints &constraints,
+    PetscScalar *x, const PetscScalar *v, std::vector<Collision> *collisions) const {
+  PetscInt projected = 0;
+  for (const auto &[local, natural] : checked) {
+    const Point position(&x[3 * local]);
+    SurfaceHit hit;
+    if (!obstacles_->FindPenetration(position, state_->body_of(natural), VertexObstacles(), &hit) ||
+        !ShouldProject(local, natural, position, hit, constraints))
+      continue;
+    const Point velocity(&v[3 * local]);
+    const double approach = hit.normal.dot(velocity - hit.velocity);
+    const Point target =
+        hit.point + kProjectionClearance * state_->edge(state_->body_of(natural)) * hit.normal;
+    for (int c = 0; c < 3; ++c) x[3 * local + c] = target[c];
+    if (approach < 0)
+      collisions->push_back({natural, state_->body_of(natural), target,
+                             -(1 + options_.restitution) * approach * hit.normal});
+    ++projected;
+  }
+  return projected;
+}
+
+// Deeper than kMaxRecoveryPerStep edge lengths: left to the next step's
+// constraints, which bring it out gradually. A constrained vertex ends on the
+// surface (to round-off) unless its constraints could not all hold (more than
+// three directions, e.g. a sticking contact's and a sharp edge's); it is
+// projected out of fixed bodies and the ground only (out of a free body, one
+// side's projection would change the momentum of the pair).
+bool VelocityResponse::ShouldProject(PetscInt local, int32_t natural, const Point &x,
+                                     const SurfaceHit &hit,
+                                     const ContactConstraints &constraints) const {
+  const double depth = (hit.point - x).norm(), edge = state_->edge(state_->body_of(natural));
+  const bool immobile = hit.body < 0 || scene_->bodies[hit.body].fixed;
+  return !(depth > kMaxRecoveryPerStep * edge ||
+           (constraints.obstacles_of(local).count && (depth < kOnSurface * edge || !immobile)));
+}
+
+void VelocityResponse::Apply(const std::vector<Collision> &collisions, PetscScalar *v) const {
+  for (const Collision &c : collisions) {
+    const PetscInt local = layout_->LocalOfNatural(c.vertex);
+    for (int k = 0; k < 3; ++k) v[3 * local + k] += c.dv[k];
+  }
+}
+
+PetscErrorCode VelocityResponse::Bounce(const ContactConstraints &constraints,
+                                        const std::vector<PetscReal> &reactions, Vec v) const {
+  PetscFunctionBeginUser;
+  const size_t bodies = scene_->bodies.size();
+  std::vector<double> local(3 * bodies, 0.0), impulse(3 * bodies);
+  const auto &contacts = constraints.contacts();
+  for (size_t i = 0; i < contacts.size(); ++i) {
+    if (!contacts[i].impact || reactions[i] <= 0) continue;
+    const int32_t body = state_->body_of(contacts[i].natural);
+    for (int k = 0; k < 3; ++k)
+      local[3 * body + k] += reactions[i] * constraints.normals()[i].normal[k];
+  }
+  PetscCallMPI(MPI_Allreduce(local.data(), impulse.data(), static_cast<int>(local.size()),
+                             MPI_DOUBLE, MPI_SUM, comm_));
+  PetscScalar *lv;
+  PetscCall(VecGetArray(v, &lv));
+  for (PetscInt p = 0; p < state_->local_count(); ++p) {
+    const int32_t body = state_->body_of(state_->owned_natural()[p]);
+    for (int k = 0; k < 3; ++k)
+      lv[3 * p + k] += options_.restitution * impulse[3 * body + k] / state_->mass(body);
+  }
+  PetscCall(VecRestoreArray(v, &lv));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode VelocityResponse::AllGather(const std::vector<Collision> &local,
+                                           std::vector<double> *all) const {
+  PetscFunctionBeginUser;
+  std::vector<double> packed;
+  for (const Collision &c : local) {
+    packed.insert(packed.end(), {double(c.vertex), double(c.body)});
+    packed.insert(packed.end(), c.position.data(), c.position.data() + 3);
+    packed.insert(packed.end(), c.dv.data(), c.dv.data() + 3);
+  }
+  PetscMPIInt size, count = static_cast<PetscMPIInt>(packed.size());
+  PetscCallMPI(MPI_Comm_size(comm_, &size));
+  std::vector<PetscMPIInt> counts(size), offsets(size + 1, 0);
+  PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_));
+  for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + counts[r];
+  all->resize(offsets[size]);
+  PetscCallMPI(MPI_Allgatherv(packed.data(), count, MPI_DOUBLE, all->data(), counts.data(),
+                              offsets.data(), MPI_DOUBLE, comm_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode VelocityResponse::SpreadImpulses(const std::vector<Collision> &local, Vec v) const {
+  PetscFunctionBeginUser;
+  std::vector<double> all;
+  PetscCall(AllGather(local, &all));
+  PetscScalar *lv;
+  PetscCall(VecGetArray(v, &lv));
+  for (size_t i = 0; i < all.size(); i += kPackedCollision) {
+    const int32_t vertex = static_cast<int32_t>(all[i]), body = static_cast<int32_t>(all[i + 1]);
+    const Point at(all[i + 2], all[i + 3], all[i + 4]), dv(all[i + 5], all[i + 6], all[i + 7]);
+    Spread(vertex, body, at, dv, lv);
+  }
+  PetscCall(VecRestoreArray(v, &lv));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void VelocityResponse::Spread(int32_t vertex, int32_t body, const Point &at, const Point &dv,
+                              PetscScalar *v) const {
+  const Body &b = scene_->bodies[body];
+  const double l = state_->edge(body);
+  // Weights over the body's free vertices; the impulse m_c dv shared by them.
+  double total = 0;
+  for (int32_t k = 0; k < b.mesh.num_vertices(); ++k) {
+    const int32_t n = b.first_vertex + k;
+    if (state_->inverse_mass(n) > 0 || n == vertex)
+      total += 1 / std::pow(l + (state_->position(n) - at).norm(), 2);
+  }
+  const Point impulse = dv / state_->inverse_mass(vertex);
+  for (PetscInt p = 0; p < state_->local_count(); ++p) {
+    const int32_t n = state_->owned_natural()[p];
+    if (state_->body_of(n) != body) continue;
+    const double share = 1 / std::pow(l + (state_->position(n) - at).norm(), 2) / total;
+    for (int c = 0; c < 3; ++c) v[3 * p + c] += share * state_->inverse_mass(n) * impulse[c];
+  }
+}
+
+}  // namespace softbody
