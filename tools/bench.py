@@ -9,7 +9,7 @@ runs softbody on it over the grid
   solvers  -bench_solvers  presets config/NAME.opts (default: direct, cg-warp,
                            cg-gamg)
   ranks    -bench_ranks    1, 2
-with -bench, which makes softbody measure itself (src/benchmark.hpp): median
+with -bench, which makes softbody measure itself (src/app/benchmark.hpp): median
 step time over -bench_steps steps, one assembly of A (median of 5), the largest
 factorisation / preconditioner set-up, solver iterations per step, the largest
 resident set of any rank, a STREAM triad run on all ranks in the same run, and

@@ -1,7 +1,7 @@
 // libFuzzer target: the distance-constraints reader (ReadConstraints,
-// src/contact.hpp), against a fixed scene of two bodies (cube.mesh, tet.mesh of
-// fuzz::WriteMeshes). An accepted constraint joins two distinct in-range vertices
-// with 0 <= lower <= upper.
+// src/contact/distance_constraints.hpp), against a fixed scene of two bodies (cube.mesh, tet.mesh
+// of fuzz::WriteMeshes). An accepted constraint joins two distinct in-range vertices with 0 <=
+// lower <= upper.
 #include "contact/contact.hpp"
 #include "fuzz_input.hpp"
 #include "io/scene.hpp"

@@ -1,4 +1,4 @@
-// libFuzzer target: the MEDIT .mesh reader (ReadMedit, src/mesh_io.hpp).
+// libFuzzer target: the MEDIT .mesh reader (ReadMedit, src/io/mesh_io.hpp).
 // An accepted mesh must have tets, finite vertices and in-range corners.
 #include <cmath>
 

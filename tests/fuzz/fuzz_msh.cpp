@@ -1,4 +1,4 @@
-// libFuzzer target: the gmsh .msh reader (ReadGmsh, src/mesh_io.hpp), formats 2.2
+// libFuzzer target: the gmsh .msh reader (ReadGmsh, src/io/mesh_io.hpp), formats 2.2
 // and 4.1. An accepted mesh must have tets, finite vertices and in-range corners.
 #include "fuzz_input.hpp"
 #include "io/mesh_io.hpp"

@@ -1,4 +1,4 @@
-// libFuzzer target: the OFF surface reader (ReadOffSurface, src/mesh_io.hpp), the
+// libFuzzer target: the OFF surface reader (ReadOffSurface, src/io/mesh_io.hpp), the
 // part of ReadOff before TetGen runs (TetGen itself is not fuzzed here). An
 // accepted surface must have >= 4 distinct finite vertices and >= 4 faces of >= 3
 // distinct in-range vertices.

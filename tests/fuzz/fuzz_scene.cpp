@@ -1,4 +1,4 @@
-// libFuzzer target: the scene reader (ReadScene, src/scene.hpp). The fuzzed scene
+// libFuzzer target: the scene reader (ReadScene, src/io/scene.hpp). The fuzzed scene
 // sits next to the small meshes of fuzz::WriteMeshes, so mesh lines that name them
 // load a mesh and the velocity section is reached. OFF bodies are parsed but never
 // meshed: the TetGen switches given are refused, which ReadOff checks after parsing

@@ -1,4 +1,4 @@
-// Unit tests of the linear tetrahedral element kernels (src/element.hpp), each
+// Unit tests of the linear tetrahedral element kernels (src/fem/element.hpp), each
 // compared against something computed independently: closed formulas, the
 // literal V B^T C B, rigid-body modes, an affine patch and finite differences.
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
-// Unit tests of the OFF (TetGen) and gmsh readers (src/mesh_io.hpp) and of scenes
-// that mix .off, .mesh and .msh files (src/scene.hpp).
+// Unit tests of the OFF (TetGen) and gmsh readers (src/io/mesh_io.hpp) and of scenes
+// that mix .off, .mesh and .msh files (src/io/scene.hpp).
 //
 // Files: tests/data/meshes/ (run from tests/, as ctest does; see tests/data/meshes/README.md).
 // Every check of a tetrahedralisation is independent of the reader: this file

@@ -1,5 +1,5 @@
-// Unit tests of the MEDIT and scene readers (src/mesh_io.hpp, src/scene.hpp) and
-// of the mesh queries (src/mesh.hpp). Files are written to a fresh temporary
+// Unit tests of the MEDIT and scene readers (src/io/mesh_io.hpp, src/io/scene.hpp) and
+// of the mesh queries (src/fem/mesh.hpp). Files are written to a fresh temporary
 // folder per test; every error is an InputError naming "path:line:".
 #include <gtest/gtest.h>
 
