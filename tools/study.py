@@ -205,7 +205,8 @@ def run_softbody(args, name, mode, solver, rtol, ranks, dt):
         return result
     try:
         with h5py.File(out, "r") as f:
-            attrs = {key: float(value) for key, value in f.attrs.items()}
+            # The run's statistics are the scalar attributes ("gravity" is a vector).
+            attrs = {key: float(value) for key, value in f.attrs.items() if np.size(value) == 1}
             positions = f["positions"][-1].astype(np.float64)
             rest = f["mesh/rest_positions"][()].astype(np.float64)
             vertex_body = f["mesh/vertex_body"][()]
