@@ -161,6 +161,12 @@ class ImplicitEuler {
   const SolverStatistics &statistics() const { return stats_; }
 
  private:
+  // Setup's steps: f_ext = M g; the assembler, A (and K in linear mode); the
+  // gather plan of the local elements' vertices; the KSP (and the warp PC's A0).
+  PetscErrorCode CreateGravityForce();
+  PetscErrorCode CreateMatrices(MPI_Comm comm, const Scene &scene, const DofLayout &layout);
+  PetscErrorCode CreateTouchedScatter(const LocalElements &elements);
+  PetscErrorCode CreateLinearSolver(const DofLayout &layout);
   // f_el(x) into elastic_force_ and the elastic energy; corotational mode also
   // refills A for x. Skipped when already done for these positions (x changes
   // only in Step).

@@ -152,8 +152,9 @@ TEST(RowAssembler, EqualsCooAssembly) {
       CooValues values(144 * f.elements.size() + local_dofs);
       LinearStiffnessValues(f.elements, shear_scale, stiffness_scale, &values);
       ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
-      ASSERT_EQ(f.assembler.Fill(f.A, false, nullptr, stiffness_scale, f.state.lumped_mass,
-                                 mass_scale, nullptr, nullptr),
+      ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms()
+                                          .Stiffness(stiffness_scale)
+                                          .Mass(f.state.lumped_mass, mass_scale)),
                 0);
       EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-14) << "shear scale " << shear_scale;
       MatDestroy(&reference);
@@ -167,8 +168,12 @@ TEST(RowAssembler, EqualsCooAssembly) {
       ASSERT_EQ(DeformedPositions(f.state.rest_positions, x), 0);
       PetscReal energy;
       f.assembler.ComputeVertexRotations(true);
-      ASSERT_EQ(f.assembler.Fill(f.A, true, x, stiffness_scale, f.state.lumped_mass, mass_scale,
-                                 force, &energy),
+      ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms()
+                                          .Stiffness(stiffness_scale)
+                                          .Mass(f.state.lumped_mass, mass_scale)
+                                          .CorotatedAt(x)
+                                          .ElasticForce(force)
+                                          .StrainEnergy(&energy)),
                 0);
 
       Mat reference;
@@ -227,9 +232,11 @@ TEST(RowAssembler, IncrementDampingEqualsReference) {
     ASSERT_EQ(DeformedPositions(f.state.rest_positions, x1, 0.1, 0.01), 0);
     std::vector<double> start, current;
     RowAssembler::IncrementDamping damping{&start, nullptr, force};
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x0, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms().CorotatedAt(x0).Damping(&damping)),
+              0);
     damping = {&current, &start, force};
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x1, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms().CorotatedAt(x1).Damping(&damping)),
+              0);
 
     // Reference: the COO pass with CorotatedDamping, at x0 (y0) then at x1.
     PetscInt local_dofs;
@@ -270,7 +277,8 @@ TEST(RowAssembler, IncrementDampingEqualsReference) {
     VecRestoreArray(x1, &x1w);
     VecRestoreArrayRead(x0, &x0a);
     damping = {&current, &start, force};
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x1, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms().CorotatedAt(x1).Damping(&damping)),
+              0);
     PetscReal rigid_force;
     VecNorm(force, NORM_2, &rigid_force);
     EXPECT_LT(rigid_force, 1e-9 * scale);
@@ -292,7 +300,13 @@ TEST(RowAssembler, CorotationalRefillRate) {
   for (int repeat = 0; repeat < 7; ++repeat) {
     PetscReal energy;
     const auto start = std::chrono::steady_clock::now();
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x, 1e-3, f.state.lumped_mass, 1.0, force, &energy), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms()
+                                        .Stiffness(1e-3)
+                                        .Mass(f.state.lumped_mass, 1.0)
+                                        .CorotatedAt(x)
+                                        .ElasticForce(force)
+                                        .StrainEnergy(&energy)),
+              0);
     best = std::min(
         best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }
