@@ -525,46 +525,48 @@ PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+PetscErrorCode ImplicitEuler::CorrectRigidBodyVelocities(const std::vector<Eigen::Vector3d> &target,
+                                                         const std::vector<Eigen::Vector3d> &solved,
+                                                         Vec v) {
   PetscFunctionBeginUser;
-  // rhs = M v0 - dt f_el(x0) + dt f_ext
-  PetscCall(UpdateElasticState(x));
-  PetscCall(VecPointwiseMult(rhs_, mass_, v));
-  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
-  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
-  if (!contact || !contact->active()) {
-    if (options_.mode == MODE_COROTATIONAL) PetscFunctionReturn(CorotationalStep(x, v));
-    // A v1 = rhs; v holds v0, the initial guess of iterative solvers. Then each
-    // body's rigid-body velocity from its momentum (SetBodies).
-    std::vector<Eigen::Vector3d> target, solved;
-    if (!rigid_.empty()) PetscCall(BodyMomenta(v, true, &target));
-    PetscCall(Solve(v, nullptr));
-    if (!rigid_.empty()) {
-      PetscCall(BodyMomenta(v, false, &solved));
-      PetscScalar *w;
-      const PetscScalar *X;
-      PetscCall(VecGetArray(v, &w));
-      PetscCall(VecGetArrayRead(rest_, &X));
-      const double damping = 1.0 + options_.alpha * dt_;
-      for (size_t i = 0; i < owned_body_.size(); ++i) {
-        const RigidBody &body = rigid_[owned_body_[i]];
-        const Eigen::Vector3d dp =
-            target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
-        const Eigen::Vector3d dL =
-            target[2 * owned_body_[i] + 1] / damping - solved[2 * owned_body_[i] + 1];
-        const Eigen::Vector3d r = Eigen::Vector3d(&X[3 * i]) - body.centre;
-        Eigen::Map<Eigen::Vector3d>(&w[3 * i]) +=
-            dp / body.mass + (body.inverse_inertia * dL).cross(r);
-      }
-      PetscCall(VecRestoreArray(v, &w));
-      PetscCall(VecRestoreArrayRead(rest_, &X));
-    }
-    PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
-    elastic_state_current_ = false;
-    PetscFunctionReturn(PETSC_SUCCESS);
+  PetscScalar *w;
+  const PetscScalar *X;
+  PetscCall(VecGetArray(v, &w));
+  PetscCall(VecGetArrayRead(rest_, &X));
+  const double damping = 1.0 + options_.alpha * dt_;
+  for (size_t i = 0; i < owned_body_.size(); ++i) {
+    const RigidBody &body = rigid_[owned_body_[i]];
+    const Eigen::Vector3d dp = target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
+    const Eigen::Vector3d dL =
+        target[2 * owned_body_[i] + 1] / damping - solved[2 * owned_body_[i] + 1];
+    const Eigen::Vector3d r = Eigen::Vector3d(&X[3 * i]) - body.centre;
+    Eigen::Map<Eigen::Vector3d>(&w[3 * i]) += dp / body.mass + (body.inverse_inertia * dL).cross(r);
   }
-  // With contact: the obstacles move with v0 meanwhile; constrain and solve again
-  // until the step takes no further vertex inside an obstacle.
+  PetscCall(VecRestoreArray(v, &w));
+  PetscCall(VecRestoreArrayRead(rest_, &X));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::LinearStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  // A v1 = rhs; v holds v0, the initial guess of iterative solvers. Then each
+  // body's rigid-body velocity from its momentum (SetBodies).
+  std::vector<Eigen::Vector3d> target, solved;
+  if (!rigid_.empty()) PetscCall(BodyMomenta(v, true, &target));
+  PetscCall(Solve(v, nullptr));
+  if (!rigid_.empty()) {
+    PetscCall(BodyMomenta(v, false, &solved));
+    PetscCall(CorrectRigidBodyVelocities(target, solved, v));
+  }
+  PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
+  elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  // The obstacles move with v0 meanwhile; constrain and solve again until the
+  // step takes no further vertex inside an obstacle.
   if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
   PetscCall(VecCopy(x, x_start_));
   {
@@ -573,9 +575,8 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   }
   // Sticking contacts that would need more than Coulomb's friction slip (their
   // friction impulse goes into rhs_) and the step is solved again.
-  constexpr int kMaxRounds = 20;
   bool again = true;
-  for (int round = 0; again && round < kMaxRounds; ++round) {
+  for (int round = 0; again && round < kMaxContactRounds; ++round) {
     PetscCall(Solve(v, contact));
     StageScope stage(Stages().contact);
     bool added, released = false;
@@ -591,6 +592,22 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
     PetscCall(contact->EndStep(x, v, reactions_, &changed));
   }
   elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  // rhs = M v0 - dt f_el(x0) + dt f_ext
+  PetscCall(UpdateElasticState(x));
+  PetscCall(VecPointwiseMult(rhs_, mass_, v));
+  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
+  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
+  if (contact && contact->active())
+    PetscCall(ContactStep(x, v, contact));
+  else if (options_.mode == MODE_COROTATIONAL)
+    PetscCall(CorotationalStep(x, v));
+  else
+    PetscCall(LinearStep(x, v));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -619,7 +636,7 @@ PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
+PetscErrorCode ImplicitEuler::BeginCorotationalStep(Vec x, Vec v) {
   PetscFunctionBeginUser;
   if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
   if (!v_start_) {
@@ -637,60 +654,115 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
     damping_energy_ = 0;
     step_started_ = true;
   }
-  // Scale of g: |M v0| + dt |f_el(x0)| + dt |f_ext|; total energy at the start,
-  // |v0|_M^2 / 2 + E(x0) (gravity's reference: x0).
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::StepScales(Vec v, PetscReal *scale, PetscReal *start_energy) {
+  PetscFunctionBeginUser;
   PetscReal momentum, force, external = 0, start_kinetic;
   PetscCall(VecPointwiseMult(work_, mass_, v));
   PetscCall(VecNorm(work_, NORM_2, &momentum));
   PetscCall(VecDot(work_, v, &start_kinetic));
   PetscCall(VecNorm(elastic_force_, NORM_2, &force));
   if (gravity_force_) PetscCall(VecNorm(gravity_force_, NORM_2, &external));
-  const PetscReal scale = momentum + dt_ * (force + external);
-  const PetscReal tolerance = options_.newton_rtol * scale;
-  const PetscReal start_energy = 0.5 * start_kinetic + elastic_energy_;
+  *scale = momentum + dt_ * (force + external);
+  *start_energy = 0.5 * start_kinetic + elastic_energy_;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
+PetscErrorCode ImplicitEuler::NewtonDirection(PetscInt k, PetscReal *slope) {
+  PetscFunctionBeginUser;
+  // A_k d = -g(v_k); the first direction is v1 itself, guessed as v0.
+  PetscCall(VecScale(rhs_, -1.0));
+  if (k == 0)
+    PetscCall(VecCopy(v_start_, direction_));
+  else
+    PetscCall(VecZeroEntries(direction_));
+  PetscCall(Solve(direction_, nullptr));
+  PetscCall(VecDot(rhs_, direction_, slope));
+  *slope = -*slope;  // g.d < 0
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::LineSearch(Vec x, PetscReal slope, PetscReal scale, PetscReal *merit,
+                                         PetscReal *residual, PetscReal *step_length) {
+  PetscFunctionBeginUser;
+  // Armijo on P. Near the root |g| decides: round-off in P (stiff elements: y is
+  // a small difference) hides the decrease, and the left-out rotation
+  // derivatives of the damping term move P's minimum off g's root by a little.
+  const PetscReal last_merit = *merit, last_residual = *residual;
+  PetscCall(VecCopy(iterate_, v_trial_base_));
+  PetscReal s = 1;
+  for (int halvings = 0;; ++halvings) {
+    PetscCall(VecWAXPY(iterate_, s, direction_, v_trial_base_));
+    PetscCall(VecWAXPY(x, dt_, iterate_, x_start_));
+    elastic_state_current_ = false;
+    PetscCall(UpdateElasticState(x));
+    PetscCall(Residual(iterate_, rhs_, merit));
+    PetscCall(VecNorm(rhs_, NORM_2, residual));
+    const bool near_root = last_residual <= kNearRootFraction * scale;
+    if (*merit <= last_merit + kSufficientDecrease * s * slope ||
+        (near_root && *residual <= (1 - kSufficientDecrease * s) * last_residual) ||
+        halvings == kMaxHalvings)
+      break;
+    s *= 0.5;
+    ++stats_.backtracks;
+  }
+  *step_length = s;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::IterateEnergy(PetscReal *energy, PetscReal *work) {
+  PetscFunctionBeginUser;
+  // |v_k|_M^2 / 2 + E(x_k) - dt f_ext.v_k
+  PetscReal kinetic;
+  *work = 0;
+  PetscCall(VecPointwiseMult(work_, mass_, iterate_));
+  PetscCall(VecDot(work_, iterate_, &kinetic));
+  if (gravity_force_) PetscCall(VecDot(gravity_force_, iterate_, work));
+  *energy = 0.5 * kinetic + elastic_energy_ - dt_ * *work;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::FinishCorotationalStep(PetscInt iterations, PetscReal residual,
+                                                     PetscReal tolerance, bool dissipative, Vec v) {
+  PetscFunctionBeginUser;
+  step_started_ = false;
+  stats_.newton_iterations += iterations;
+  stats_.max_newton_iterations = PetscMax(stats_.max_newton_iterations, iterations);
+  if (iterations == options_.newton_max_it && residual > tolerance && options_.newton_max_it > 1) {
+    PetscCheck(
+        dissipative, PetscObjectComm((PetscObject)v), PETSC_ERR_NOT_CONVERGED,
+        "step: the corotational iteration did not converge (|g| = %g > %g after %" PetscInt_FMT
+        " iterations) and its last iterate gains energy; try a smaller -dt or a larger "
+        "-newton_max_it",
+        (double)residual, (double)tolerance, iterations);
+    ++stats_.newton_stopped_short;
+  }
+  // x = x0 + dt v_k and the elastic state of x are current: the next step starts from them.
+  PetscCall(VecCopy(iterate_, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscCall(BeginCorotationalStep(x, v));
+  // Scale of g: |M v0| + dt |f_el(x0)| + dt |f_ext|; total energy at the start,
+  // |v0|_M^2 / 2 + E(x0) (gravity's reference: x0).
+  PetscReal scale, start_energy;
+  PetscCall(StepScales(v, &scale, &start_energy));
+  const PetscReal tolerance = options_.newton_rtol * scale;
   PetscCall(VecZeroEntries(iterate_));  // v_0 = 0: x = x0
   PetscReal merit, residual = PETSC_MAX_REAL;
   PetscCall(Residual(iterate_, rhs_, &merit));
   PetscInt k = 0;
   bool dissipative = false;
   for (; k < options_.newton_max_it; ++k) {
-    // A_k d = -g(v_k); the first direction is v1 itself, guessed as v0.
-    PetscCall(VecScale(rhs_, -1.0));
-    if (k == 0)
-      PetscCall(VecCopy(v_start_, direction_));
-    else
-      PetscCall(VecZeroEntries(direction_));
-    PetscCall(Solve(direction_, nullptr));
-    PetscReal slope;
-    PetscCall(VecDot(rhs_, direction_, &slope));
-    slope = -slope;  // g.d < 0
-    // Armijo on P. Near the root |g| decides: round-off in P (stiff elements: y is
-    // a small difference) hides the decrease, and the left-out rotation
-    // derivatives of the damping term move P's minimum off g's root by a little.
-    const PetscReal last_merit = merit, last_residual = residual;
-    PetscCall(VecCopy(iterate_, v_trial_base_));
-    PetscReal s = 1;
-    for (int halvings = 0;; ++halvings) {
-      PetscCall(VecWAXPY(iterate_, s, direction_, v_trial_base_));
-      PetscCall(VecWAXPY(x, dt_, iterate_, x_start_));
-      elastic_state_current_ = false;
-      PetscCall(UpdateElasticState(x));
-      PetscCall(Residual(iterate_, rhs_, &merit));
-      PetscCall(VecNorm(rhs_, NORM_2, &residual));
-      const bool near_root = last_residual <= 1e-2 * scale;
-      if (merit <= last_merit + 1e-4 * s * slope ||
-          (near_root && residual <= (1 - 1e-4 * s) * last_residual) || halvings == 40)
-        break;
-      s *= 0.5;
-      ++stats_.backtracks;
-    }
-    // Energy gain of the iterate: |v_k|_M^2 / 2 + E(x_k) - dt f_ext.v_k - start_energy.
-    PetscReal kinetic, work = 0;
-    PetscCall(VecPointwiseMult(work_, mass_, iterate_));
-    PetscCall(VecDot(work_, iterate_, &kinetic));
-    if (gravity_force_) PetscCall(VecDot(gravity_force_, iterate_, &work));
-    const PetscReal energy = 0.5 * kinetic + elastic_energy_ - dt_ * work;
+    PetscReal slope, s, energy, work;
+    PetscCall(NewtonDirection(k, &slope));
+    const PetscReal last_residual = residual;
+    PetscCall(LineSearch(x, slope, scale, &merit, &residual, &s));
+    PetscCall(IterateEnergy(&energy, &work));
     const PetscReal gain = energy - start_energy;
     PetscCall(PetscInfo(ksp_,
                         "corotational iterate %" PetscInt_FMT
@@ -701,32 +773,19 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
     if (residual <= tolerance) break;
     // The linearised step stands unless it gains energy (round-off allowed).
     const PetscReal round_off =
-        1e-12 * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
+        kEnergyRoundOff * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
     dissipative = gain <= round_off;
     if (k == 0 && !options_.newton_always && dissipative) break;
     // A dissipative iterate also stands once the iteration stalls (|g| falls by
     // less than a tenth: a kink of R at an inverted element, or the left-out
     // rotation derivative with lambda >> mu); counted as stopped short.
-    if (k > 0 && dissipative && residual > 0.9 * last_residual) {
+    if (k > 0 && dissipative && residual > kStallRatio * last_residual) {
       ++stats_.newton_stopped_short;
       break;
     }
   }
-  step_started_ = false;
   const PetscInt iterations = PetscMin(k + 1, options_.newton_max_it);
-  stats_.newton_iterations += iterations;
-  stats_.max_newton_iterations = PetscMax(stats_.max_newton_iterations, iterations);
-  if (iterations == options_.newton_max_it && residual > tolerance && options_.newton_max_it > 1) {
-    PetscCheck(
-        dissipative, PetscObjectComm((PetscObject)x), PETSC_ERR_NOT_CONVERGED,
-        "step: the corotational iteration did not converge (|g| = %g > %g after %" PetscInt_FMT
-        " iterations) and its last iterate gains energy; try a smaller -dt or a larger "
-        "-newton_max_it",
-        (double)residual, (double)tolerance, iterations);
-    ++stats_.newton_stopped_short;
-  }
-  // x = x0 + dt v_k and the elastic state of x are current: the next step starts from them.
-  PetscCall(VecCopy(iterate_, v));
+  PetscCall(FinishCorotationalStep(iterations, residual, tolerance, dissipative, v));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

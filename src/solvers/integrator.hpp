@@ -181,8 +181,28 @@ class ImplicitEuler {
   // Linear mode: per body, the momentum and angular momentum about the rest
   // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
   PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
-  // Corotational step without contact: the Newton-type iteration above.
+  // Step without contact, linear mode: one solve, then each body's rigid-body
+  // velocity from its momentum (v += dp / m + (I^-1 dL) x r per vertex, dp and
+  // dL the momenta target / (1 + a dt) - solved).
+  PetscErrorCode LinearStep(Vec x, Vec v);
+  PetscErrorCode CorrectRigidBodyVelocities(const std::vector<Eigen::Vector3d> &target,
+                                            const std::vector<Eigen::Vector3d> &solved, Vec v);
+  // Step with contact: solve, constrain, solve again (Step).
+  PetscErrorCode ContactStep(Vec x, Vec v, ContactSolver *contact);
+  // Corotational step without contact: the Newton-type iteration above, in its
+  // steps: x0, v0 and the damping's start; g's scale and the start energy; the
+  // direction A_k d = -g(v_k) and the slope g.d; the line search on the step
+  // length s; the energy of the iterate (and its work term dt f_ext.v_k, J);
+  // the statistics, the convergence check and v = v_k.
   PetscErrorCode CorotationalStep(Vec x, Vec v);
+  PetscErrorCode BeginCorotationalStep(Vec x, Vec v);
+  PetscErrorCode StepScales(Vec v, PetscReal *scale, PetscReal *start_energy);
+  PetscErrorCode NewtonDirection(PetscInt k, PetscReal *slope);
+  PetscErrorCode LineSearch(Vec x, PetscReal slope, PetscReal scale, PetscReal *merit,
+                            PetscReal *residual, PetscReal *step_length);
+  PetscErrorCode IterateEnergy(PetscReal *energy, PetscReal *work);
+  PetscErrorCode FinishCorotationalStep(PetscInt iterations, PetscReal residual,
+                                        PetscReal tolerance, bool dissipative, Vec v);
   // g(v) and the merit P(v) for the state at x0 + dt v (element pass done).
   PetscErrorCode Residual(Vec v, Vec g, PetscReal *merit);
 
