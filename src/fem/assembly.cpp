@@ -6,7 +6,6 @@ namespace softbody {
 
 LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) {
   LocalElements elements;
-  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
   for (const Body &body : scene.bodies) {
     if (body.fixed) continue;
     const Lame lame = LameFromYoungPoisson(body.material.young, body.material.poisson);
@@ -15,11 +14,11 @@ LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) 
       TetPositions X;
       for (int a = 0; a < 4; ++a) {
         const int32_t local = body.mesh.tets(t, a);
-        vertices[a] = layout.petsc_of_free[layout.free_of_natural[body.first_vertex + local]];
+        vertices[a] = layout.PetscVertexOfNatural(body.first_vertex + local);
         X.row(a) = body.mesh.vertices.row(local);
       }
-      const PetscInt owner_vertex = *std::min_element(vertices.begin(), vertices.end());
-      if (owner_vertex < begin || owner_vertex >= end) continue;
+      // The lowest PETSc vertex's owner owns the element.
+      if (!layout.OwnsPetscVertex(*std::min_element(vertices.begin(), vertices.end()))) continue;
       elements.vertices.push_back(vertices);
       elements.gradients.push_back(ComputeShapeGradients(X));
       elements.volumes.push_back(std::abs(SignedVolume(X)));
@@ -223,16 +222,13 @@ PetscErrorCode CreateState(MPI_Comm comm, const Scene &scene, const DofLayout &l
   PetscScalar *X, *v;
   PetscCall(VecGetArray(state->rest_positions, &X));
   PetscCall(VecGetArray(state->velocities, &v));
-  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
   for (const Body &body : scene.bodies)
     for (int32_t i = 0; i < body.mesh.num_vertices(); ++i) {
-      const PetscInt f = layout.free_of_natural[body.first_vertex + i];
-      if (f < 0) continue;
-      const PetscInt p = layout.petsc_of_free[f];
-      if (p < begin || p >= end) continue;
+      const PetscInt local = layout.LocalOfNatural(body.first_vertex + i);
+      if (local < 0) continue;
       for (int c = 0; c < 3; ++c) {
-        X[3 * (p - begin) + c] = body.mesh.vertices(i, c);
-        v[3 * (p - begin) + c] = scene.initial_velocities(body.first_vertex + i, c);
+        X[3 * local + c] = body.mesh.vertices(i, c);
+        v[3 * local + c] = scene.initial_velocities(body.first_vertex + i, c);
       }
     }
   PetscCall(VecRestoreArray(state->rest_positions, &X));

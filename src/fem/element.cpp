@@ -4,6 +4,31 @@
 
 namespace softbody {
 
+namespace {
+
+// The Newton iteration for the polar factor (RotationOfDeformationNewton,
+// RotationOfDeformation4):
+// Only F with det F > kNewtonConditioning (|F|_F^2 / 3)^(3/2): this bounds the
+// ratio of the smallest to the largest singular value from below, so F is
+// neither inverted nor nearly singular (the SVD takes the rest).
+constexpr double kNewtonConditioning = 1e-3;
+// F counts as nearly orthogonal when |F|_F^2 / 3 and det F are within this of 1
+// (10 %): the unscaled iteration converges fast from there.
+constexpr double kNearlyOrthogonal = 0.1;
+// The Frobenius scaling z is used until it is within this of 1 (1 %).
+constexpr double kScalingCutoff = 1e-2;
+// Squared size of an update below which F was already a rotation (to round-off).
+constexpr double kExactRotationUpdate2 = 1e-34;
+// Squared size of an update below which the next iterate is the last: an update
+// d < 1e-4 leaves an error of at most d^4 / 8 < 2e-17 after one more step.
+constexpr double kLastUpdate2 = 1e-8;
+// Iteration caps (one matrix; four at once): far above the handful the
+// eligible F need; a matrix that reaches them takes the SVD.
+constexpr int kMaxNewtonIterations = 40;
+constexpr int kMaxBatchIterations = 30;
+
+}  // namespace
+
 Lame LameFromYoungPoisson(double young, double poisson) {
   return {young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson)),
           young / (2.0 * (1.0 + poisson))};
@@ -118,10 +143,11 @@ bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
     for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
   // Only clearly non-inverted, well-conditioned F: det F > 1e-3 (|F|_F^2 / 3)^(3/2)
   // bounds the ratio of the smallest to the largest singular value from below.
-  if (!(det > 1e-3 * (x2 / 3.0) * std::sqrt(x2 / 3.0))) return false;
-  bool scaled = std::abs(x2 / 3.0 - 1.0) > 0.1 || std::abs(det - 1.0) > 0.1;
+  if (!(det > kNewtonConditioning * (x2 / 3.0) * std::sqrt(x2 / 3.0))) return false;
+  bool scaled =
+      std::abs(x2 / 3.0 - 1.0) > kNearlyOrthogonal || std::abs(det - 1.0) > kNearlyOrthogonal;
   bool last = false;
-  for (int iteration = 0; iteration < 40; ++iteration) {
+  for (int iteration = 0; iteration < kMaxNewtonIterations; ++iteration) {
     const double inverse_det = 1.0 / det;
     double z = 1.0;
     if (scaled) {
@@ -129,7 +155,7 @@ bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
       for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) c2 += c[j][i] * c[j][i];
       const double z2 = std::sqrt(c2 / x2) * inverse_det;  // |X^-1|_F / |X|_F
-      if (std::abs(z2 - 1.0) > 1e-2)
+      if (std::abs(z2 - 1.0) > kScalingCutoff)
         z = std::sqrt(z2);
       else
         scaled = false;
@@ -152,12 +178,12 @@ bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
       for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
     }
-    if (change2 < 1e-34) {  // converged outright (F was a rotation)
+    if (change2 < kExactRotationUpdate2) {  // converged outright (F was a rotation)
       for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) (*R)(i, j) = x[j][i];
       return true;
     }
-    last = !scaled && change2 < 1e-8;
+    last = !scaled && change2 < kLastUpdate2;
     cofactor(x, c);
     det = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
   }
@@ -191,7 +217,8 @@ void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
   for (int l = 0; l < 4; ++l) {
     double x2 = 0;
     for (int k = 0; k < 9; ++k) x2 += x[k][l] * x[k][l];
-    eligible[l] = std::abs(x2 / 3.0 - 1.0) <= 0.1 && std::abs(det[l] - 1.0) <= 0.1;
+    eligible[l] = std::abs(x2 / 3.0 - 1.0) <= kNearlyOrthogonal &&
+                  std::abs(det[l] - 1.0) <= kNearlyOrthogonal;
     converged[l] = false;
     any = any || eligible[l];
     if (!eligible[l]) {  // iterate the identity instead (no division by a small det)
@@ -200,7 +227,7 @@ void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
     }
   }
   bool final_round = false;
-  for (int iteration = 0; any && iteration < 30; ++iteration) {
+  for (int iteration = 0; any && iteration < kMaxBatchIterations; ++iteration) {
     double b[4];
     for (int l = 0; l < 4; ++l) {
       b[l] = 0.5 / det[l];
@@ -215,7 +242,7 @@ void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
     if (final_round) break;  // one iteration after the last lane's update fell below 1e-4
     bool all = true;
     for (int l = 0; l < 4; ++l) {
-      converged[l] = converged[l] || change2[l] < 1e-8;
+      converged[l] = converged[l] || change2[l] < kLastUpdate2;
       all = all && (converged[l] || !eligible[l]);
     }
     final_round = all;

@@ -132,9 +132,8 @@ std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layo
                 scene.bodies[b].mesh.num_vertices(), static_cast<int32_t>(b));
   std::vector<int32_t> owned(layout.local_count());
   for (PetscInt f = 0; f < layout.num_free(); ++f) {
-    const PetscInt local = layout.petsc_of_free[f] - layout.local_begin();
-    if (local >= 0 && local < layout.local_count())
-      owned[local] = body_of_natural[layout.natural_of_free[f]];
+    const PetscInt local = layout.LocalOfFree(f);
+    if (local >= 0) owned[local] = body_of_natural[layout.natural_of_free[f]];
   }
   return owned;
 }
