@@ -1,6 +1,6 @@
 // RowAssembler (row_assembly.hpp): the matrix, elastic force and energy it
 // writes straight into A's CSR values equal the element-by-element COO assembly
-// (assembly.hpp) in linear and corotational mode, for both shear scales, and
+// (assembly.hpp, coo_reference.hpp) in linear and corotational mode, for both shear scales, and
 // so do the corotated stiffness damping's increment force and energy; and
 // its speed (printed, not asserted: the machine may be shared).
 #include <gtest/gtest.h>
@@ -9,12 +9,14 @@
 #include <chrono>
 #include <random>
 
+#include "coo_reference.hpp"
 #include "fem/assembly.hpp"
 #include "fem/partition.hpp"
 #include "fem/row_assembly.hpp"
 #include "io/scene.hpp"
 
 using namespace softbody;
+using namespace softbody::coo_reference;
 
 namespace {
 
@@ -145,13 +147,11 @@ TEST(RowAssembler, EqualsCooAssembly) {
     // Linear: K and A = mass_scale M + stiffness_scale K.
     {
       Mat reference;
-      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference),
-                0);
-      PetscInt local_dofs;
-      VecGetLocalSize(f.state.lumped_mass, &local_dofs);
-      CooValues values(144 * f.elements.size() + local_dofs);
+      CooValues values(144 * f.elements.size());
       LinearStiffnessValues(f.elements, shear_scale, stiffness_scale, &values);
-      ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
+      ASSERT_EQ(ReferenceMatrix(PETSC_COMM_WORLD, f.layout, f.elements, values, f.state.lumped_mass,
+                                mass_scale, &reference),
+                0);
       ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms()
                                           .Stiffness(stiffness_scale)
                                           .Mass(f.state.lumped_mass, mass_scale)),
@@ -177,11 +177,9 @@ TEST(RowAssembler, EqualsCooAssembly) {
                 0);
 
       Mat reference;
-      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference),
-                0);
       PetscInt local_dofs;
       VecGetLocalSize(f.state.lumped_mass, &local_dofs);
-      CooValues values(144 * f.elements.size() + local_dofs);
+      CooValues values;
       const PetscScalar *xa, *Xa;
       VecGetArrayRead(x, &xa);
       VecGetArrayRead(f.state.rest_positions, &Xa);
@@ -192,7 +190,9 @@ TEST(RowAssembler, EqualsCooAssembly) {
           f.elements, shear_scale, xa, Xa, stiffness_scale, &values, force_touched.data());
       VecRestoreArrayRead(x, &xa);
       VecRestoreArrayRead(f.state.rest_positions, &Xa);
-      ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
+      ASSERT_EQ(ReferenceMatrix(PETSC_COMM_WORLD, f.layout, f.elements, values, f.state.lumped_mass,
+                                mass_scale, &reference),
+                0);
       EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-13) << "shear scale " << shear_scale;
       PetscReal scale;
       const PetscReal difference = DifferenceFrom(force_touched, force, reference_force, &scale);
@@ -242,7 +242,7 @@ TEST(RowAssembler, IncrementDampingEqualsReference) {
     PetscInt local_dofs;
     VecGetLocalSize(x0, &local_dofs);
     ASSERT_EQ(f.elements.touched_vertices.size() * 3, static_cast<size_t>(local_dofs));  // one rank
-    CooValues values(144 * f.elements.size() + local_dofs);
+    CooValues values;
     std::vector<PetscScalar> force_touched(local_dofs), increment_touched(local_dofs);
     std::vector<double> y0, y1;
     const PetscScalar *x0a, *x1a, *Xa;
