@@ -794,9 +794,9 @@ PetscErrorCode ImplicitEuler::TimeAssembly(Vec x, PetscInt repeats, std::vector<
   StageScope stage(Stages().assembly);
   const PetscReal a = options_.alpha, b = options_.beta;
   const bool rotated = options_.mode == MODE_COROTATIONAL;
-  // The refill of A as issue 6 counts it (rotations, rotated element blocks,
-  // values, forces, energy); the warp preconditioner's per-vertex rotations,
-  // which a step computes in the same pass, are its own work and left out here.
+  // The refill of A alone (rotations, rotated element blocks, values, forces,
+  // energy); the warp preconditioner's per-vertex rotations, which a step
+  // computes in the same pass, are its own work and left out here.
   const bool vertex_rotations = assembler_.vertex_rotations_requested();
   assembler_.ComputeVertexRotations(false);
   seconds->clear();

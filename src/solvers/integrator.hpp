@@ -65,11 +65,13 @@ struct IntegratorOptions {
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2
   PetscInt steps = 100;
-  PetscReal alpha = 0.1;  // mass damping a, 1/s
-  PetscReal beta = 0.1;   // stiffness damping b, s
-  PetscReal shear_scale = 1.0;
+  PetscReal alpha = 0.1;        // mass damping a, 1/s
+  PetscReal beta = 0.1;         // stiffness damping b, s
+  PetscReal shear_scale = 1.0;  // s on the shear block of the elasticity tensor (element.hpp)
   // Corotational mode: the step's nonlinear equation is solved by Newton-type
-  // iterations until |g| <= newton_rtol |g(0)| (see CorotationalStep).
+  // iterations until |g| <= newton_rtol (|M v0| + dt |f_el(x0)| + dt |f_ext|), at
+  // most newton_max_it linearised solves, every step when newton_always (else
+  // only steps whose first iterate gains energy; see the top of this file).
   PetscReal newton_rtol = 1e-4;
   PetscInt newton_max_it = 50;
   PetscBool newton_always = PETSC_FALSE;
@@ -81,8 +83,9 @@ struct IntegratorOptions {
 // The time step at time t (s): -dt until the first -dt_schedule entry applies.
 PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time);
 
-// Collective. Reads -mode -dt -dt_schedule -steps -alpha -beta -shear_scale
-// -gravity; rejects impossible values.
+// Collective. Reads the options of IntegratorOptions (their list with units and
+// defaults: softbody -help, section "Time integration"); rejects impossible
+// values (non-positive -dt, negative damping, ...).
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *options);
 
 struct SolverStatistics {
@@ -101,8 +104,8 @@ struct SolverStatistics {
   PetscInt newton_iterations = 0;         // corotational: linearised solves, all steps
   PetscInt max_newton_iterations = 0;     // corotational: most in one step
   PetscInt backtracks = 0;                // corotational: line-search step halvings
-  PetscInt newton_stopped_short =
-      0;                         // corotational: dissipative steps that stalled above -newton_rtol
+  // corotational: dissipative steps that stalled above -newton_rtol
+  PetscInt newton_stopped_short = 0;
   PetscInt fallback_solves = 0;  // solves repeated by the direct fallback after a breakdown
 };
 
