@@ -468,45 +468,43 @@ SOFTBODY_ELEMENT_STEP void CorotatedElementTerms(const Element &el, size_t e, co
 }
 
 // The factors of the blocks B_ab = p_a h_b^T + q_b h_a^T + (q_a . h_b) I [+ ...]:
-// p_a = w l h_a, q_a = w s m h_a with w = stiffness_scale V.
-struct BlockFactors {
-  double w, p[4][3], q[4][3];
-};
-
-SOFTBODY_ELEMENT_STEP void ComputeBlockFactors(double stiffness_scale, double volume,
-                                               const ElementMaterial &k, const double (&h)[4][3],
-                                               BlockFactors *f) {
-  f->w = stiffness_scale * volume;
-  const double wl = f->w * k.l, wsm = f->w * k.sm;
+// p_a = w l h_a, q_a = w s m h_a with w = stiffness_scale V (returned). Plain
+// arrays, not a struct: GCC vectorises the pass less well with the struct.
+SOFTBODY_ELEMENT_STEP double BlockFactors(double stiffness_scale, double volume,
+                                          const ElementMaterial &k, const double (&h)[4][3],
+                                          double (&p)[4][3], double (&q)[4][3]) {
+  const double w = stiffness_scale * volume, wl = w * k.l, wsm = w * k.sm;
   for (int a = 0; a < 4; ++a)
     for (int i = 0; i < 3; ++i) {
-      f->p[a][i] = wl * h[a][i];
-      f->q[a][i] = wsm * h[a][i];
+      p[a][i] = wl * h[a][i];
+      q[a][i] = wsm * h[a][i];
     }
+  return w;
 }
 
 #ifdef __AVX2__
 // The blocks of a standard-shear element (s = 1) in AVX2 rows.
 SOFTBODY_ELEMENT_STEP void AddBlocksAvx2(uint32_t owned, const std::array<int32_t, 16> &offset,
-                                         const double (&h)[4][3], const BlockFactors &f,
-                                         const int32_t (&owned_row)[4], const FillContext &c) {
+                                         const double (&h)[4][3], const double (&p)[4][3],
+                                         const double (&q)[4][3], const int32_t (&owned_row)[4],
+                                         const FillContext &c) {
   __m256d hv[4];
   for (int a = 0; a < 4; ++a) hv[a] = _mm256_set_pd(0.0, h[a][2], h[a][1], h[a][0]);
   double diagonal[4][4];
   for (int a = 0; a < 4; ++a)
     for (int b = a; b < 4; ++b)
-      diagonal[a][b] = f.q[a][0] * h[b][0] + f.q[a][1] * h[b][1] + f.q[a][2] * h[b][2];
+      diagonal[a][b] = q[a][0] * h[b][0] + q[a][1] * h[b][1] + q[a][2] * h[b][2];
   if ((owned & 15u) == 15u) {  // every row owned, every column in the diagonal part
     PetscScalar *values = c.values[1];
     int32_t stride[4];
     for (int a = 0; a < 4; ++a) stride[a] = c.row_length[1][owned_row[a]];
     for (int a = 0; a < 4; ++a) {
-      AddBlockRows(f.p[a], f.q[a], hv[a], hv[a], _mm256_set1_pd(diagonal[a][a]),
-                   values + offset[5 * a], stride[a]);
+      AddBlockRows(p[a], q[a], hv[a], hv[a], _mm256_set1_pd(diagonal[a][a]), values + offset[5 * a],
+                   stride[a]);
       for (int b = a + 1; b < 4; ++b) {
         const __m256d dv = _mm256_set1_pd(diagonal[a][b]);
-        AddBlockRows(f.p[a], f.q[b], hv[a], hv[b], dv, values + offset[4 * a + b], stride[a]);
-        AddBlockRows(f.p[b], f.q[a], hv[b], hv[a], dv, values + offset[4 * b + a], stride[b]);
+        AddBlockRows(p[a], q[b], hv[a], hv[b], dv, values + offset[4 * a + b], stride[a]);
+        AddBlockRows(p[b], q[a], hv[b], hv[a], dv, values + offset[4 * b + a], stride[b]);
       }
     }
     return;
@@ -517,10 +515,10 @@ SOFTBODY_ELEMENT_STEP void AddBlocksAvx2(uint32_t owned, const std::array<int32_
       const bool b_owned = VertexIsOwned(owned, b);
       const __m256d dv = _mm256_set1_pd(diagonal[a][b]);
       if (a_owned)
-        AddBlockRows(f.p[a], f.q[b], hv[a], hv[b], dv, c.values[b_owned] + offset[4 * a + b],
+        AddBlockRows(p[a], q[b], hv[a], hv[b], dv, c.values[b_owned] + offset[4 * a + b],
                      c.row_length[b_owned][owned_row[a]]);
       if (b_owned && b != a)
-        AddBlockRows(f.p[b], f.q[a], hv[b], hv[a], dv, c.values[a_owned] + offset[4 * b + a],
+        AddBlockRows(p[b], q[a], hv[b], hv[a], dv, c.values[a_owned] + offset[4 * b + a],
                      c.row_length[a_owned][owned_row[b]]);
     }
   }
@@ -532,22 +530,22 @@ SOFTBODY_ELEMENT_STEP void AddBlocksAvx2(uint32_t owned, const std::array<int32_
 template <bool kStandardShear>
 SOFTBODY_ELEMENT_STEP void AddBlocks(uint32_t owned, const std::array<int32_t, 16> &offset,
                                      const double (&g)[4][3], const double (&h)[4][3],
-                                     const double (&R)[3][3], const ElementMaterial &k,
-                                     const BlockFactors &f, const int32_t (&owned_row)[4],
-                                     const FillContext &c) {
+                                     const double (&R)[3][3], const ElementMaterial &k, double w,
+                                     const double (&p)[4][3], const double (&q)[4][3],
+                                     const int32_t (&owned_row)[4], const FillContext &c) {
   for (int a = 0; a < 4; ++a) {
     const bool a_owned = VertexIsOwned(owned, a);
     for (int b = a; b < 4; ++b) {
       const bool b_owned = VertexIsOwned(owned, b);
       if (!a_owned && !b_owned) continue;
       double B[3][3];
-      const double diagonal = f.q[a][0] * h[b][0] + f.q[a][1] * h[b][1] + f.q[a][2] * h[b][2];
+      const double diagonal = q[a][0] * h[b][0] + q[a][1] * h[b][1] + q[a][2] * h[b][2];
       for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) B[i][j] = f.p[a][i] * h[b][j] + f.q[b][i] * h[a][j];
+        for (int j = 0; j < 3; ++j) B[i][j] = p[a][i] * h[b][j] + q[b][i] * h[a][j];
       for (int i = 0; i < 3; ++i) B[i][i] += diagonal;
       if constexpr (!kStandardShear) {
         double t[3];  // (2m - 2sm) w (g_a o g_b)
-        for (int q = 0; q < 3; ++q) t[q] = (2.0 * k.m - 2.0 * k.sm) * f.w * g[a][q] * g[b][q];
+        for (int q = 0; q < 3; ++q) t[q] = (2.0 * k.m - 2.0 * k.sm) * w * g[a][q] * g[b][q];
         for (int i = 0; i < 3; ++i)
           for (int j = 0; j < 3; ++j)
             B[i][j] +=
@@ -598,15 +596,15 @@ double FillElements(const std::vector<Element> &elements, const std::vector<Lame
       for (int a = 0; a < 4; ++a)
         for (int i = 0; i < 3; ++i) h[a][i] = g[a][i];
     }
-    BlockFactors f;
-    ComputeBlockFactors(c.stiffness_scale, el.volume, k, h, &f);
+    double p[4][3], q[4][3];  // w l h_a, w s m h_a
+    const double w = BlockFactors(c.stiffness_scale, el.volume, k, h, p, q);
 #ifdef __AVX2__
     if constexpr (kStandardShear) {
-      AddBlocksAvx2(el.owned, el.offset, h, f, owned_row, c);
+      AddBlocksAvx2(el.owned, el.offset, h, p, q, owned_row, c);
       continue;
     }
 #endif
-    AddBlocks<kStandardShear>(el.owned, el.offset, g, h, R, k, f, owned_row, c);
+    AddBlocks<kStandardShear>(el.owned, el.offset, g, h, R, k, w, p, q, owned_row, c);
   }
   return energy;
 }
