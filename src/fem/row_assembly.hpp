@@ -131,11 +131,11 @@ class RowAssembler {
   struct Element {
     std::array<int32_t, 4> vertex;   // index into the halo vertices
     std::array<double, 9> gradient;  // rows grad N_1, grad N_2, grad N_3 (1/m)
-    std::array<double, 9>
-        rest_gradient;  // sum_a (X_a - X_0) grad N_a^T (= I up to round-off), row-major
-    double volume;      // |V| (m^3)
-    int32_t material;   // index into lame_
-    uint32_t owned;     // bit a: vertex a is owned; bit 4: the energy counts here
+    // sum_a (X_a - X_0) grad N_a^T (= I up to round-off), row-major
+    std::array<double, 9> rest_gradient;
+    double volume;     // |V| (m^3)
+    int32_t material;  // index into lame_
+    uint32_t owned;    // bit a: vertex a is owned; bit 4: the energy counts here
     // Offsets of the blocks a, b (16): entry (3a, 3b) in the values of the
     // diagonal part when b is owned, else of the off-diagonal part; -1 when a is
     // not owned.
