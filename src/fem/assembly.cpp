@@ -6,7 +6,6 @@ namespace softbody {
 
 LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) {
   LocalElements elements;
-  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
   for (const Body &body : scene.bodies) {
     if (body.fixed) continue;
     const Lame lame = LameFromYoungPoisson(body.material.young, body.material.poisson);
@@ -15,11 +14,11 @@ LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) 
       TetPositions X;
       for (int a = 0; a < 4; ++a) {
         const int32_t local = body.mesh.tets(t, a);
-        vertices[a] = layout.petsc_of_free[layout.free_of_natural[body.first_vertex + local]];
+        vertices[a] = layout.PetscVertexOfNatural(body.first_vertex + local);
         X.row(a) = body.mesh.vertices.row(local);
       }
-      const PetscInt owner_vertex = *std::min_element(vertices.begin(), vertices.end());
-      if (owner_vertex < begin || owner_vertex >= end) continue;
+      // The lowest PETSc vertex's owner owns the element.
+      if (!layout.OwnsPetscVertex(*std::min_element(vertices.begin(), vertices.end()))) continue;
       elements.vertices.push_back(vertices);
       elements.gradients.push_back(ComputeShapeGradients(X));
       elements.volumes.push_back(std::abs(SignedVolume(X)));
@@ -43,12 +42,10 @@ LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) 
 }
 
 PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
-                                   const LocalElements &elements, PetscBool with_diagonal,
-                                   Mat *matrix) {
+                                   const LocalElements &elements, Mat *matrix) {
   PetscFunctionBeginUser;
-  const PetscInt local_dofs = 3 * layout.local_count(), dof_begin = 3 * layout.local_begin();
-  const PetscCount entries =
-      144 * static_cast<PetscCount>(elements.size()) + (with_diagonal ? local_dofs : 0);
+  const PetscInt local_dofs = 3 * layout.local_count();
+  const PetscCount entries = 144 * static_cast<PetscCount>(elements.size());
   std::vector<PetscInt> rows, cols;
   rows.reserve(entries);
   cols.reserve(entries);
@@ -60,11 +57,6 @@ PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
             rows.push_back(3 * v[a] + ca);
             cols.push_back(3 * v[b] + cb);
           }
-  if (with_diagonal)
-    for (PetscInt i = 0; i < local_dofs; ++i) {
-      rows.push_back(dof_begin + i);
-      cols.push_back(dof_begin + i);
-    }
   PetscCall(MatCreate(comm, matrix));
   PetscCall(MatSetSizes(*matrix, local_dofs, local_dofs, PETSC_DETERMINE, PETSC_DETERMINE));
   PetscCall(MatSetBlockSize(*matrix, 3));
@@ -85,61 +77,11 @@ void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
   }
 }
 
-// Positions of element e's vertices from a touched-vertex array.
-static TetPositions ElementPositions(const LocalElements &elements, size_t e,
-                                     const PetscScalar *touched) {
+TetPositions ElementPositions(const LocalElements &elements, size_t e, const PetscScalar *touched) {
   TetPositions x;
   for (int a = 0; a < 4; ++a)
     for (int c = 0; c < 3; ++c) x(a, c) = touched[3 * elements.touched_index[e][a] + c];
   return x;
-}
-
-double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
-                                const PetscScalar *x_touched, const PetscScalar *X_touched,
-                                double stiffness_scale, CooValues *values,
-                                PetscScalar *force_touched, CorotatedDamping *damping) {
-  const size_t touched = 3 * elements.touched_vertices.size();
-  std::fill(force_touched, force_touched + touched, 0.0);
-  if (damping) {
-    damping->current->resize(12 * elements.size());
-    damping->energy = 0;
-    if (damping->start) std::fill(damping->force_touched, damping->force_touched + touched, 0.0);
-  }
-  PetscScalar *out = values->data();
-  double energy = 0;
-  for (size_t e = 0; e < elements.size(); ++e) {
-    const TetPositions x = ElementPositions(elements, e, x_touched),
-                       X = ElementPositions(elements, e, X_touched);
-    TetPositions force;
-    Mat12 K;
-    double element_energy;
-    const Mat3 R = CorotatedElement(elements.gradients[e], elements.volumes[e], elements.lame[e],
-                                    shear_scale, x, X, &force, &element_energy, &K);
-    energy += element_energy;
-    for (int a = 0; a < 4; ++a)
-      for (int c = 0; c < 3; ++c)
-        force_touched[3 * elements.touched_index[e][a] + c] += force(a, c);
-    if (damping) {
-      Eigen::Map<Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y(damping->current->data() + 12 * e);
-      y = x * R - X;  // rows R^T x_a - X_a
-      if (damping->start) {
-        const Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> y_start(
-            damping->start + 12 * e);
-        TetPositions increment_force;
-        double increment_energy;
-        ElasticForceAndEnergy(elements.gradients[e], elements.volumes[e], elements.lame[e],
-                              shear_scale, y - y_start, &increment_force, &increment_energy);
-        damping->energy += increment_energy;
-        increment_force = increment_force * R.transpose();
-        for (int a = 0; a < 4; ++a)
-          for (int c = 0; c < 3; ++c)
-            damping->force_touched[3 * elements.touched_index[e][a] + c] += increment_force(a, c);
-      }
-    }
-    for (int i = 0; i < 12; ++i)
-      for (int j = 0; j < 12; ++j) *out++ = stiffness_scale * K(i, j);
-  }
-  return energy;
 }
 
 double LinearStrainEnergy(const LocalElements &elements, double shear_scale,
@@ -157,29 +99,19 @@ double LinearStrainEnergy(const LocalElements &elements, double shear_scale,
   return energy;
 }
 
-PetscErrorCode SetElasticMatrixValues(Vec lumped_mass, double mass_scale, CooValues *values,
-                                      Mat matrix) {
+PetscErrorCode SetElasticMatrixValues(const CooValues &values, Mat matrix) {
   PetscFunctionBeginUser;
-  if (lumped_mass) {
-    PetscInt local_dofs;
-    const PetscScalar *mass;
-    PetscCall(VecGetLocalSize(lumped_mass, &local_dofs));
-    PetscCall(VecGetArrayRead(lumped_mass, &mass));
-    PetscScalar *diagonal = values->data() + values->size() - local_dofs;
-    for (PetscInt i = 0; i < local_dofs; ++i) diagonal[i] = mass_scale * mass[i];
-    PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
-  }
-  PetscCall(MatSetValuesCOO(matrix, values->data(), INSERT_VALUES));
+  PetscCall(MatSetValuesCOO(matrix, values.data(), INSERT_VALUES));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode CreateStiffnessMatrix(MPI_Comm comm, const DofLayout &layout,
                                      const LocalElements &elements, double shear_scale, Mat *K) {
   PetscFunctionBeginUser;
-  PetscCall(CreateElasticMatrix(comm, layout, elements, PETSC_FALSE, K));
+  PetscCall(CreateElasticMatrix(comm, layout, elements, K));
   CooValues values(144 * elements.size());
   LinearStiffnessValues(elements, shear_scale, 1.0, &values);
-  PetscCall(SetElasticMatrixValues(nullptr, 0.0, &values, *K));
+  PetscCall(SetElasticMatrixValues(values, *K));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -203,10 +135,6 @@ PetscErrorCode AssembleLumpedMass(MPI_Comm comm, const DofLayout &layout,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-}  // namespace softbody
-
-namespace softbody {
-
 State::~State() {
   VecDestroy(&rest_positions);
   VecDestroy(&positions);
@@ -223,16 +151,13 @@ PetscErrorCode CreateState(MPI_Comm comm, const Scene &scene, const DofLayout &l
   PetscScalar *X, *v;
   PetscCall(VecGetArray(state->rest_positions, &X));
   PetscCall(VecGetArray(state->velocities, &v));
-  const PetscInt begin = layout.local_begin(), end = begin + layout.local_count();
   for (const Body &body : scene.bodies)
     for (int32_t i = 0; i < body.mesh.num_vertices(); ++i) {
-      const PetscInt f = layout.free_of_natural[body.first_vertex + i];
-      if (f < 0) continue;
-      const PetscInt p = layout.petsc_of_free[f];
-      if (p < begin || p >= end) continue;
+      const PetscInt local = layout.LocalOfNatural(body.first_vertex + i);
+      if (local < 0) continue;
       for (int c = 0; c < 3; ++c) {
-        X[3 * (p - begin) + c] = body.mesh.vertices(i, c);
-        v[3 * (p - begin) + c] = scene.initial_velocities(body.first_vertex + i, c);
+        X[3 * local + c] = body.mesh.vertices(i, c);
+        v[3 * local + c] = scene.initial_velocities(body.first_vertex + i, c);
       }
     }
   PetscCall(VecRestoreArray(state->rest_positions, &X));

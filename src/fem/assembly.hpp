@@ -1,10 +1,15 @@
-// Distributed assembly of the lumped mass and the elastic matrices.
+// The local elements, the distributed state and its lumped mass, the elements'
+// linear strain energy, and the assembly of the rest stiffness K by COO triplets.
 //
-// Every rank computes the elements it owns (the owner of an element is the owner
-// of its lowest-numbered PETSc vertex) and hands PETSc coordinate (COO) triplets:
-// the pattern once (MatSetPreallocationCOO), the values at every refill
-// (MatSetValuesCOO: repeated entries are summed, off-process entries are sent to
-// their owner). Matrices are MATAIJ with block size 3 over the DofLayout.
+// Every rank holds the elements it owns (the owner of an element is the owner
+// of its lowest-numbered PETSc vertex). The COO assembly hands PETSc coordinate
+// triplets: the pattern once (MatSetPreallocationCOO), the values then
+// (MatSetValuesCOO: repeated entries are summed, off-process entries are sent
+// to their owner). It builds K for -export_matrices (output.hpp), and it is the
+// independent reference the unit tests compare RowAssembler against
+// (tests/unit/coo_reference.hpp); the time step's matrices come from
+// RowAssembler (row_assembly.hpp). Matrices are MATAIJ with block size 3 over
+// the DofLayout.
 #pragma once
 
 #include <petscmat.h>
@@ -37,44 +42,26 @@ struct LocalElements {
 LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout);
 
 // Collective. A MATAIJ matrix (block size 3) with the COO pattern of the local
-// elements' 12 x 12 blocks, plus, when with_diagonal, every local diagonal entry
-// (for the mass term of A).
+// elements' 12 x 12 blocks.
 PetscErrorCode CreateElasticMatrix(MPI_Comm comm, const DofLayout &layout,
-                                   const LocalElements &elements, PetscBool with_diagonal,
-                                   Mat *matrix);
+                                   const LocalElements &elements, Mat *matrix);
 
-// Collective. The rest stiffness K (N/m): CreateElasticMatrix without diagonal
-// part, filled with the linear element stiffness.
+// Collective. The rest stiffness K (N/m): CreateElasticMatrix filled with the
+// linear element stiffness.
 PetscErrorCode CreateStiffnessMatrix(MPI_Comm comm, const DofLayout &layout,
                                      const LocalElements &elements, double shear_scale, Mat *K);
 
-// COO values of a matrix made by CreateElasticMatrix: 144 per element (its 12 x 12
-// block, row-major), then, with a diagonal part, one per local DOF.
+// COO values of a matrix made by CreateElasticMatrix: 144 per element (its
+// 12 x 12 block, row-major).
 using CooValues = std::vector<PetscScalar>;
 
-// Not collective. Element part of values = stiffness_scale K_e (linear stiffness).
+// Not collective. values = stiffness_scale K_e (linear stiffness) per element.
 void LinearStiffnessValues(const LocalElements &elements, double shear_scale,
                            double stiffness_scale, CooValues *values);
 
-// Not collective. The corotational pass (Mueller & Gross 2004) over the local
-// elements at positions x_touched (3 per touched vertex, m), rest positions
-// X_touched: element part of values = stiffness_scale R K_e R^T; force_touched
-// (zeroed here, 3 per touched vertex) += R K_e (R^T x_e - X_e); returns the local
-// strain energy sum_e y^T K_e y / 2 (J). With damping: also records every y_e
-// (12 per element) and, when damping->start holds y_e at the start of the step,
-// adds R K_e (y_e - y_e,start) to damping->force_touched (zeroed here) and
-// sum_e |y_e - y_e,start|_K_e^2 / 2 to damping->energy: the rotation-free
-// deformation increment behind the corotated stiffness damping (integrator.hpp).
-struct CorotatedDamping {
-  std::vector<double> *current = nullptr;  // out: y_e
-  const double *start = nullptr;           // in: y_e at the start of the step, or null
-  PetscScalar *force_touched = nullptr;    // out (when start)
-  double energy = 0;                       // out (when start), J
-};
-double CorotatedStiffnessValues(const LocalElements &elements, double shear_scale,
-                                const PetscScalar *x_touched, const PetscScalar *X_touched,
-                                double stiffness_scale, CooValues *values,
-                                PetscScalar *force_touched, CorotatedDamping *damping = nullptr);
+// Not collective. Positions of element e's vertices (rows, m) from an array of
+// 3 values per touched vertex (LocalElements::touched_vertices order).
+TetPositions ElementPositions(const LocalElements &elements, size_t e, const PetscScalar *touched);
 
 // Not collective. Linear strain energy sum_e V strain . C strain / 2 (J) of the
 // local elements at positions x_touched (rest X_touched), element by element:
@@ -82,19 +69,13 @@ double CorotatedStiffnessValues(const LocalElements &elements, double shear_scal
 double LinearStrainEnergy(const LocalElements &elements, double shear_scale,
                           const PetscScalar *x_touched, const PetscScalar *X_touched);
 
-// Collective. Writes mass_scale x lumped_mass into the diagonal part of values
-// (when lumped_mass is given) and sets the matrix's values from them.
-PetscErrorCode SetElasticMatrixValues(Vec lumped_mass, double mass_scale, CooValues *values,
-                                      Mat matrix);
+// Collective. Sets the matrix's values (made by CreateElasticMatrix) from values.
+PetscErrorCode SetElasticMatrixValues(const CooValues &values, Mat matrix);
 
 // Collective. Lumped mass per DOF (kg), density x volume / 4 to each vertex of
 // each tet, repeated for the three coordinates. Created from the layout.
 PetscErrorCode AssembleLumpedMass(MPI_Comm comm, const DofLayout &layout,
                                   const LocalElements &elements, Vec *lumped_mass);
-
-}  // namespace softbody
-
-namespace softbody {
 
 // The distributed state, PETSc order, block size 3 (x y z per vertex).
 struct State {

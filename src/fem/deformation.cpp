@@ -25,10 +25,8 @@ std::vector<PetscInt> LocalBodies(const Scene &scene, const DofLayout &layout) {
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
     for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
-      const PetscInt f = layout.free_of_natural[body.first_vertex + v];
-      if (f < 0) continue;
-      const PetscInt p = layout.petsc_of_free[f] - layout.local_begin();
-      if (p >= 0 && p < layout.local_count()) body_of[p] = static_cast<PetscInt>(b);
+      const PetscInt local = layout.LocalOfNatural(body.first_vertex + v);
+      if (local >= 0) body_of[local] = static_cast<PetscInt>(b);
     }
   }
   return body_of;

@@ -4,6 +4,31 @@
 
 namespace softbody {
 
+namespace {
+
+// The Newton iteration for the polar factor (RotationOfDeformationNewton,
+// RotationOfDeformation4):
+// Only F with det F > kNewtonConditioning (|F|_F^2 / 3)^(3/2): this bounds the
+// ratio of the smallest to the largest singular value from below, so F is
+// neither inverted nor nearly singular (the SVD takes the rest).
+constexpr double kNewtonConditioning = 1e-3;
+// F counts as nearly orthogonal when |F|_F^2 / 3 and det F are within this of 1
+// (10 %): the unscaled iteration converges fast from there.
+constexpr double kNearlyOrthogonal = 0.1;
+// The Frobenius scaling z is used until it is within this of 1 (1 %).
+constexpr double kScalingCutoff = 1e-2;
+// Squared size of an update below which F was already a rotation (to round-off).
+constexpr double kExactRotationUpdate2 = 1e-34;
+// Squared size of an update below which the next iterate is the last: an update
+// d < 1e-4 leaves an error of at most d^4 / 8 < 2e-17 after one more step.
+constexpr double kLastUpdate2 = 1e-8;
+// Iteration caps (one matrix; four at once): far above the handful the
+// eligible F need; a matrix that reaches them takes the SVD.
+constexpr int kMaxNewtonIterations = 40;
+constexpr int kMaxBatchIterations = 30;
+
+}  // namespace
+
 Lame LameFromYoungPoisson(double young, double poisson) {
   return {young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson)),
           young / (2.0 * (1.0 + poisson))};
@@ -91,6 +116,92 @@ Mat3 RotationOfDeformationSvd(const Mat3 &F) {
   return U * V.transpose();
 }
 
+namespace {
+
+// The steps of the Newton iterations below are always inlined: each iteration
+// must compile as one function (speed, and the same fused multiply-adds).
+#define SOFTBODY_KERNEL_STEP [[gnu::always_inline]] inline
+
+// One matrix as three columns: m[j][i] = entry (i, j).
+// The cofactor matrix of m (columns: cross products of m's columns).
+SOFTBODY_KERNEL_STEP void Cofactor(const double (&m)[3][3], double (&out)[3][3]) {
+  for (int j = 0; j < 3; ++j) {
+    const double *u = m[(j + 1) % 3], *v = m[(j + 2) % 3];
+    out[j][0] = u[1] * v[2] - u[2] * v[1];
+    out[j][1] = u[2] * v[0] - u[0] * v[2];
+    out[j][2] = u[0] * v[1] - u[1] * v[0];
+  }
+}
+
+// det m from its cofactor matrix c (first column of each).
+SOFTBODY_KERNEL_STEP double Determinant(const double (&m)[3][3], const double (&c)[3][3]) {
+  return m[0][0] * c[0][0] + m[0][1] * c[0][1] + m[0][2] * c[0][2];
+}
+
+SOFTBODY_KERNEL_STEP double SquaredFrobenius(const double (&m)[3][3]) {
+  double sum = 0;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) sum += m[j][i] * m[j][i];
+  return sum;
+}
+
+// The Frobenius scaling z = (|X^-1|_F / |X|_F)^(1/2) of the iteration while
+// *scaled; once z is within kScalingCutoff of 1, scaling ends (z = 1).
+SOFTBODY_KERNEL_STEP double NewtonScaling(const double (&c)[3][3], double x2, double inverse_det,
+                                          bool *scaled) {
+  double z = 1.0;
+  if (*scaled) {
+    const double c2 = SquaredFrobenius(c);
+    const double z2 = std::sqrt(c2 / x2) * inverse_det;  // |X^-1|_F / |X|_F
+    if (std::abs(z2 - 1.0) > kScalingCutoff)
+      z = std::sqrt(z2);
+    else
+      *scaled = false;
+  }
+  return z;
+}
+
+// X <- a X + b C; returns the squared size of the update.
+SOFTBODY_KERNEL_STEP double NewtonUpdate(double a, double b, const double (&c)[3][3],
+                                         double (&x)[3][3]) {
+  double change2 = 0;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) {
+      const double next = a * x[j][i] + b * c[j][i];
+      change2 += (next - x[j][i]) * (next - x[j][i]);
+      x[j][i] = next;
+    }
+  return change2;
+}
+
+// Four matrices in lanes, x[k][l] = entry k (column-major, k = 3 j + i) of
+// matrix l, with their cofactor matrices c and determinants det: marks the
+// nearly orthogonal lanes eligible (none converged yet) and replaces
+// the others by the identity (no division by a small det); true when any is
+// eligible.
+SOFTBODY_KERNEL_STEP bool SelectNearlyOrthogonal4(double (&x)[9][4], double (&c)[9][4],
+                                                  double (&det)[4], bool (&eligible)[4],
+                                                  bool (&converged)[4]) {
+  bool any = false;
+  for (int l = 0; l < 4; ++l) {
+    double x2 = 0;
+    for (int k = 0; k < 9; ++k) x2 += x[k][l] * x[k][l];
+    eligible[l] = std::abs(x2 / 3.0 - 1.0) <= kNearlyOrthogonal &&
+                  std::abs(det[l] - 1.0) <= kNearlyOrthogonal;
+    converged[l] = false;
+    any = any || eligible[l];
+    if (!eligible[l]) {
+      for (int k = 0; k < 9; ++k) x[k][l] = c[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
+      det[l] = 1.0;
+    }
+  }
+  return any;
+}
+
+#undef SOFTBODY_KERNEL_STEP
+
+}  // namespace
+
 bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
   // Newton iteration for the polar factor (Higham 1986, "Computing the polar
   // decomposition with applications"): X <- (z X + X^-T / z) / 2, X^-T = C / det X
@@ -103,63 +214,32 @@ bool RotationOfDeformationNewton(const Mat3 &F, Mat3 *R) {
   double x[3][3], c[3][3];  // x[j]: column j of X; c[j]: column j of C
   for (int j = 0; j < 3; ++j)
     for (int i = 0; i < 3; ++i) x[j][i] = F(i, j);
-  const auto cofactor = [](const double(*m)[3], double(*out)[3]) {
-    for (int j = 0; j < 3; ++j) {
-      const double *u = m[(j + 1) % 3], *v = m[(j + 2) % 3];
-      out[j][0] = u[1] * v[2] - u[2] * v[1];
-      out[j][1] = u[2] * v[0] - u[0] * v[2];
-      out[j][2] = u[0] * v[1] - u[1] * v[0];
-    }
-  };
-  cofactor(x, c);
-  double det = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
-  double x2 = 0;
-  for (int j = 0; j < 3; ++j)
-    for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
-  // Only clearly non-inverted, well-conditioned F: det F > 1e-3 (|F|_F^2 / 3)^(3/2)
-  // bounds the ratio of the smallest to the largest singular value from below.
-  if (!(det > 1e-3 * (x2 / 3.0) * std::sqrt(x2 / 3.0))) return false;
-  bool scaled = std::abs(x2 / 3.0 - 1.0) > 0.1 || std::abs(det - 1.0) > 0.1;
+  Cofactor(x, c);
+  double det = Determinant(x, c);
+  double x2 = SquaredFrobenius(x);
+  if (!(det > kNewtonConditioning * (x2 / 3.0) * std::sqrt(x2 / 3.0))) return false;
+  bool scaled =
+      std::abs(x2 / 3.0 - 1.0) > kNearlyOrthogonal || std::abs(det - 1.0) > kNearlyOrthogonal;
   bool last = false;
-  for (int iteration = 0; iteration < 40; ++iteration) {
+  for (int iteration = 0; iteration < kMaxNewtonIterations; ++iteration) {
     const double inverse_det = 1.0 / det;
-    double z = 1.0;
-    if (scaled) {
-      double c2 = 0;
-      for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i) c2 += c[j][i] * c[j][i];
-      const double z2 = std::sqrt(c2 / x2) * inverse_det;  // |X^-1|_F / |X|_F
-      if (std::abs(z2 - 1.0) > 1e-2)
-        z = std::sqrt(z2);
-      else
-        scaled = false;
-    }
+    const double z = NewtonScaling(c, x2, inverse_det, &scaled);
     const double a = 0.5 * z, b = 0.5 * inverse_det / z;
     if (last) {
       for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) (*R)(i, j) = a * x[j][i] + b * c[j][i];
       return true;
     }
-    double change2 = 0;
-    for (int j = 0; j < 3; ++j)
-      for (int i = 0; i < 3; ++i) {
-        const double next = a * x[j][i] + b * c[j][i];
-        change2 += (next - x[j][i]) * (next - x[j][i]);
-        x[j][i] = next;
-      }
-    if (scaled) {
-      x2 = 0;
-      for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i) x2 += x[j][i] * x[j][i];
-    }
-    if (change2 < 1e-34) {  // converged outright (F was a rotation)
+    const double change2 = NewtonUpdate(a, b, c, x);
+    if (scaled) x2 = SquaredFrobenius(x);
+    if (change2 < kExactRotationUpdate2) {  // converged outright (F was a rotation)
       for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) (*R)(i, j) = x[j][i];
       return true;
     }
-    last = !scaled && change2 < 1e-8;
-    cofactor(x, c);
-    det = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
+    last = !scaled && change2 < kLastUpdate2;
+    Cofactor(x, c);
+    det = Determinant(x, c);
   }
   return false;
 }
@@ -169,7 +249,8 @@ void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
   // matrices at once, lane l of every array being matrix l (the loops over
   // lanes vectorise). Lanes that are not nearly orthogonal (|F|_F^2 / 3 or
   // det F off 1 by more than 10 %), or not converged after 30 iterations, take
-  // RotationOfDeformation.
+  // RotationOfDeformation. (The iteration stays in this one function: split
+  // into helpers, GCC schedules it more slowly.)
   double x[9][4], c[9][4], det[4], change2[4];
   bool eligible[4], converged[4];
   for (int l = 0; l < 4; ++l)
@@ -187,20 +268,9 @@ void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
     for (int l = 0; l < 4; ++l) det[l] = x[0][l] * c[0][l] + x[1][l] * c[1][l] + x[2][l] * c[2][l];
   };
   cofactor_and_det();
-  bool any = false;
-  for (int l = 0; l < 4; ++l) {
-    double x2 = 0;
-    for (int k = 0; k < 9; ++k) x2 += x[k][l] * x[k][l];
-    eligible[l] = std::abs(x2 / 3.0 - 1.0) <= 0.1 && std::abs(det[l] - 1.0) <= 0.1;
-    converged[l] = false;
-    any = any || eligible[l];
-    if (!eligible[l]) {  // iterate the identity instead (no division by a small det)
-      for (int k = 0; k < 9; ++k) x[k][l] = c[k][l] = (k % 4 == 0) ? 1.0 : 0.0;
-      det[l] = 1.0;
-    }
-  }
+  const bool any = SelectNearlyOrthogonal4(x, c, det, eligible, converged);
   bool final_round = false;
-  for (int iteration = 0; any && iteration < 30; ++iteration) {
+  for (int iteration = 0; any && iteration < kMaxBatchIterations; ++iteration) {
     double b[4];
     for (int l = 0; l < 4; ++l) {
       b[l] = 0.5 / det[l];
@@ -215,7 +285,7 @@ void RotationOfDeformation4(const Mat3 *F, Mat3 *R) {
     if (final_round) break;  // one iteration after the last lane's update fell below 1e-4
     bool all = true;
     for (int l = 0; l < 4; ++l) {
-      converged[l] = converged[l] || change2[l] < 1e-8;
+      converged[l] = converged[l] || change2[l] < kLastUpdate2;
       all = all && (converged[l] || !eligible[l]);
     }
     final_round = all;

@@ -78,7 +78,7 @@ Mat3 DeformationGradient(const TetPositions &x, const ShapeGradients &grad);
 // R = U diag(1, 1, det(U V^T)) V^T for F = U diag(s) V^T (s decreasing), so the
 // axis of the smallest singular value is flipped when det F <= 0 and det R = +1
 // always. Well-conditioned F with det F > 0 (nearly every tet) take the Newton
-// iteration below (about 0.05 us); the rest the SVD (about 1.7 us).
+// iteration below, the rest the SVD.
 Mat3 RotationOfDeformation(const Mat3 &F);
 
 // RotationOfDeformation of F[0..3] into R[0..3], the common case (nearly

@@ -9,6 +9,10 @@ namespace softbody {
 
 namespace {
 
+// METIS's random seed, fixed so that a scene is partitioned the same way at
+// every run (results reproducible bit for bit); any fixed value would do.
+constexpr idx_t kMetisSeed = 1;
+
 // Rank 0 only: METIS k-way partition of the free-vertex adjacency graph.
 PetscErrorCode PartitionFreeVertices(const Scene &scene, const DofLayout &layout, idx_t nparts,
                                      std::vector<idx_t> *part) {
@@ -38,7 +42,7 @@ PetscErrorCode PartitionFreeVertices(const Scene &scene, const DofLayout &layout
   idx_t nvtxs = static_cast<idx_t>(n), ncon = 1, objval = 0;
   idx_t options[METIS_NOPTIONS];
   METIS_SetDefaultOptions(options);
-  options[METIS_OPTION_SEED] = 1;  // reproducible partitions
+  options[METIS_OPTION_SEED] = kMetisSeed;
   part->assign(n, 0);
   const int status =
       METIS_PartGraphKway(&nvtxs, &ncon, xadj.data(), adjncy.data(), nullptr, nullptr, nullptr,
@@ -132,9 +136,8 @@ std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layo
                 scene.bodies[b].mesh.num_vertices(), static_cast<int32_t>(b));
   std::vector<int32_t> owned(layout.local_count());
   for (PetscInt f = 0; f < layout.num_free(); ++f) {
-    const PetscInt local = layout.petsc_of_free[f] - layout.local_begin();
-    if (local >= 0 && local < layout.local_count())
-      owned[local] = body_of_natural[layout.natural_of_free[f]];
+    const PetscInt local = layout.LocalOfFree(f);
+    if (local >= 0) owned[local] = body_of_natural[layout.natural_of_free[f]];
   }
   return owned;
 }

@@ -49,8 +49,6 @@ struct DofLayout {
     const PetscInt free = free_of_natural[natural];
     return free < 0 ? -1 : LocalOfFree(free);
   }
-  // Natural-order layout of the free vertices with the same local sizes as the
-  // PETSc layout: rank r holds free indices [vertex_start[r], vertex_start[r+1]).
 };
 
 // Collective. Rank 0 partitions with METIS and broadcasts the parts.

@@ -28,6 +28,10 @@
 
 namespace softbody {
 
+namespace row_assembly_detail {
+struct FillContext;  // the element pass's pointers and scales (row_assembly.cpp)
+}
+
 class RowAssembler {
  public:
   RowAssembler() = default;
@@ -41,13 +45,15 @@ class RowAssembler {
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                        double shear_scale, Vec rest_positions);
 
+  // How PETSc multiplies with the matrix: its default "inode" kernel, or the
+  // plain CSR kernel, faster on these rows but summing in another order.
+  enum class Products { kInode, kPlainCsr };
+
   // Collective. A new MATAIJ matrix (block size 3) with one 3 x 3 block per pair
   // of vertices sharing a tet (the diagonal included), all values zero, and the
   // offsets of this rank's element blocks in it. Every matrix passed to Fill
-  // must come from here (or be a MatDuplicate of one). plain_products: PETSc's
-  // plain CSR product instead of its "inode" variant, a third faster on these
-  // rows (3.0 against 4.1 ms at 1e5 tets) but summing in another order.
-  PetscErrorCode CreateMatrix(Mat *matrix, bool plain_products = false);
+  // must come from here (or be a MatDuplicate of one).
+  PetscErrorCode CreateMatrix(Mat *matrix, Products products = Products::kInode);
 
   // Corotated stiffness damping (integrator.hpp): the displacement gradients
   // H_e = sum_a y_a g_a^T of y_a = R^T x_a - X_a (9 per element, this object's
@@ -62,16 +68,51 @@ class RowAssembler {
     PetscReal energy = 0;                        // out when start
   };
 
+  // The terms of one Fill, named. Build with the setters, e.g.
+  //     FillTerms().Stiffness(b dt + dt^2).Mass(lumped_mass, 1 + a dt).CorotatedAt(x)
+  //         .ElasticForce(force).StrainEnergy(&energy)
+  // Every output is optional; the force, energy and damping outputs need CorotatedAt.
+  struct FillTerms {
+    double stiffness_scale = 1;           // factor on K (or on sum_e R K_e R^T)
+    Vec lumped_mass = nullptr;            // per DOF (kg); null: no mass term
+    double mass_scale = 0;                // factor on diag(lumped_mass)
+    Vec positions = nullptr;              // x (m): the corotated K(R) at x; null: the rest K
+    Vec force = nullptr;                  // out: sum_e R K_e (R^T x_e - X_e), owned rows (N)
+    PetscReal *energy = nullptr;          // out: sum_e y_e^T K_e y_e / 2 (J, all ranks)
+    IncrementDamping *damping = nullptr;  // in/out: the increment damping terms
+
+    FillTerms &Stiffness(double scale) {
+      stiffness_scale = scale;
+      return *this;
+    }
+    FillTerms &Mass(Vec lumped, double scale) {
+      lumped_mass = lumped;
+      mass_scale = scale;
+      return *this;
+    }
+    FillTerms &CorotatedAt(Vec x) {
+      positions = x;
+      return *this;
+    }
+    FillTerms &ElasticForce(Vec out) {
+      force = out;
+      return *this;
+    }
+    FillTerms &StrainEnergy(PetscReal *out) {
+      energy = out;
+      return *this;
+    }
+    FillTerms &Damping(IncrementDamping *terms) {
+      damping = terms;
+      return *this;
+    }
+  };
+
   // Collective. matrix = stiffness_scale K + mass_scale diag(lumped_mass), K the
-  // rest stiffness (rotated = false) or the corotated sum_e R K_e R^T at
-  // positions x (rotated = true). With rotated, also the elastic force term
-  // force = sum_e R K_e (R^T x_e - X_e) (owned rows, N; may be null), the
-  // strain energy sum_e y_e^T K_e y_e / 2 (J, summed over ranks; may be null)
-  // and the damping terms (may be null). lumped_mass may be null (no mass
-  // term). x is ignored unless rotated.
-  PetscErrorCode Fill(Mat matrix, bool rotated, Vec x, double stiffness_scale, Vec lumped_mass,
-                      double mass_scale, Vec force, PetscReal *energy,
-                      IncrementDamping *damping = nullptr);
+  // rest stiffness (no positions) or the corotated sum_e R K_e R^T at positions
+  // x, with y_e = R^T x_e - X_e; with positions, also the requested outputs of
+  // `terms` (FillTerms). matrix must come from CreateMatrix.
+  PetscErrorCode Fill(Mat matrix, const FillTerms &terms);
 
   // Not collective. From now on, every rotated Fill also computes one rotation per
   // owned vertex: the polar rotation of the volume-weighted sum of the
@@ -90,16 +131,44 @@ class RowAssembler {
   struct Element {
     std::array<int32_t, 4> vertex;   // index into the halo vertices
     std::array<double, 9> gradient;  // rows grad N_1, grad N_2, grad N_3 (1/m)
-    std::array<double, 9>
-        rest_gradient;  // sum_a (X_a - X_0) grad N_a^T (= I up to round-off), row-major
-    double volume;      // |V| (m^3)
-    int32_t material;   // index into lame_
-    uint32_t owned;     // bit a: vertex a is owned; bit 4: the energy counts here
+    // sum_a (X_a - X_0) grad N_a^T (= I up to round-off), row-major
+    std::array<double, 9> rest_gradient;
+    double volume;     // |V| (m^3)
+    int32_t material;  // index into lame_
+    uint32_t owned;    // bit a: vertex a is owned; bit 4: the energy counts here
     // Offsets of the blocks a, b (16): entry (3a, 3b) in the values of the
     // diagonal part when b is owned, else of the off-diagonal part; -1 when a is
     // not owned.
     std::array<int32_t, 16> offset;
   };
+
+  struct MatrixParts;   // CSR structure of the matrix's two parts (set-up)
+  struct MatrixValues;  // their value arrays (a fill)
+  using FillContext = row_assembly_detail::FillContext;
+
+  // Setup's steps: the elements touching an owned vertex (and their PETSc
+  // vertices), the halo indices of those vertices, the gather plan.
+  static Element MakeElement(const TetPositions &X, int32_t material, uint32_t owned);
+  void CollectElements(const Scene &scene, const DofLayout &layout,
+                       std::vector<std::array<PetscInt, 4>> *vertices);
+  PetscErrorCode IndexHalo(const std::vector<std::array<PetscInt, 4>> &vertices);
+  PetscErrorCode CreateHaloScatter(Vec rest_positions);
+  PetscErrorCode GatherHalo(Vec x);  // x_halo_ = the halo vertices' entries of x
+  // CreateMatrix's steps: per owned vertex its neighbours (CSR by vertex:
+  // start, halo indices, their count), the preallocated pattern, the offsets of
+  // the element blocks and diagonal entries in it (false when one is missing).
+  void OwnedNeighbours(std::vector<PetscInt> *start, std::vector<int32_t> *neighbours,
+                       std::vector<PetscInt> *degree) const;
+  PetscErrorCode CreatePattern(Mat *matrix, Products products) const;
+  bool LocateBlocks(const MatrixParts &parts);
+  // Fill's steps.
+  PetscErrorCode OpenValues(Mat matrix, MatrixValues *values) const;  // and zero them
+  PetscErrorCode CloseValues(Mat matrix, MatrixValues *values) const;
+  PetscErrorCode FillRotated(const FillTerms &terms, FillContext *context, double *local_energy);
+  void RotateVertexDeformations();
+  PetscErrorCode AddMassTerm(const FillTerms &terms, PetscScalar *diagonal_values);
+  PetscErrorCode SumEnergies(const FillTerms &terms, double local_energy,
+                             double local_damping_energy);
 
   MPI_Comm comm_ = MPI_COMM_NULL;
   double shear_scale_ = 1;

@@ -10,8 +10,109 @@
 
 namespace softbody {
 
+namespace {
+
+// -dt_schedule: an entry applies from its time t on, with t taken as reached
+// within this fraction of its step (the accumulated time carries round-off).
+constexpr PetscReal kScheduleTimeTolerance = 1e-9;
+// With contact: most rounds of "solve, add penetrating vertices or release
+// slipping contacts"; a last solve follows when the rounds run out. Twenty
+// rounds is well above what settling contacts take.
+constexpr int kMaxContactRounds = 20;
+
+// Corotational iteration (CorotationalStep):
+// Sufficient decrease of the line search (Armijo's c1, the customary 1e-4): P
+// must fall by this fraction of s g.d, or, near the root, |g| by this fraction of s.
+constexpr PetscReal kSufficientDecrease = 1e-4;
+// "Near the root": the last |g| is below this fraction of g's scale; there |g|
+// decides, as round-off in P hides its decrease.
+constexpr PetscReal kNearRootFraction = 1e-2;
+// The line search halves s at most this often (s = 2^-40: the iterate stands).
+constexpr int kMaxHalvings = 40;
+// Relative round-off of the energy balance: an iterate "gains energy" only
+// beyond this fraction of the energies involved.
+constexpr PetscReal kEnergyRoundOff = 1e-12;
+// The iteration stalls when |g| keeps more than this fraction of its last value.
+constexpr PetscReal kStallRatio = 0.9;
+
+}  // namespace
+
 const char *const kElasticityModes[] = {"linear", "corotational", "ElasticityMode", "MODE_",
                                         nullptr};
+
+namespace {
+
+// "t1:dt1,t2:dt2,..." (s) into schedule: times >= 0 and increasing, steps > 0.
+PetscErrorCode ParseTimeStepSchedule(MPI_Comm comm, std::string_view text,
+                                     std::vector<std::pair<PetscReal, PetscReal>> *schedule) {
+  PetscFunctionBeginUser;
+  schedule->clear();
+  for (std::string_view rest = text; !rest.empty();) {
+    const size_t comma = rest.find(',');
+    const std::string_view item = rest.substr(0, comma);
+    const size_t colon = item.find(':');
+    std::pair<PetscReal, PetscReal> entry;
+    PetscCheck(
+        colon != std::string_view::npos && ParseNumber(item.substr(0, colon), &entry.first) &&
+            ParseNumber(item.substr(colon + 1), &entry.second) && std::isfinite(entry.first) &&
+            std::isfinite(entry.second) && entry.first >= 0 && entry.second > 0,
+        comm, PETSC_ERR_USER_INPUT,
+        "option -dt_schedule: '%s' is not time:dt with time >= 0 and dt > 0 (s)",
+        std::string(item).c_str());
+    PetscCheck(schedule->empty() || entry.first > schedule->back().first, comm,
+               PETSC_ERR_USER_INPUT, "option -dt_schedule: times must increase");
+    schedule->push_back(entry);
+    if (comma == std::string_view::npos) break;
+    rest.remove_prefix(comma + 1);
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode CheckIntegratorOptions(MPI_Comm comm, const IntegratorOptions &o) {
+  PetscFunctionBeginUser;
+  PetscCheck(o.dt > 0, comm, PETSC_ERR_USER_INPUT, "option -dt: must be > 0 (got %g)",
+             (double)o.dt);
+  PetscCheck(o.steps >= 0, comm, PETSC_ERR_USER_INPUT,
+             "option -steps: must be >= 0 (got %" PetscInt_FMT ")", o.steps);
+  PetscCheck(o.alpha >= 0, comm, PETSC_ERR_USER_INPUT, "option -alpha: must be >= 0 (got %g)",
+             (double)o.alpha);
+  PetscCheck(o.beta >= 0, comm, PETSC_ERR_USER_INPUT, "option -beta: must be >= 0 (got %g)",
+             (double)o.beta);
+  PetscCheck(o.newton_rtol > 0, comm, PETSC_ERR_USER_INPUT,
+             "option -newton_rtol: must be > 0 (got %g)", (double)o.newton_rtol);
+  PetscCheck(o.newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o.newton_max_it);
+  PetscCheck(o.shear_scale > 0, comm, PETSC_ERR_USER_INPUT,
+             "option -shear_scale: must be > 0 (got %g)", (double)o.shear_scale);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Inside ProcessIntegratorOptions' PetscOptionsBegin/End: the corotational
+// iteration and the direct fallback.
+PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, IntegratorOptions *o) {
+  PetscFunctionBeginUser;
+  PetscCall(PetscOptionsReal("-newton_rtol",
+                             "Corotational mode: a step is done when its residual |g| is below "
+                             "this times |M v0| + dt |f_el(x0)| + dt |f_ext| (integrator.hpp)",
+                             nullptr, o->newton_rtol, &o->newton_rtol, nullptr));
+  PetscCall(PetscOptionsBool("-newton_always",
+                             "Corotational mode: iterate every step to -newton_rtol (default: only "
+                             "steps whose single linearised solve would gain energy)",
+                             nullptr, o->newton_always, &o->newton_always, nullptr));
+  PetscCall(PetscOptionsInt("-newton_max_it",
+                            "Corotational mode: most linearised solves per step (1: the single "
+                            "linearised step, no check)",
+                            nullptr, o->newton_max_it, &o->newton_max_it, nullptr));
+  PetscCall(
+      PetscOptionsBool("-fallback_direct",
+                       "Repeat a solve that breaks down (factor or preconditioner not positive "
+                       "definite, NaN) by a direct factorisation, MUMPS Cholesky (its options take "
+                       "the prefix -fallback_)",
+                       nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
 
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionBeginUser;
@@ -54,63 +155,15 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              "Factor s on the shear block of the elasticity tensor (1: standard "
                              "linear elasticity, 0.25: the coursework grader's convention)",
                              nullptr, o->shear_scale, &o->shear_scale, nullptr));
-  PetscCall(PetscOptionsReal("-newton_rtol",
-                             "Corotational mode: a step is done when its residual |g| is below "
-                             "this times |M v0| + dt |f_el(x0)| + dt |f_ext| (integrator.hpp)",
-                             nullptr, o->newton_rtol, &o->newton_rtol, nullptr));
-  PetscCall(PetscOptionsBool("-newton_always",
-                             "Corotational mode: iterate every step to -newton_rtol (default: only "
-                             "steps whose single linearised solve would gain energy)",
-                             nullptr, o->newton_always, &o->newton_always, nullptr));
-  PetscCall(PetscOptionsInt("-newton_max_it",
-                            "Corotational mode: most linearised solves per step (1: the single "
-                            "linearised step, no check)",
-                            nullptr, o->newton_max_it, &o->newton_max_it, nullptr));
-  PetscCall(
-      PetscOptionsBool("-fallback_direct",
-                       "Repeat a solve that breaks down (factor or preconditioner not positive "
-                       "definite, NaN) by a direct factorisation, MUMPS Cholesky (its options take "
-                       "the prefix -fallback_)",
-                       nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
+  PetscCall(ReadSolveOptions(PetscOptionsObject, o));
   PetscOptionsEnd();
   if (gravity_set) {
     PetscCheck(gravity_count == 3, comm, PETSC_ERR_USER_INPUT,
                "option -gravity: expected gx,gy,gz");
     o->gravity = Eigen::Vector3d(gravity[0], gravity[1], gravity[2]);
   }
-  o->dt_schedule.clear();
-  for (std::string_view rest = schedule; !rest.empty();) {
-    const size_t comma = rest.find(',');
-    const std::string_view item = rest.substr(0, comma);
-    const size_t colon = item.find(':');
-    std::pair<PetscReal, PetscReal> entry;
-    PetscCheck(
-        colon != std::string_view::npos && ParseNumber(item.substr(0, colon), &entry.first) &&
-            ParseNumber(item.substr(colon + 1), &entry.second) && std::isfinite(entry.first) &&
-            std::isfinite(entry.second) && entry.first >= 0 && entry.second > 0,
-        comm, PETSC_ERR_USER_INPUT,
-        "option -dt_schedule: '%s' is not time:dt with time >= 0 and dt > 0 (s)",
-        std::string(item).c_str());
-    PetscCheck(o->dt_schedule.empty() || entry.first > o->dt_schedule.back().first, comm,
-               PETSC_ERR_USER_INPUT, "option -dt_schedule: times must increase");
-    o->dt_schedule.push_back(entry);
-    if (comma == std::string_view::npos) break;
-    rest.remove_prefix(comma + 1);
-  }
-  PetscCheck(o->dt > 0, comm, PETSC_ERR_USER_INPUT, "option -dt: must be > 0 (got %g)",
-             (double)o->dt);
-  PetscCheck(o->steps >= 0, comm, PETSC_ERR_USER_INPUT,
-             "option -steps: must be >= 0 (got %" PetscInt_FMT ")", o->steps);
-  PetscCheck(o->alpha >= 0, comm, PETSC_ERR_USER_INPUT, "option -alpha: must be >= 0 (got %g)",
-             (double)o->alpha);
-  PetscCheck(o->beta >= 0, comm, PETSC_ERR_USER_INPUT, "option -beta: must be >= 0 (got %g)",
-             (double)o->beta);
-  PetscCheck(o->newton_rtol > 0, comm, PETSC_ERR_USER_INPUT,
-             "option -newton_rtol: must be > 0 (got %g)", (double)o->newton_rtol);
-  PetscCheck(o->newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
-             "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o->newton_max_it);
-  PetscCheck(o->shear_scale > 0, comm, PETSC_ERR_USER_INPUT,
-             "option -shear_scale: must be > 0 (got %g)", (double)o->shear_scale);
+  PetscCall(ParseTimeStepSchedule(comm, schedule, &o->dt_schedule));
+  PetscCall(CheckIntegratorOptions(comm, *o));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -118,7 +171,7 @@ PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time) {
   PetscReal dt = options.dt;
   // An entry applies from its time on, up to round-off in the accumulated time.
   for (const auto &[from, step] : options.dt_schedule)
-    if (time >= from - 1e-9 * step) dt = step;
+    if (time >= from - kScheduleTimeTolerance * step) dt = step;
   return dt;
 }
 
@@ -144,53 +197,57 @@ ImplicitEuler::~ImplicitEuler() {
   VecDestroy(&X_touched_);
 }
 
-PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                                    const LocalElements &elements, Vec rest_positions,
-                                    Vec lumped_mass, const IntegratorOptions &options) {
+PetscErrorCode ImplicitEuler::CreateGravityForce() {
   PetscFunctionBeginUser;
-  elements_ = &elements;
-  options_ = options;
-  rest_ = rest_positions;
-  mass_ = lumped_mass;
-  PetscCall(VecDuplicate(rest_, &elastic_force_));
-  PetscCall(VecDuplicate(rest_, &rhs_));
-  if (options.gravity.squaredNorm() > 0) {  // f_ext = M g, coordinate by coordinate
-    PetscCall(VecDuplicate(rest_, &gravity_force_));
-    PetscCall(VecCopy(mass_, gravity_force_));
-    PetscScalar *f;
-    PetscInt n;
-    PetscCall(VecGetLocalSize(gravity_force_, &n));
-    PetscCall(VecGetArray(gravity_force_, &f));
-    for (PetscInt i = 0; i < n; ++i) f[i] *= options.gravity[i % 3];
-    PetscCall(VecRestoreArray(gravity_force_, &f));
-  }
-  PetscCall(assembler_.Setup(comm, scene, layout, options.shear_scale, rest_));
+  PetscCall(VecDuplicate(rest_, &gravity_force_));
+  PetscCall(VecCopy(mass_, gravity_force_));
+  PetscScalar *f;
+  PetscInt n;
+  PetscCall(VecGetLocalSize(gravity_force_, &n));
+  PetscCall(VecGetArray(gravity_force_, &f));
+  for (PetscInt i = 0; i < n; ++i) f[i] *= options_.gravity[i % 3];
+  PetscCall(VecRestoreArray(gravity_force_, &f));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::CreateMatrices(MPI_Comm comm, const Scene &scene,
+                                             const DofLayout &layout) {
+  PetscFunctionBeginUser;
+  PetscCall(assembler_.Setup(comm, scene, layout, options_.shear_scale, rest_));
   // A: the plain product for CG's many products with it; K (one product per
-  // linear step) keeps PETSc's default, as the stability matrix was set against it.
-  PetscCall(assembler_.CreateMatrix(&A_, options.mode == MODE_COROTATIONAL));
-  if (options.mode == MODE_LINEAR) {
+  // linear step) keeps PETSc's default product and its order of summation.
+  PetscCall(assembler_.CreateMatrix(&A_, options_.mode == MODE_COROTATIONAL
+                                             ? RowAssembler::Products::kPlainCsr
+                                             : RowAssembler::Products::kInode));
+  if (options_.mode == MODE_LINEAR) {
     StageScope stage(Stages().assembly);
     PetscCall(assembler_.CreateMatrix(&K_));
-    PetscCall(assembler_.Fill(K_, false, nullptr, 1.0, nullptr, 0.0, nullptr, nullptr));
+    PetscCall(assembler_.Fill(K_, RowAssembler::FillTerms().Stiffness(1.0)));
     PetscCall(VecDuplicate(rest_, &displacement_));
   }
-  {
-    // Gather plan: owned and ghost positions of every vertex the local elements
-    // touch (corotational steps; energies in both modes).
-    const PetscInt touched = static_cast<PetscInt>(elements.touched_vertices.size());
-    IS from;
-    PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, touched, elements.touched_vertices.data(),
-                            PETSC_COPY_VALUES, &from));
-    PetscCall(VecCreateSeq(PETSC_COMM_SELF, 3 * touched, &x_touched_));
-    PetscCall(VecDuplicate(x_touched_, &X_touched_));
-    PetscCall(VecScatterCreate(rest_, from, x_touched_, nullptr, &touched_scatter_));
-    PetscCall(ISDestroy(&from));
-    PetscCall(VecScatterBegin(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
-  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
-  PetscCall(ApplyPresetDefaults(options.mode == MODE_LINEAR ? kDirectPreset : kCorotationalPreset));
-  PetscCall(CreateSolver(A_, rest_positions, &ksp_));
+PetscErrorCode ImplicitEuler::CreateTouchedScatter(const LocalElements &elements) {
+  PetscFunctionBeginUser;
+  const PetscInt touched = static_cast<PetscInt>(elements.touched_vertices.size());
+  IS from;
+  PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, touched, elements.touched_vertices.data(),
+                          PETSC_COPY_VALUES, &from));
+  PetscCall(VecCreateSeq(PETSC_COMM_SELF, 3 * touched, &x_touched_));
+  PetscCall(VecDuplicate(x_touched_, &X_touched_));
+  PetscCall(VecScatterCreate(rest_, from, x_touched_, nullptr, &touched_scatter_));
+  PetscCall(ISDestroy(&from));
+  PetscCall(VecScatterBegin(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
+  PetscCall(VecScatterEnd(touched_scatter_, rest_, X_touched_, INSERT_VALUES, SCATTER_FORWARD));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
+  PetscFunctionBeginUser;
+  PetscCall(
+      ApplyPresetDefaults(options_.mode == MODE_LINEAR ? kDirectPreset : kCorotationalPreset));
+  PetscCall(CreateSolver(A_, rest_, &ksp_));
   PC pc;
   PetscCall(KSPGetPC(ksp_, &pc));
   PetscBool gamg;
@@ -198,7 +255,7 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const Dof
   gamg_ = gamg;
   PetscBool warp;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
-  if (warp && options.mode == MODE_COROTATIONAL) {
+  if (warp && options_.mode == MODE_COROTATIONAL) {
     // The warp preconditioner: A0 = the linear system, factorised per time step size.
     PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &A_linear_));
     PetscCall(PCWarpSetLinearOperator(pc, A_linear_));
@@ -210,6 +267,25 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const Dof
       identity[9 * v] = identity[9 * v + 4] = identity[9 * v + 8] = 1.0;
     PetscCall(PCWarpSetRotations(pc, layout.local_count(), identity.data()));
   }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                                    const LocalElements &elements, Vec rest_positions,
+                                    Vec lumped_mass, const IntegratorOptions &options) {
+  PetscFunctionBeginUser;
+  elements_ = &elements;
+  options_ = options;
+  rest_ = rest_positions;
+  mass_ = lumped_mass;
+  PetscCall(VecDuplicate(rest_, &elastic_force_));
+  PetscCall(VecDuplicate(rest_, &rhs_));
+  if (options.gravity.squaredNorm() > 0) PetscCall(CreateGravityForce());  // f_ext = M g
+  PetscCall(CreateMatrices(comm, scene, layout));
+  // Owned and ghost positions of every vertex the local elements touch
+  // (element-wise energies in linear mode).
+  PetscCall(CreateTouchedScatter(elements));
+  PetscCall(CreateLinearSolver(layout));
   PetscCall(SetTimeStep(options.dt));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -284,8 +360,9 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
     elastic_state_current_ = false;  // A depends on dt: refilled at the next step
     if (A_linear_) {
       StageScope stage(Stages().assembly);
-      PetscCall(assembler_.Fill(A_linear_, false, nullptr, options_.beta * dt + dt * dt, mass_,
-                                1.0 + options_.alpha * dt, nullptr, nullptr));
+      PetscCall(assembler_.Fill(A_linear_, RowAssembler::FillTerms()
+                                               .Stiffness(options_.beta * dt + dt * dt)
+                                               .Mass(mass_, 1.0 + options_.alpha * dt)));
     }
     PetscFunctionReturn(PETSC_SUCCESS);
   }
@@ -294,8 +371,8 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   {
     StageScope stage(Stages().assembly);
     PetscCall(PetscTime(&start));
-    PetscCall(assembler_.Fill(A_, false, nullptr, b * dt + dt * dt, mass_, 1.0 + a * dt, nullptr,
-                              nullptr));
+    PetscCall(assembler_.Fill(
+        A_, RowAssembler::FillTerms().Stiffness(b * dt + dt * dt).Mass(mass_, 1.0 + a * dt)));
     PetscCall(PetscTime(&end));
     stats_.assemble_seconds = end - start;
     ++stats_.assemblies;
@@ -336,8 +413,13 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     if (b > 0 && !damping_force_) PetscCall(VecDuplicate(elastic_force_, &damping_force_));
     RowAssembler::IncrementDamping damping{&corotated_, step_started_ ? &corotated_start_ : nullptr,
                                            damping_force_};
-    PetscCall(assembler_.Fill(A_, true, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_,
-                              elastic_force_, &elastic_energy_, b > 0 ? &damping : nullptr));
+    PetscCall(assembler_.Fill(A_, RowAssembler::FillTerms()
+                                      .Stiffness(b * dt_ + dt_ * dt_)
+                                      .Mass(mass_, 1.0 + a * dt_)
+                                      .CorotatedAt(x)
+                                      .ElasticForce(elastic_force_)
+                                      .StrainEnergy(&elastic_energy_)
+                                      .Damping(b > 0 ? &damping : nullptr)));
     if (step_started_) damping_energy_ = damping.energy;
     PetscCall(PetscTime(&end));
     stats_.assemble_seconds = end - start;
@@ -443,46 +525,48 @@ PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+PetscErrorCode ImplicitEuler::CorrectRigidBodyVelocities(const std::vector<Eigen::Vector3d> &target,
+                                                         const std::vector<Eigen::Vector3d> &solved,
+                                                         Vec v) {
   PetscFunctionBeginUser;
-  // rhs = M v0 - dt f_el(x0) + dt f_ext
-  PetscCall(UpdateElasticState(x));
-  PetscCall(VecPointwiseMult(rhs_, mass_, v));
-  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
-  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
-  if (!contact || !contact->active()) {
-    if (options_.mode == MODE_COROTATIONAL) PetscFunctionReturn(CorotationalStep(x, v));
-    // A v1 = rhs; v holds v0, the initial guess of iterative solvers. Then each
-    // body's rigid-body velocity from its momentum (SetBodies).
-    std::vector<Eigen::Vector3d> target, solved;
-    if (!rigid_.empty()) PetscCall(BodyMomenta(v, true, &target));
-    PetscCall(Solve(v, nullptr));
-    if (!rigid_.empty()) {
-      PetscCall(BodyMomenta(v, false, &solved));
-      PetscScalar *w;
-      const PetscScalar *X;
-      PetscCall(VecGetArray(v, &w));
-      PetscCall(VecGetArrayRead(rest_, &X));
-      const double damping = 1.0 + options_.alpha * dt_;
-      for (size_t i = 0; i < owned_body_.size(); ++i) {
-        const RigidBody &body = rigid_[owned_body_[i]];
-        const Eigen::Vector3d dp =
-            target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
-        const Eigen::Vector3d dL =
-            target[2 * owned_body_[i] + 1] / damping - solved[2 * owned_body_[i] + 1];
-        const Eigen::Vector3d r = Eigen::Vector3d(&X[3 * i]) - body.centre;
-        Eigen::Map<Eigen::Vector3d>(&w[3 * i]) +=
-            dp / body.mass + (body.inverse_inertia * dL).cross(r);
-      }
-      PetscCall(VecRestoreArray(v, &w));
-      PetscCall(VecRestoreArrayRead(rest_, &X));
-    }
-    PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
-    elastic_state_current_ = false;
-    PetscFunctionReturn(PETSC_SUCCESS);
+  PetscScalar *w;
+  const PetscScalar *X;
+  PetscCall(VecGetArray(v, &w));
+  PetscCall(VecGetArrayRead(rest_, &X));
+  const double damping = 1.0 + options_.alpha * dt_;
+  for (size_t i = 0; i < owned_body_.size(); ++i) {
+    const RigidBody &body = rigid_[owned_body_[i]];
+    const Eigen::Vector3d dp = target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
+    const Eigen::Vector3d dL =
+        target[2 * owned_body_[i] + 1] / damping - solved[2 * owned_body_[i] + 1];
+    const Eigen::Vector3d r = Eigen::Vector3d(&X[3 * i]) - body.centre;
+    Eigen::Map<Eigen::Vector3d>(&w[3 * i]) += dp / body.mass + (body.inverse_inertia * dL).cross(r);
   }
-  // With contact: the obstacles move with v0 meanwhile; constrain and solve again
-  // until the step takes no further vertex inside an obstacle.
+  PetscCall(VecRestoreArray(v, &w));
+  PetscCall(VecRestoreArrayRead(rest_, &X));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::LinearStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  // A v1 = rhs; v holds v0, the initial guess of iterative solvers. Then each
+  // body's rigid-body velocity from its momentum (SetBodies).
+  std::vector<Eigen::Vector3d> target, solved;
+  if (!rigid_.empty()) PetscCall(BodyMomenta(v, true, &target));
+  PetscCall(Solve(v, nullptr));
+  if (!rigid_.empty()) {
+    PetscCall(BodyMomenta(v, false, &solved));
+    PetscCall(CorrectRigidBodyVelocities(target, solved, v));
+  }
+  PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
+  elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  // The obstacles move with v0 meanwhile; constrain and solve again until the
+  // step takes no further vertex inside an obstacle.
   if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
   PetscCall(VecCopy(x, x_start_));
   {
@@ -491,9 +575,8 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   }
   // Sticking contacts that would need more than Coulomb's friction slip (their
   // friction impulse goes into rhs_) and the step is solved again.
-  constexpr int kMaxRounds = 20;
   bool again = true;
-  for (int round = 0; again && round < kMaxRounds; ++round) {
+  for (int round = 0; again && round < kMaxContactRounds; ++round) {
     PetscCall(Solve(v, contact));
     StageScope stage(Stages().contact);
     bool added, released = false;
@@ -509,6 +592,22 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
     PetscCall(contact->EndStep(x, v, reactions_, &changed));
   }
   elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  // rhs = M v0 - dt f_el(x0) + dt f_ext
+  PetscCall(UpdateElasticState(x));
+  PetscCall(VecPointwiseMult(rhs_, mass_, v));
+  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
+  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
+  if (contact && contact->active())
+    PetscCall(ContactStep(x, v, contact));
+  else if (options_.mode == MODE_COROTATIONAL)
+    PetscCall(CorotationalStep(x, v));
+  else
+    PetscCall(LinearStep(x, v));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -537,7 +636,7 @@ PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
+PetscErrorCode ImplicitEuler::BeginCorotationalStep(Vec x, Vec v) {
   PetscFunctionBeginUser;
   if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
   if (!v_start_) {
@@ -555,88 +654,85 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
     damping_energy_ = 0;
     step_started_ = true;
   }
-  // Scale of g: |M v0| + dt |f_el(x0)| + dt |f_ext|; total energy at the start,
-  // |v0|_M^2 / 2 + E(x0) (gravity's reference: x0).
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::StepScales(Vec v, PetscReal *scale, PetscReal *start_energy) {
+  PetscFunctionBeginUser;
   PetscReal momentum, force, external = 0, start_kinetic;
   PetscCall(VecPointwiseMult(work_, mass_, v));
   PetscCall(VecNorm(work_, NORM_2, &momentum));
   PetscCall(VecDot(work_, v, &start_kinetic));
   PetscCall(VecNorm(elastic_force_, NORM_2, &force));
   if (gravity_force_) PetscCall(VecNorm(gravity_force_, NORM_2, &external));
-  const PetscReal scale = momentum + dt_ * (force + external);
-  const PetscReal tolerance = options_.newton_rtol * scale;
-  const PetscReal start_energy = 0.5 * start_kinetic + elastic_energy_;
+  *scale = momentum + dt_ * (force + external);
+  *start_energy = 0.5 * start_kinetic + elastic_energy_;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
-  PetscCall(VecZeroEntries(iterate_));  // v_0 = 0: x = x0
-  PetscReal merit, residual = PETSC_MAX_REAL;
-  PetscCall(Residual(iterate_, rhs_, &merit));
-  PetscInt k = 0;
-  bool dissipative = false;
-  for (; k < options_.newton_max_it; ++k) {
-    // A_k d = -g(v_k); the first direction is v1 itself, guessed as v0.
-    PetscCall(VecScale(rhs_, -1.0));
-    if (k == 0)
-      PetscCall(VecCopy(v_start_, direction_));
-    else
-      PetscCall(VecZeroEntries(direction_));
-    PetscCall(Solve(direction_, nullptr));
-    PetscReal slope;
-    PetscCall(VecDot(rhs_, direction_, &slope));
-    slope = -slope;  // g.d < 0
-    // Armijo on P. Near the root |g| decides: round-off in P (stiff elements: y is
-    // a small difference) hides the decrease, and the left-out rotation
-    // derivatives of the damping term move P's minimum off g's root by a little.
-    const PetscReal last_merit = merit, last_residual = residual;
-    PetscCall(VecCopy(iterate_, v_trial_base_));
-    PetscReal s = 1;
-    for (int halvings = 0;; ++halvings) {
-      PetscCall(VecWAXPY(iterate_, s, direction_, v_trial_base_));
-      PetscCall(VecWAXPY(x, dt_, iterate_, x_start_));
-      elastic_state_current_ = false;
-      PetscCall(UpdateElasticState(x));
-      PetscCall(Residual(iterate_, rhs_, &merit));
-      PetscCall(VecNorm(rhs_, NORM_2, &residual));
-      const bool near_root = last_residual <= 1e-2 * scale;
-      if (merit <= last_merit + 1e-4 * s * slope ||
-          (near_root && residual <= (1 - 1e-4 * s) * last_residual) || halvings == 40)
-        break;
-      s *= 0.5;
-      ++stats_.backtracks;
-    }
-    // Energy gain of the iterate: |v_k|_M^2 / 2 + E(x_k) - dt f_ext.v_k - start_energy.
-    PetscReal kinetic, work = 0;
-    PetscCall(VecPointwiseMult(work_, mass_, iterate_));
-    PetscCall(VecDot(work_, iterate_, &kinetic));
-    if (gravity_force_) PetscCall(VecDot(gravity_force_, iterate_, &work));
-    const PetscReal energy = 0.5 * kinetic + elastic_energy_ - dt_ * work;
-    const PetscReal gain = energy - start_energy;
-    PetscCall(PetscInfo(ksp_,
-                        "corotational iterate %" PetscInt_FMT
-                        ": |g| = %g (%g of the scale), step length %g, "
-                        "energy gain %g J of %g J\n",
-                        k + 1, (double)residual, (double)(residual / scale), (double)s,
-                        (double)gain, (double)start_energy));
-    if (residual <= tolerance) break;
-    // The linearised step stands unless it gains energy (round-off allowed).
-    const PetscReal round_off =
-        1e-12 * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
-    dissipative = gain <= round_off;
-    if (k == 0 && !options_.newton_always && dissipative) break;
-    // A dissipative iterate also stands once the iteration stalls (|g| falls by
-    // less than a tenth: a kink of R at an inverted element, or the left-out
-    // rotation derivative with lambda >> mu); counted as stopped short.
-    if (k > 0 && dissipative && residual > 0.9 * last_residual) {
-      ++stats_.newton_stopped_short;
+PetscErrorCode ImplicitEuler::NewtonDirection(PetscInt k, PetscReal *slope) {
+  PetscFunctionBeginUser;
+  // A_k d = -g(v_k); the first direction is v1 itself, guessed as v0.
+  PetscCall(VecScale(rhs_, -1.0));
+  if (k == 0)
+    PetscCall(VecCopy(v_start_, direction_));
+  else
+    PetscCall(VecZeroEntries(direction_));
+  PetscCall(Solve(direction_, nullptr));
+  PetscCall(VecDot(rhs_, direction_, slope));
+  *slope = -*slope;  // g.d < 0
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::LineSearch(Vec x, PetscReal slope, PetscReal scale, PetscReal *merit,
+                                         PetscReal *residual, PetscReal *step_length) {
+  PetscFunctionBeginUser;
+  // Armijo on P. Near the root |g| decides: round-off in P (stiff elements: y is
+  // a small difference) hides the decrease, and the left-out rotation
+  // derivatives of the damping term move P's minimum off g's root by a little.
+  const PetscReal last_merit = *merit, last_residual = *residual;
+  PetscCall(VecCopy(iterate_, v_trial_base_));
+  PetscReal s = 1;
+  for (int halvings = 0;; ++halvings) {
+    PetscCall(VecWAXPY(iterate_, s, direction_, v_trial_base_));
+    PetscCall(VecWAXPY(x, dt_, iterate_, x_start_));
+    elastic_state_current_ = false;
+    PetscCall(UpdateElasticState(x));
+    PetscCall(Residual(iterate_, rhs_, merit));
+    PetscCall(VecNorm(rhs_, NORM_2, residual));
+    const bool near_root = last_residual <= kNearRootFraction * scale;
+    if (*merit <= last_merit + kSufficientDecrease * s * slope ||
+        (near_root && *residual <= (1 - kSufficientDecrease * s) * last_residual) ||
+        halvings == kMaxHalvings)
       break;
-    }
+    s *= 0.5;
+    ++stats_.backtracks;
   }
+  *step_length = s;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::IterateEnergy(PetscReal *energy, PetscReal *work) {
+  PetscFunctionBeginUser;
+  // |v_k|_M^2 / 2 + E(x_k) - dt f_ext.v_k
+  PetscReal kinetic;
+  *work = 0;
+  PetscCall(VecPointwiseMult(work_, mass_, iterate_));
+  PetscCall(VecDot(work_, iterate_, &kinetic));
+  if (gravity_force_) PetscCall(VecDot(gravity_force_, iterate_, work));
+  *energy = 0.5 * kinetic + elastic_energy_ - dt_ * *work;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::FinishCorotationalStep(PetscInt iterations, PetscReal residual,
+                                                     PetscReal tolerance, bool dissipative, Vec v) {
+  PetscFunctionBeginUser;
   step_started_ = false;
-  const PetscInt iterations = PetscMin(k + 1, options_.newton_max_it);
   stats_.newton_iterations += iterations;
   stats_.max_newton_iterations = PetscMax(stats_.max_newton_iterations, iterations);
   if (iterations == options_.newton_max_it && residual > tolerance && options_.newton_max_it > 1) {
     PetscCheck(
-        dissipative, PetscObjectComm((PetscObject)x), PETSC_ERR_NOT_CONVERGED,
+        dissipative, PetscObjectComm((PetscObject)v), PETSC_ERR_NOT_CONVERGED,
         "step: the corotational iteration did not converge (|g| = %g > %g after %" PetscInt_FMT
         " iterations) and its last iterate gains energy; try a smaller -dt or a larger "
         "-newton_max_it",
@@ -648,14 +744,59 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscCall(BeginCorotationalStep(x, v));
+  // Scale of g: |M v0| + dt |f_el(x0)| + dt |f_ext|; total energy at the start,
+  // |v0|_M^2 / 2 + E(x0) (gravity's reference: x0).
+  PetscReal scale, start_energy;
+  PetscCall(StepScales(v, &scale, &start_energy));
+  const PetscReal tolerance = options_.newton_rtol * scale;
+  PetscCall(VecZeroEntries(iterate_));  // v_0 = 0: x = x0
+  PetscReal merit, residual = PETSC_MAX_REAL;
+  PetscCall(Residual(iterate_, rhs_, &merit));
+  PetscInt k = 0;
+  bool dissipative = false;
+  for (; k < options_.newton_max_it; ++k) {
+    PetscReal slope, s, energy, work;
+    PetscCall(NewtonDirection(k, &slope));
+    const PetscReal last_residual = residual;
+    PetscCall(LineSearch(x, slope, scale, &merit, &residual, &s));
+    PetscCall(IterateEnergy(&energy, &work));
+    const PetscReal gain = energy - start_energy;
+    PetscCall(PetscInfo(ksp_,
+                        "corotational iterate %" PetscInt_FMT
+                        ": |g| = %g (%g of the scale), step length %g, "
+                        "energy gain %g J of %g J\n",
+                        k + 1, (double)residual, (double)(residual / scale), (double)s,
+                        (double)gain, (double)start_energy));
+    if (residual <= tolerance) break;
+    // The linearised step stands unless it gains energy (round-off allowed).
+    const PetscReal round_off =
+        kEnergyRoundOff * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
+    dissipative = gain <= round_off;
+    if (k == 0 && !options_.newton_always && dissipative) break;
+    // A dissipative iterate also stands once the iteration stalls (|g| falls by
+    // less than a tenth: a kink of R at an inverted element, or the left-out
+    // rotation derivative with lambda >> mu); counted as stopped short.
+    if (k > 0 && dissipative && residual > kStallRatio * last_residual) {
+      ++stats_.newton_stopped_short;
+      break;
+    }
+  }
+  const PetscInt iterations = PetscMin(k + 1, options_.newton_max_it);
+  PetscCall(FinishCorotationalStep(iterations, residual, tolerance, dissipative, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ImplicitEuler::TimeAssembly(Vec x, PetscInt repeats, std::vector<double> *seconds) {
   PetscFunctionBeginUser;
   StageScope stage(Stages().assembly);
   const PetscReal a = options_.alpha, b = options_.beta;
   const bool rotated = options_.mode == MODE_COROTATIONAL;
-  // The refill of A as issue 6 counts it (rotations, rotated element blocks,
-  // values, forces, energy); the warp preconditioner's per-vertex rotations,
-  // which a step computes in the same pass, are its own work and left out here.
+  // The refill of A alone (rotations, rotated element blocks, values, forces,
+  // energy); the warp preconditioner's per-vertex rotations, which a step
+  // computes in the same pass, are its own work and left out here.
   const bool vertex_rotations = assembler_.vertex_rotations_requested();
   assembler_.ComputeVertexRotations(false);
   seconds->clear();
@@ -663,9 +804,10 @@ PetscErrorCode ImplicitEuler::TimeAssembly(Vec x, PetscInt repeats, std::vector<
     PetscLogDouble start, end;
     PetscCallMPI(MPI_Barrier(PetscObjectComm((PetscObject)x)));
     PetscCall(PetscTime(&start));
-    PetscCall(assembler_.Fill(A_, rotated, x, b * dt_ + dt_ * dt_, mass_, 1.0 + a * dt_,
-                              rotated ? elastic_force_ : nullptr,
-                              rotated ? &elastic_energy_ : nullptr));
+    RowAssembler::FillTerms terms =
+        RowAssembler::FillTerms().Stiffness(b * dt_ + dt_ * dt_).Mass(mass_, 1.0 + a * dt_);
+    if (rotated) terms.CorotatedAt(x).ElasticForce(elastic_force_).StrainEnergy(&elastic_energy_);
+    PetscCall(assembler_.Fill(A_, terms));
     PetscCall(PetscTime(&end));
     seconds->push_back(end - start);
   }

@@ -65,11 +65,13 @@ struct IntegratorOptions {
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();  // m/s^2
   PetscInt steps = 100;
-  PetscReal alpha = 0.1;  // mass damping a, 1/s
-  PetscReal beta = 0.1;   // stiffness damping b, s
-  PetscReal shear_scale = 1.0;
+  PetscReal alpha = 0.1;        // mass damping a, 1/s
+  PetscReal beta = 0.1;         // stiffness damping b, s
+  PetscReal shear_scale = 1.0;  // s on the shear block of the elasticity tensor (element.hpp)
   // Corotational mode: the step's nonlinear equation is solved by Newton-type
-  // iterations until |g| <= newton_rtol |g(0)| (see CorotationalStep).
+  // iterations until |g| <= newton_rtol (|M v0| + dt |f_el(x0)| + dt |f_ext|), at
+  // most newton_max_it linearised solves, every step when newton_always (else
+  // only steps whose first iterate gains energy; see the top of this file).
   PetscReal newton_rtol = 1e-4;
   PetscInt newton_max_it = 50;
   PetscBool newton_always = PETSC_FALSE;
@@ -81,8 +83,9 @@ struct IntegratorOptions {
 // The time step at time t (s): -dt until the first -dt_schedule entry applies.
 PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time);
 
-// Collective. Reads -mode -dt -dt_schedule -steps -alpha -beta -shear_scale
-// -gravity; rejects impossible values.
+// Collective. Reads the options of IntegratorOptions (their list with units and
+// defaults: softbody -help, section "Time integration"); rejects impossible
+// values (non-positive -dt, negative damping, ...).
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *options);
 
 struct SolverStatistics {
@@ -101,8 +104,8 @@ struct SolverStatistics {
   PetscInt newton_iterations = 0;         // corotational: linearised solves, all steps
   PetscInt max_newton_iterations = 0;     // corotational: most in one step
   PetscInt backtracks = 0;                // corotational: line-search step halvings
-  PetscInt newton_stopped_short =
-      0;                         // corotational: dissipative steps that stalled above -newton_rtol
+  // corotational: dissipative steps that stalled above -newton_rtol
+  PetscInt newton_stopped_short = 0;
   PetscInt fallback_solves = 0;  // solves repeated by the direct fallback after a breakdown
 };
 
@@ -161,6 +164,12 @@ class ImplicitEuler {
   const SolverStatistics &statistics() const { return stats_; }
 
  private:
+  // Setup's steps: f_ext = M g; the assembler, A (and K in linear mode); the
+  // gather plan of the local elements' vertices; the KSP (and the warp PC's A0).
+  PetscErrorCode CreateGravityForce();
+  PetscErrorCode CreateMatrices(MPI_Comm comm, const Scene &scene, const DofLayout &layout);
+  PetscErrorCode CreateTouchedScatter(const LocalElements &elements);
+  PetscErrorCode CreateLinearSolver(const DofLayout &layout);
   // f_el(x) into elastic_force_ and the elastic energy; corotational mode also
   // refills A for x. Skipped when already done for these positions (x changes
   // only in Step).
@@ -175,8 +184,28 @@ class ImplicitEuler {
   // Linear mode: per body, the momentum and angular momentum about the rest
   // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
   PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
-  // Corotational step without contact: the Newton-type iteration above.
+  // Step without contact, linear mode: one solve, then each body's rigid-body
+  // velocity from its momentum (v += dp / m + (I^-1 dL) x r per vertex, dp and
+  // dL the momenta target / (1 + a dt) - solved).
+  PetscErrorCode LinearStep(Vec x, Vec v);
+  PetscErrorCode CorrectRigidBodyVelocities(const std::vector<Eigen::Vector3d> &target,
+                                            const std::vector<Eigen::Vector3d> &solved, Vec v);
+  // Step with contact: solve, constrain, solve again (Step).
+  PetscErrorCode ContactStep(Vec x, Vec v, ContactSolver *contact);
+  // Corotational step without contact: the Newton-type iteration above, in its
+  // steps: x0, v0 and the damping's start; g's scale and the start energy; the
+  // direction A_k d = -g(v_k) and the slope g.d; the line search on the step
+  // length s; the energy of the iterate (and its work term dt f_ext.v_k, J);
+  // the statistics, the convergence check and v = v_k.
   PetscErrorCode CorotationalStep(Vec x, Vec v);
+  PetscErrorCode BeginCorotationalStep(Vec x, Vec v);
+  PetscErrorCode StepScales(Vec v, PetscReal *scale, PetscReal *start_energy);
+  PetscErrorCode NewtonDirection(PetscInt k, PetscReal *slope);
+  PetscErrorCode LineSearch(Vec x, PetscReal slope, PetscReal scale, PetscReal *merit,
+                            PetscReal *residual, PetscReal *step_length);
+  PetscErrorCode IterateEnergy(PetscReal *energy, PetscReal *work);
+  PetscErrorCode FinishCorotationalStep(PetscInt iterations, PetscReal residual,
+                                        PetscReal tolerance, bool dissipative, Vec v);
   // g(v) and the merit P(v) for the state at x0 + dt v (element pass done).
   PetscErrorCode Residual(Vec v, Vec g, PetscReal *merit);
 

@@ -6,6 +6,54 @@
 
 namespace softbody {
 
+namespace {
+
+// CombineConstraints: at most this many constraints per vertex are considered
+// (a contact with its two friction tangents and the normals of up to three
+// obstacles); the candidate sets are their 2^6 - 1 subsets.
+constexpr int kMaxConstraintsPerVertex = 6;
+// A constraint counts as kept when it is violated by less than this fraction of
+// the largest prescribed speed (round-off of the least-norm solve).
+constexpr double kViolationRoundOff = 1e-12;
+// The violation and norm of "no candidate yet": above any real candidate's.
+constexpr double kNoCandidate = 1e300;
+
+// The inner CG: relative tolerance (as tight as the unconstrained solve's
+// -ksp_rtol 1e-10 of the presets), no divergence test (at rest b is tiny next
+// to the warm start's residual) and an iteration cap far above the at most one
+// iteration per constraint a direct preconditioner needs. -contact_ksp_*
+// options override them.
+constexpr PetscReal kInnerRelativeTolerance = 1e-10;
+constexpr PetscReal kNoDivergenceTest = 1e300;
+constexpr PetscInt kInnerMaxIterations = 10000;
+
+// A candidate set of imposed constraints, ranked by CombineConstraints' order.
+struct Candidate {
+  double violation = kNoCandidate, norm = kNoCandidate;
+  int size = 0, immobile = 0;
+
+  bool BetterThan(const Candidate &o) const {
+    return violation < o.violation ||
+           (violation == o.violation &&
+            (size > o.size || (size == o.size && (immobile > o.immobile ||
+                                                  (immobile == o.immobile && norm < o.norm)))));
+  }
+};
+
+// max_j (c_j - n_j . p) over the first k constraints, at least the round-off
+// kViolationRoundOff max_j |c_j| (below that a constraint counts as kept).
+double Violation(const std::vector<VelocityConstraint> &constraints, int k,
+                 const Eigen::Vector3d &p) {
+  double violation = 0, scale = 0;
+  for (int j = 0; j < k; ++j) {
+    violation = std::max(violation, constraints[j].velocity - constraints[j].normal.dot(p));
+    scale = std::max(scale, std::abs(constraints[j].velocity));
+  }
+  return std::max(violation, kViolationRoundOff * scale);
+}
+
+}  // namespace
+
 ProjectedSolver::~ProjectedSolver() {
   KSPDestroy(&inner_);
   MatDestroy(&shell_);
@@ -29,48 +77,35 @@ void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &const
 
 ConstrainedVertex CombineConstraints(PetscInt vertex,
                                      const std::vector<VelocityConstraint> &constraints) {
-  const int k = static_cast<int>(std::min<size_t>(constraints.size(), 6));
+  const int k = static_cast<int>(
+      std::min<size_t>(constraints.size(), static_cast<size_t>(kMaxConstraintsPerVertex)));
   // Candidate active sets S (bit masks), each solved exactly: p = least-norm
   // solution of N_S^T p = c_S, in span(N_S).
   ConstrainedVertex best{vertex, Eigen::Matrix3d::Zero(), 0, Eigen::Vector3d::Zero()};
-  double best_violation = 1e300, best_norm = 1e300;
-  int best_size = 0, best_immobile = 0;
+  Candidate best_candidate;
   for (int mask = 1; mask < (1 << k); ++mask) {
     Eigen::Matrix3d N = Eigen::Matrix3d::Zero();
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
     int members = 0;
     for (int j = 0; j < k; ++j) members += (mask >> j) & 1;
     if (members > 3) continue;  // at most three independent directions
-    int size = 0, immobile = 0;
+    Candidate candidate;
     for (int j = 0; j < k; ++j)
       if (mask & (1 << j)) {
-        N.col(size) = constraints[j].normal;
-        c[size++] = constraints[j].velocity;
-        immobile += constraints[j].immobile;
+        N.col(candidate.size) = constraints[j].normal;
+        c[candidate.size++] = constraints[j].velocity;
+        candidate.immobile += constraints[j].immobile;
       }
+    const int size = candidate.size;
     const Eigen::JacobiSVD<Eigen::MatrixXd> svd(N.leftCols(size),
                                                 Eigen::ComputeThinU | Eigen::ComputeThinV);
     if (svd.singularValues()[size - 1] < kMinSeparation) continue;  // near-parallel directions
     const Eigen::Vector3d p =
         N.leftCols(size).transpose().completeOrthogonalDecomposition().solve(c.head(size));
-    double violation = 0, scale = 0;
-    for (int j = 0; j < k; ++j) {
-      violation = std::max(violation, constraints[j].velocity - constraints[j].normal.dot(p));
-      scale = std::max(scale, std::abs(constraints[j].velocity));
-    }
-    violation = std::max(violation, 1e-12 * scale);  // round-off counts as kept
-    const double norm = p.norm();
-    const bool better =
-        violation < best_violation ||
-        (violation == best_violation &&
-         (size > best_size ||
-          (size == best_size &&
-           (immobile > best_immobile || (immobile == best_immobile && norm < best_norm)))));
-    if (!better) continue;
-    best_violation = violation;
-    best_norm = norm;
-    best_size = size;
-    best_immobile = immobile;
+    candidate.violation = Violation(constraints, k, p);
+    candidate.norm = p.norm();
+    if (!candidate.BetterThan(best_candidate)) continue;
+    best_candidate = candidate;
     best.rank = size;
     best.basis.leftCols(size) = svd.matrixU();
     best.prescribed = p;
@@ -130,6 +165,60 @@ PetscErrorCode ProjectedSolver::ApplyPreconditioner(PC shell, Vec w, Vec y) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode ProjectedSolver::CreateInnerSolver(Vec b) {
+  PetscFunctionBeginUser;
+  PetscInt n, N;
+  PetscCall(VecGetLocalSize(b, &n));
+  PetscCall(VecGetSize(b, &N));
+  for (Vec *work : {&work_, &work2_, &z_, &rhs_, &w_}) PetscCall(VecDuplicate(b, work));
+  PetscCall(MatCreateShell(PetscObjectComm((PetscObject)b), n, n, N, N, this, &shell_));
+  PetscCall(MatShellSetOperation(shell_, MATOP_MULT, (void (*)(void))ApplyOperator));
+  PetscCall(KSPCreate(PetscObjectComm((PetscObject)b), &inner_));
+  PetscCall(KSPSetOptionsPrefix(inner_, "contact_"));
+  PetscCall(KSPSetType(inner_, KSPCG));
+  PetscCall(KSPSetTolerances(inner_, kInnerRelativeTolerance, PETSC_DEFAULT, kNoDivergenceTest,
+                             kInnerMaxIterations));
+  PetscCall(KSPSetOperators(inner_, shell_, shell_));
+  PC pc;
+  PetscCall(KSPGetPC(inner_, &pc));
+  PetscCall(PCSetType(pc, PCSHELL));
+  PetscCall(PCShellSetContext(pc, this));
+  PetscCall(PCShellSetApply(pc, ApplyPreconditioner));
+  PetscCall(PCShellSetName(pc, "P M^-1 P + I - P"));
+  PetscCall(KSPSetInitialGuessNonzero(inner_, PETSC_TRUE));
+  PetscCall(KSPSetFromOptions(inner_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ProjectedSolver::SetPrescribedVelocities() {
+  PetscFunctionBeginUser;
+  PetscCall(VecZeroEntries(z_));
+  PetscScalar *z;
+  PetscCall(VecGetArray(z_, &z));
+  for (const ConstrainedVertex &c : vertices_)
+    for (int k = 0; k < 3; ++k) z[3 * c.vertex + k] = c.prescribed[k];
+  PetscCall(VecRestoreArray(z_, &z));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ProjectedSolver::Reactions(Vec b, Vec v,
+                                          const std::vector<VelocityConstraint> &constraints,
+                                          std::vector<PetscReal> *reactions) {
+  PetscFunctionBeginUser;
+  PetscCall(MatMult(A_, v, work_));
+  PetscCall(VecAXPY(work_, -1.0, b));
+  const PetscScalar *residual;
+  PetscCall(VecGetArrayRead(work_, &residual));
+  reactions->resize(constraints.size());
+  for (size_t i = 0; i < constraints.size(); ++i) {
+    const VelocityConstraint &c = constraints[i];
+    (*reactions)[i] = c.normal.dot(Eigen::Vector3d(
+        residual[3 * c.vertex], residual[3 * c.vertex + 1], residual[3 * c.vertex + 2]));
+  }
+  PetscCall(VecRestoreArrayRead(work_, &residual));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
                                       const std::vector<VelocityConstraint> &constraints, Vec v,
                                       std::vector<PetscReal> *reactions, PetscInt *iterations) {
@@ -138,35 +227,9 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   PetscCall(KSPGetOperators(solver, &A_, nullptr));
   PetscCall(KSPGetPC(solver, &unconstrained_pc_));
   GroupByVertex(constraints);
-  if (!inner_) {
-    PetscInt n, N;
-    PetscCall(VecGetLocalSize(b, &n));
-    PetscCall(VecGetSize(b, &N));
-    for (Vec *work : {&work_, &work2_, &z_, &rhs_, &w_}) PetscCall(VecDuplicate(b, work));
-    PetscCall(MatCreateShell(PetscObjectComm((PetscObject)b), n, n, N, N, this, &shell_));
-    PetscCall(MatShellSetOperation(shell_, MATOP_MULT, (void (*)(void))ApplyOperator));
-    PetscCall(KSPCreate(PetscObjectComm((PetscObject)b), &inner_));
-    PetscCall(KSPSetOptionsPrefix(inner_, "contact_"));
-    PetscCall(KSPSetType(inner_, KSPCG));
-    // No divergence test: at rest b is tiny next to the warm start's residual.
-    PetscCall(KSPSetTolerances(inner_, 1e-10, PETSC_DEFAULT, 1e300, 10000));
-    PetscCall(KSPSetOperators(inner_, shell_, shell_));
-    PC pc;
-    PetscCall(KSPGetPC(inner_, &pc));
-    PetscCall(PCSetType(pc, PCSHELL));
-    PetscCall(PCShellSetContext(pc, this));
-    PetscCall(PCShellSetApply(pc, ApplyPreconditioner));
-    PetscCall(PCShellSetName(pc, "P M^-1 P + I - P"));
-    PetscCall(KSPSetInitialGuessNonzero(inner_, PETSC_TRUE));
-    PetscCall(KSPSetFromOptions(inner_));
-  }
+  if (!inner_) PetscCall(CreateInnerSolver(b));
   // z: the prescribed normal velocities; rhs = P (b - A z); w from the guess.
-  PetscCall(VecZeroEntries(z_));
-  PetscScalar *z;
-  PetscCall(VecGetArray(z_, &z));
-  for (const ConstrainedVertex &c : vertices_)
-    for (int k = 0; k < 3; ++k) z[3 * c.vertex + k] = c.prescribed[k];
-  PetscCall(VecRestoreArray(z_, &z));
+  PetscCall(SetPrescribedVelocities());
   PetscCall(MatMult(A_, z_, work_));
   PetscCall(VecAYPX(work_, -1.0, b));
   PetscCall(ProjectVec(work_, rhs_, true));
@@ -182,17 +245,7 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   // v = P w + z; reactions from A v - b.
   PetscCall(ProjectVec(w_, v, true));
   PetscCall(VecAXPY(v, 1.0, z_));
-  PetscCall(MatMult(A_, v, work_));
-  PetscCall(VecAXPY(work_, -1.0, b));
-  const PetscScalar *residual;
-  PetscCall(VecGetArrayRead(work_, &residual));
-  reactions->resize(constraints.size());
-  for (size_t i = 0; i < constraints.size(); ++i) {
-    const VelocityConstraint &c = constraints[i];
-    (*reactions)[i] = c.normal.dot(Eigen::Vector3d(
-        residual[3 * c.vertex], residual[3 * c.vertex + 1], residual[3 * c.vertex + 2]));
-  }
-  PetscCall(VecRestoreArrayRead(work_, &residual));
+  PetscCall(Reactions(b, v, constraints, reactions));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

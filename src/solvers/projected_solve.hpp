@@ -73,6 +73,12 @@ class ProjectedSolver {
   // Groups the constraints by vertex (any order) and combines each vertex's.
   void GroupByVertex(const std::vector<VelocityConstraint> &constraints);
   PetscErrorCode ProjectVec(Vec w, Vec y, bool project) const;
+  // Solve's steps: the work vectors, the shell operator and the inner CG (first
+  // call); z_ = the prescribed velocities; reactions n_k . (A v - b)_i.
+  PetscErrorCode CreateInnerSolver(Vec b);
+  PetscErrorCode SetPrescribedVelocities();
+  PetscErrorCode Reactions(Vec b, Vec v, const std::vector<VelocityConstraint> &constraints,
+                           std::vector<PetscReal> *reactions);
 
   KSP inner_ = nullptr;
   Mat shell_ = nullptr;

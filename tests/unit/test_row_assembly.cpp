@@ -1,6 +1,6 @@
 // RowAssembler (row_assembly.hpp): the matrix, elastic force and energy it
 // writes straight into A's CSR values equal the element-by-element COO assembly
-// (assembly.hpp) in linear and corotational mode, for both shear scales, and
+// (assembly.hpp, coo_reference.hpp) in linear and corotational mode, for both shear scales, and
 // so do the corotated stiffness damping's increment force and energy; and
 // its speed (printed, not asserted: the machine may be shared).
 #include <gtest/gtest.h>
@@ -9,12 +9,14 @@
 #include <chrono>
 #include <random>
 
+#include "coo_reference.hpp"
 #include "fem/assembly.hpp"
 #include "fem/partition.hpp"
 #include "fem/row_assembly.hpp"
 #include "io/scene.hpp"
 
 using namespace softbody;
+using namespace softbody::coo_reference;
 
 namespace {
 
@@ -145,15 +147,14 @@ TEST(RowAssembler, EqualsCooAssembly) {
     // Linear: K and A = mass_scale M + stiffness_scale K.
     {
       Mat reference;
-      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference),
-                0);
-      PetscInt local_dofs;
-      VecGetLocalSize(f.state.lumped_mass, &local_dofs);
-      CooValues values(144 * f.elements.size() + local_dofs);
+      CooValues values(144 * f.elements.size());
       LinearStiffnessValues(f.elements, shear_scale, stiffness_scale, &values);
-      ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
-      ASSERT_EQ(f.assembler.Fill(f.A, false, nullptr, stiffness_scale, f.state.lumped_mass,
-                                 mass_scale, nullptr, nullptr),
+      ASSERT_EQ(ReferenceMatrix(PETSC_COMM_WORLD, f.layout, f.elements, values, f.state.lumped_mass,
+                                mass_scale, &reference),
+                0);
+      ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms()
+                                          .Stiffness(stiffness_scale)
+                                          .Mass(f.state.lumped_mass, mass_scale)),
                 0);
       EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-14) << "shear scale " << shear_scale;
       MatDestroy(&reference);
@@ -167,16 +168,18 @@ TEST(RowAssembler, EqualsCooAssembly) {
       ASSERT_EQ(DeformedPositions(f.state.rest_positions, x), 0);
       PetscReal energy;
       f.assembler.ComputeVertexRotations(true);
-      ASSERT_EQ(f.assembler.Fill(f.A, true, x, stiffness_scale, f.state.lumped_mass, mass_scale,
-                                 force, &energy),
+      ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms()
+                                          .Stiffness(stiffness_scale)
+                                          .Mass(f.state.lumped_mass, mass_scale)
+                                          .CorotatedAt(x)
+                                          .ElasticForce(force)
+                                          .StrainEnergy(&energy)),
                 0);
 
       Mat reference;
-      ASSERT_EQ(CreateElasticMatrix(PETSC_COMM_WORLD, f.layout, f.elements, PETSC_TRUE, &reference),
-                0);
       PetscInt local_dofs;
       VecGetLocalSize(f.state.lumped_mass, &local_dofs);
-      CooValues values(144 * f.elements.size() + local_dofs);
+      CooValues values;
       const PetscScalar *xa, *Xa;
       VecGetArrayRead(x, &xa);
       VecGetArrayRead(f.state.rest_positions, &Xa);
@@ -187,7 +190,9 @@ TEST(RowAssembler, EqualsCooAssembly) {
           f.elements, shear_scale, xa, Xa, stiffness_scale, &values, force_touched.data());
       VecRestoreArrayRead(x, &xa);
       VecRestoreArrayRead(f.state.rest_positions, &Xa);
-      ASSERT_EQ(SetElasticMatrixValues(f.state.lumped_mass, mass_scale, &values, reference), 0);
+      ASSERT_EQ(ReferenceMatrix(PETSC_COMM_WORLD, f.layout, f.elements, values, f.state.lumped_mass,
+                                mass_scale, &reference),
+                0);
       EXPECT_LT(RelativeMatrixDifference(f.A, reference), 1e-13) << "shear scale " << shear_scale;
       PetscReal scale;
       const PetscReal difference = DifferenceFrom(force_touched, force, reference_force, &scale);
@@ -227,15 +232,17 @@ TEST(RowAssembler, IncrementDampingEqualsReference) {
     ASSERT_EQ(DeformedPositions(f.state.rest_positions, x1, 0.1, 0.01), 0);
     std::vector<double> start, current;
     RowAssembler::IncrementDamping damping{&start, nullptr, force};
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x0, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms().CorotatedAt(x0).Damping(&damping)),
+              0);
     damping = {&current, &start, force};
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x1, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms().CorotatedAt(x1).Damping(&damping)),
+              0);
 
     // Reference: the COO pass with CorotatedDamping, at x0 (y0) then at x1.
     PetscInt local_dofs;
     VecGetLocalSize(x0, &local_dofs);
     ASSERT_EQ(f.elements.touched_vertices.size() * 3, static_cast<size_t>(local_dofs));  // one rank
-    CooValues values(144 * f.elements.size() + local_dofs);
+    CooValues values;
     std::vector<PetscScalar> force_touched(local_dofs), increment_touched(local_dofs);
     std::vector<double> y0, y1;
     const PetscScalar *x0a, *x1a, *Xa;
@@ -270,7 +277,8 @@ TEST(RowAssembler, IncrementDampingEqualsReference) {
     VecRestoreArray(x1, &x1w);
     VecRestoreArrayRead(x0, &x0a);
     damping = {&current, &start, force};
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x1, 1.0, nullptr, 0.0, nullptr, nullptr, &damping), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms().CorotatedAt(x1).Damping(&damping)),
+              0);
     PetscReal rigid_force;
     VecNorm(force, NORM_2, &rigid_force);
     EXPECT_LT(rigid_force, 1e-9 * scale);
@@ -292,7 +300,13 @@ TEST(RowAssembler, CorotationalRefillRate) {
   for (int repeat = 0; repeat < 7; ++repeat) {
     PetscReal energy;
     const auto start = std::chrono::steady_clock::now();
-    ASSERT_EQ(f.assembler.Fill(f.A, true, x, 1e-3, f.state.lumped_mass, 1.0, force, &energy), 0);
+    ASSERT_EQ(f.assembler.Fill(f.A, RowAssembler::FillTerms()
+                                        .Stiffness(1e-3)
+                                        .Mass(f.state.lumped_mass, 1.0)
+                                        .CorotatedAt(x)
+                                        .ElasticForce(force)
+                                        .StrainEnergy(&energy)),
+              0);
     best = std::min(
         best, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   }

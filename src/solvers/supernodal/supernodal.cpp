@@ -39,11 +39,9 @@ enum SupernodalPrecision { kDouble, kSingle };
 // Supernode k holds columns [first, first + columns) of L, `height` rows each
 // in CHOLMOD (the triangle on top, then the rows listed in `rows`); here column
 // j of a supernode keeps only its rows j..height-1, so the zeros above the
-// diagonal blocks' diagonals (a fifth of CHOLMOD's storage for the 1e5-tet
-// beam) are neither stored nor streamed. Plain loops (vectorised; the sums by
-// omp simd): in single precision they stream the factor at the memory's speed,
-// where BLAS-2 calls reached about two thirds of it. (In double precision
-// CHOLMOD's own solve was faster on one rank.)
+// diagonal blocks' diagonals are neither stored nor streamed. Plain loops
+// (vectorised; the sums by omp simd) stream the factor at the memory's speed
+// (docs/design/fem-solvers.md).
 template <typename Real>
 struct PackedFactor {
   int n = 0, supernodes = 0;
@@ -54,17 +52,27 @@ struct PackedFactor {
   std::vector<Real> y, work;
 
   void From(const cholmod_factor *L) {
+    CopyStructure(L);
+    CopyValues(L);
+    y.resize(n);
+    size_t largest = 0;
+    for (int k = 0; k < supernodes; ++k)
+      largest = std::max<size_t>(largest, row_start[k + 1] - row_start[k]);
+    work.resize(largest);
+  }
+
+  // Permutation, supernodes, row lists and the packed columns' offsets.
+  void CopyStructure(const cholmod_factor *L) {
     n = static_cast<int>(L->n);
     supernodes = static_cast<int>(L->nsuper);
     const int *perm = static_cast<const int *>(L->Perm),
               *super = static_cast<const int *>(L->super), *pi = static_cast<const int *>(L->pi),
-              *px = static_cast<const int *>(L->px), *s = static_cast<const int *>(L->s);
+              *s = static_cast<const int *>(L->s);
     permutation.assign(perm, perm + n);
     first_column.assign(super, super + supernodes + 1);
     row_start.assign(pi, pi + supernodes + 1);
     value_start.resize(supernodes + 1);
     rows.assign(s, s + pi[supernodes]);
-    const double *x = static_cast<const double *>(L->x);
     size_t packed = 0;
     for (int k = 0; k < supernodes; ++k) {
       const size_t columns = super[k + 1] - super[k], height = pi[k + 1] - pi[k];
@@ -72,22 +80,25 @@ struct PackedFactor {
       packed += columns * height - columns * (columns - 1) / 2;
     }
     value_start[supernodes] = packed;
-    values.resize(packed);
+  }
+
+  // The values of every column from its diagonal down, and 1 / L_jj.
+  void CopyValues(const cholmod_factor *L) {
+    const int *px = static_cast<const int *>(L->px);
+    const double *x = static_cast<const double *>(L->x);
+    values.resize(value_start[supernodes]);
     inverse_diagonal.resize(n);
     for (int k = 0; k < supernodes; ++k) {
-      const int columns = super[k + 1] - super[k], height = pi[k + 1] - pi[k];
+      const int columns = first_column[k + 1] - first_column[k],
+                height = row_start[k + 1] - row_start[k];
       Real *out = values.data() + value_start[k];
       for (int j = 0; j < columns; ++j) {
-        inverse_diagonal[super[k] + j] =
+        inverse_diagonal[first_column[k] + j] =
             static_cast<Real>(1.0 / x[px[k] + static_cast<size_t>(j) * height + j]);
         for (int i = j; i < height; ++i)
           *out++ = static_cast<Real>(x[px[k] + static_cast<size_t>(j) * height + i]);
       }
     }
-    y.resize(n);
-    size_t largest = 0;
-    for (int k = 0; k < supernodes; ++k) largest = std::max<size_t>(largest, pi[k + 1] - pi[k]);
-    work.resize(largest);
   }
 
   // Entries of the columns before `limit` (what a pair of sweeps streams).
@@ -385,6 +396,30 @@ void StartCholmod(Supernodal *s) {
   s->started = true;
 }
 
+// The symbolic factor of the matrix `view`: in exactly the order user_order
+// when given (one method, no postorder), else by CHOLMOD's own choice.
+PetscErrorCode Analyse(Supernodal *s, cholmod_sparse *view, const std::vector<int> *user_order,
+                       cholmod_factor **factor) {
+  PetscFunctionBeginUser;
+  if (user_order) {
+    const int methods = s->common.nmethods, postorder = s->common.postorder,
+              ordering = s->common.method[0].ordering;
+    s->common.nmethods = 1;
+    s->common.method[0].ordering = CHOLMOD_GIVEN;
+    s->common.postorder = 0;
+    *factor =
+        cholmod_analyze_p(view, const_cast<int *>(user_order->data()), nullptr, 0, &s->common);
+    s->common.nmethods = methods;
+    s->common.postorder = postorder;
+    s->common.method[0].ordering = ordering;
+  } else {
+    *factor = cholmod_analyze(view, &s->common);
+  }
+  PetscCheck(*factor, PETSC_COMM_SELF, PETSC_ERR_LIB,
+             "supernodal: CHOLMOD analysis failed (status %d)", s->common.status);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // Analyses (when `*factor` is null: with `user_order`, given in full, if not
 // null) and factorises the SeqAIJ matrix A into *factor; a matrix that is not
 // positive definite sets s->failed.
@@ -400,24 +435,7 @@ PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_orde
   const PetscScalar *values;
   PetscCall(MatSeqAIJGetArrayRead(A, &values));
   cholmod_sparse view = LowerView(n, row_start, columns, values);
-  if (!*factor) {
-    if (user_order) {  // exactly this order: one method, no postorder
-      const int methods = s->common.nmethods, postorder = s->common.postorder,
-                ordering = s->common.method[0].ordering;
-      s->common.nmethods = 1;
-      s->common.method[0].ordering = CHOLMOD_GIVEN;
-      s->common.postorder = 0;
-      *factor =
-          cholmod_analyze_p(&view, const_cast<int *>(user_order->data()), nullptr, 0, &s->common);
-      s->common.nmethods = methods;
-      s->common.postorder = postorder;
-      s->common.method[0].ordering = ordering;
-    } else {
-      *factor = cholmod_analyze(&view, &s->common);
-    }
-    PetscCheck(*factor, PETSC_COMM_SELF, PETSC_ERR_LIB,
-               "supernodal: CHOLMOD analysis failed (status %d)", s->common.status);
-  }
+  if (!*factor) PetscCall(Analyse(s, &view, user_order, factor));
   const int ok = cholmod_factorize(&view, *factor, &s->common);
   PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
   PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
@@ -460,18 +478,11 @@ PetscErrorCode SetUpOneRank(Supernodal *s, Mat A, bool new_pattern) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The separator, the local piece M_r and its order (Split's comment).
-PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
+// This rank's separator DOFs (global, increasing): its owned DOFs coupled to a
+// higher rank's DOF, i.e. to a column of the off-diagonal part beyond its rows.
+PetscErrorCode OwnedSeparatorDofs(Mat A, PetscInt begin, PetscInt end,
+                                  std::vector<PetscInt> *mine) {
   PetscFunctionBeginUser;
-  Split &p = s->split;
-  MPI_Comm comm = PetscObjectComm((PetscObject)A);
-  PetscMPIInt rank, size;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  PetscCallMPI(MPI_Comm_size(comm, &size));
-  const PetscInt *ranges;
-  PetscCall(MatGetOwnershipRanges(A, &ranges));
-  const PetscInt begin = ranges[rank], owned = ranges[rank + 1] - ranges[rank];
-  // Owned DOFs coupled to a higher rank's DOF: the columns of the off-diagonal part.
   Mat diagonal_part, off_part;
   const PetscInt *garray;
   PetscCall(MatMPIAIJGetSeqAIJ(A, &diagonal_part, &off_part, &garray));
@@ -480,82 +491,130 @@ PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
   PetscBool done;
   PetscCall(MatGetRowIJ(off_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &oi, &oj, &done));
   PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "supernodal: no CSR access to the matrix");
-  std::vector<PetscInt> mine;
-  for (PetscInt i = 0; i < owned; ++i)
+  mine->clear();
+  for (PetscInt i = 0; i < end - begin; ++i)
     for (PetscInt k = oi[i]; k < oi[i + 1]; ++k)
-      if (garray[oj[k]] >= ranges[rank + 1]) {
-        mine.push_back(begin + i);
+      if (garray[oj[k]] >= end) {
+        mine->push_back(begin + i);
         break;
       }
   PetscCall(MatRestoreRowIJ(off_part, 0, PETSC_FALSE, PETSC_FALSE, &rows, &oi, &oj, &done));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The whole separator on every rank: the ranks' separator DOFs in rank order.
+PetscErrorCode GatherSeparator(MPI_Comm comm, const std::vector<PetscInt> &mine, Split *p) {
+  PetscFunctionBeginUser;
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(comm, &size));
   std::vector<int> counts(size), offsets(size + 1, 0);
   const int count = static_cast<int>(mine.size());
   PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm));
   for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + counts[r];
-  p.separator_dofs.resize(offsets[size]);
-  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, p.separator_dofs.data(), counts.data(),
+  p->separator_dofs.resize(offsets[size]);
+  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, p->separator_dofs.data(), counts.data(),
                               offsets.data(), MPIU_INT, comm));
-  p.separator = static_cast<PetscInt>(p.separator_dofs.size());
+  p->separator = static_cast<PetscInt>(p->separator_dofs.size());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
-  // M_r's DOFs: the owned interior and the whole separator, increasing.
-  p.local_dofs.clear();
-  for (PetscInt g = begin; g < begin + owned; ++g)
-    if (!std::binary_search(mine.begin(), mine.end(), g)) p.local_dofs.push_back(g);
-  p.interior = static_cast<PetscInt>(p.local_dofs.size());
-  p.local_dofs.insert(p.local_dofs.end(), p.separator_dofs.begin(), p.separator_dofs.end());
-  std::sort(p.local_dofs.begin(), p.local_dofs.end());
-  const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
-  p.owned_position.assign(n, -1);
-  p.separator_local.resize(p.separator);
+// M_r's DOFs (the owned interior and the whole separator, increasing), their
+// owned positions and the separator's local indices; returns the interior's
+// local indices.
+std::vector<int> IndexLocalPiece(PetscInt begin, PetscInt end, const std::vector<PetscInt> &mine,
+                                 Split *p) {
+  p->local_dofs.clear();
+  for (PetscInt g = begin; g < end; ++g)
+    if (!std::binary_search(mine.begin(), mine.end(), g)) p->local_dofs.push_back(g);
+  p->interior = static_cast<PetscInt>(p->local_dofs.size());
+  p->local_dofs.insert(p->local_dofs.end(), p->separator_dofs.begin(), p->separator_dofs.end());
+  std::sort(p->local_dofs.begin(), p->local_dofs.end());
+  const PetscInt n = static_cast<PetscInt>(p->local_dofs.size());
+  p->owned_position.assign(n, -1);
+  p->separator_local.resize(p->separator);
   std::vector<int> interior_local;
   for (PetscInt l = 0; l < n; ++l) {
-    const PetscInt g = p.local_dofs[l];
-    if (g >= begin && g < begin + owned) p.owned_position[l] = g - begin;
-    const auto k = std::lower_bound(p.separator_dofs.begin(), p.separator_dofs.end(), g);
-    if (k != p.separator_dofs.end() && *k == g)
-      p.separator_local[k - p.separator_dofs.begin()] = l;
+    const PetscInt g = p->local_dofs[l];
+    if (g >= begin && g < end) p->owned_position[l] = g - begin;
+    const auto k = std::lower_bound(p->separator_dofs.begin(), p->separator_dofs.end(), g);
+    if (k != p->separator_dofs.end() && *k == g)
+      p->separator_local[k - p->separator_dofs.begin()] = l;
     else
       interior_local.push_back(static_cast<int>(l));
   }
-  IS local;
-  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, n, p.local_dofs.data(), PETSC_USE_POINTER, &local));
-  if (p.local) PetscCall(MatDestroySubMatrices(1, &p.local));
-  PetscCall(MatCreateSubMatrices(A, 1, &local, &local, MAT_INITIAL_MATRIX, &p.local));
-  PetscCall(ISDestroy(&local));
+  return interior_local;
+}
 
+// M_r = A[local_dofs, local_dofs] (created, or refilled with `reuse`).
+PetscErrorCode ExtractLocalPiece(Mat A, MatReuse reuse, Split *p) {
+  PetscFunctionBeginUser;
+  IS local;
+  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(p->local_dofs.size()),
+                            p->local_dofs.data(), PETSC_USE_POINTER, &local));
+  if (reuse == MAT_INITIAL_MATRIX && p->local) PetscCall(MatDestroySubMatrices(1, &p->local));
+  PetscCall(MatCreateSubMatrices(A, 1, &local, &local, reuse, &p->local));
+  PetscCall(ISDestroy(&local));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// CHOLMOD's fill-reducing order of A[I_r, I_r] (the interior of M_r), as
+// local indices of M_r.
+PetscErrorCode InteriorOrder(Supernodal *s, const std::vector<int> &interior_local,
+                             std::vector<int> *order) {
+  PetscFunctionBeginUser;
+  Split &p = s->split;
+  IS interior;
+  Mat interior_matrix;
+  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, p.interior, interior_local.data(), PETSC_USE_POINTER,
+                            &interior));
+  PetscCall(
+      MatCreateSubMatrix(p.local[0], interior, interior, MAT_INITIAL_MATRIX, &interior_matrix));
+  PetscCall(ISDestroy(&interior));
+  StartCholmod(s);
+  PetscInt m;
+  const PetscInt *row_start, *columns;
+  PetscBool done;
+  PetscCall(
+      MatGetRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+  const PetscScalar *values;
+  PetscCall(MatSeqAIJGetArrayRead(interior_matrix, &values));
+  cholmod_sparse view = LowerView(m, row_start, columns, values);
+  cholmod_factor *symbolic = cholmod_analyze(&view, &s->common);
+  PetscCall(MatSeqAIJRestoreArrayRead(interior_matrix, &values));
+  PetscCall(MatRestoreRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns,
+                            &done));
+  PetscCheck(symbolic, PETSC_COMM_SELF, PETSC_ERR_LIB,
+             "supernodal: CHOLMOD analysis failed (status %d)", s->common.status);
+  const int *perm = static_cast<const int *>(symbolic->Perm);
+  for (PetscInt i = 0; i < p.interior; ++i) order->push_back(interior_local[perm[i]]);
+  cholmod_free_factor(&symbolic, &s->common);
+  PetscCall(MatDestroy(&interior_matrix));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The separator, the local piece M_r and its order (Split's comment), and the
+// first factorisation of M_r in that order.
+PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
+  PetscFunctionBeginUser;
+  Split &p = s->split;
+  MPI_Comm comm = PetscObjectComm((PetscObject)A);
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  const PetscInt *ranges;
+  PetscCall(MatGetOwnershipRanges(A, &ranges));
+  std::vector<PetscInt> mine;
+  PetscCall(OwnedSeparatorDofs(A, ranges[rank], ranges[rank + 1], &mine));
+  PetscCall(GatherSeparator(comm, mine, &p));
+  const std::vector<int> interior_local = IndexLocalPiece(ranges[rank], ranges[rank + 1], mine, &p);
+  PetscCall(ExtractLocalPiece(A, MAT_INITIAL_MATRIX, &p));
   // Order: the interior by CHOLMOD's fill-reducing ordering of A[I_r, I_r],
   // then the separator.
   std::vector<int> order;
-  if (p.interior > 0) {
-    IS interior;
-    Mat interior_matrix;
-    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, p.interior, interior_local.data(), PETSC_USE_POINTER,
-                              &interior));
-    PetscCall(
-        MatCreateSubMatrix(p.local[0], interior, interior, MAT_INITIAL_MATRIX, &interior_matrix));
-    PetscCall(ISDestroy(&interior));
-    StartCholmod(s);
-    PetscInt m;
-    const PetscInt *row_start, *columns;
-    PetscCall(
-        MatGetRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
-    const PetscScalar *values;
-    PetscCall(MatSeqAIJGetArrayRead(interior_matrix, &values));
-    cholmod_sparse view = LowerView(m, row_start, columns, values);
-    cholmod_factor *symbolic = cholmod_analyze(&view, &s->common);
-    PetscCall(MatSeqAIJRestoreArrayRead(interior_matrix, &values));
-    PetscCall(MatRestoreRowIJ(interior_matrix, 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start,
-                              &columns, &done));
-    PetscCheck(symbolic, PETSC_COMM_SELF, PETSC_ERR_LIB,
-               "supernodal: CHOLMOD analysis failed (status %d)", s->common.status);
-    const int *perm = static_cast<const int *>(symbolic->Perm);
-    for (PetscInt i = 0; i < p.interior; ++i) order.push_back(interior_local[perm[i]]);
-    cholmod_free_factor(&symbolic, &s->common);
-    PetscCall(MatDestroy(&interior_matrix));
-  }
+  if (p.interior > 0) PetscCall(InteriorOrder(s, interior_local, &order));
   for (PetscInt k = 0; k < p.separator; ++k)
     order.push_back(static_cast<int>(p.separator_local[k]));
   cholmod_free_factor(&p.factor, &s->common);
+  const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
   if (n > 0) {
     PetscCall(Factorise(s, p.local[0], &order, &p.factor));
     PetscCheck(s->failed ||
@@ -567,6 +626,117 @@ PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Every rank takes `failed` from `root` (root < 0: true when any rank's is).
+PetscErrorCode AgreeOnFailure(MPI_Comm comm, int root, bool *failed) {
+  PetscFunctionBeginUser;
+  int value = *failed;
+  if (root < 0)
+    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &value, 1, MPI_INT, MPI_LOR, comm));
+  else
+    PetscCallMPI(MPI_Bcast(&value, 1, MPI_INT, root, comm));
+  *failed = value;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The trailing block L_SS of the factor L of M_r (the separator's columns,
+// last), dense lower column-major, separator x separator.
+std::vector<double> TrailingBlock(const cholmod_factor *L, int interior, int separator) {
+  const int *super = static_cast<const int *>(L->super), *pi = static_cast<const int *>(L->pi),
+            *px = static_cast<const int *>(L->px), *srow = static_cast<const int *>(L->s);
+  const double *x = static_cast<const double *>(L->x);
+  std::vector<double> trailing(static_cast<size_t>(separator) * separator, 0.0);
+  for (size_t k = 0; k < L->nsuper; ++k) {
+    const int first = super[k], last = super[k + 1], height = pi[k + 1] - pi[k];
+    for (int j = std::max(first, interior); j < last; ++j)
+      for (int q = j - first; q < height; ++q) {
+        const int row = srow[pi[k] + q];
+        trailing[static_cast<size_t>(j - interior) * separator + (row - interior)] =
+            x[px[k] + static_cast<size_t>(j - first) * height + q];
+      }
+  }
+  return trailing;
+}
+
+// This rank's part after a factorisation of M_r: the packed copy of its factor
+// (whose values CHOLMOD then drops), C_r = L_SS L_SS^T into schur (lower), and
+// the entries and flops it contributes.
+PetscErrorCode KeepLocalFactor(Supernodal *s, std::vector<double> *schur, double *entries,
+                               double *flops) {
+  PetscFunctionBeginUser;
+  Split &p = s->split;
+  const int interior = static_cast<int>(p.interior), separator = static_cast<int>(p.separator);
+  const std::vector<double> trailing = TrailingBlock(p.factor, interior, separator);
+  if (s->precision == kSingle) {
+    p.single.From(p.factor);
+    *entries = p.single.EntriesBefore(interior);
+  } else {
+    p.full.From(p.factor);
+    *entries = p.full.EntriesBefore(interior);
+  }
+  *flops = s->common.fl;
+  PetscCall(DropValues(s, p.factor));
+  if (separator > 0) {
+    const double one = 1.0, zero = 0.0;
+    dsyrk_("L", "N", &separator, &separator, &one, trailing.data(), &separator, &zero,
+           schur->data(), &separator);
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Rank 0: schur (the sum of the C_r) -= (ranks - 1) A_SS, giving the separator's
+// Schur complement S, factorised in place by LAPACK (lower); sets s->failed when
+// S is not positive definite.
+PetscErrorCode FactoriseSeparator(Supernodal *s, PetscMPIInt ranks, std::vector<double> *schur) {
+  PetscFunctionBeginUser;
+  Split &p = s->split;
+  const int separator = static_cast<int>(p.separator);
+  PetscInt m;
+  const PetscInt *row_start, *columns;
+  PetscBool done;
+  const PetscScalar *values;
+  PetscCall(MatGetRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+  PetscCall(MatSeqAIJGetArrayRead(p.local[0], &values));
+  std::vector<PetscInt> separator_index(m, -1);
+  for (PetscInt k = 0; k < p.separator; ++k) separator_index[p.separator_local[k]] = k;
+  for (PetscInt k = 0; k < p.separator; ++k) {
+    const PetscInt l = p.separator_local[k];
+    for (PetscInt e = row_start[l]; e < row_start[l + 1]; ++e) {
+      const PetscInt c = separator_index[columns[e]];
+      if (c >= 0 && c >= k)
+        (*schur)[static_cast<size_t>(k) * separator + c] -= (ranks - 1) * values[e];
+    }
+  }
+  PetscCall(MatSeqAIJRestoreArrayRead(p.local[0], &values));
+  PetscCall(
+      MatRestoreRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
+  int info = 0;
+  dpotrf_("L", &separator, schur->data(), &separator, &info);
+  PetscCheck(info >= 0, PETSC_COMM_SELF, PETSC_ERR_LIB,
+             "supernodal: LAPACK dpotrf failed (info %d)", info);
+  if (info > 0) {
+    PetscCall(PetscInfo(nullptr,
+                        "supernodal: the separator's Schur complement is not positive definite\n"));
+    s->failed = true;
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Rank 0: the separator's dense factor kept in the solves' precision; its
+// entries and flops added.
+void KeepSeparatorFactor(Supernodal *s, std::vector<double> *schur, double *entries,
+                         double *flops) {
+  Split &p = s->split;
+  const int separator = static_cast<int>(p.separator);
+  for (int j = 0; j < separator; ++j)  // dpotrf leaves the upper triangle as it was
+    for (int i = 0; i < j; ++i) (*schur)[static_cast<size_t>(j) * separator + i] = 0.0;
+  if (s->precision == kSingle)
+    p.dense_single.From(*schur, separator);
+  else
+    p.dense_full.From(*schur, separator);
+  *entries += 0.5 * separator * (separator + 1.0);
+  *flops += separator * (double)separator * separator / 3.0;
+}
+
 PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   PetscFunctionBeginUser;
   Split &p = s->split;
@@ -574,105 +744,26 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   PetscCallMPI(MPI_Comm_size(comm, &size));
-  const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
   if (new_pattern || !p.local) {
     PetscCall(SplitStructure(s, A));  // also factorises
   } else {
-    IS local;
-    PetscCall(ISCreateGeneral(PETSC_COMM_SELF, n, p.local_dofs.data(), PETSC_USE_POINTER, &local));
-    PetscCall(MatCreateSubMatrices(A, 1, &local, &local, MAT_REUSE_MATRIX, &p.local));
-    PetscCall(ISDestroy(&local));
-    if (n > 0) PetscCall(Factorise(s, p.local[0], nullptr, &p.factor));
+    PetscCall(ExtractLocalPiece(A, MAT_REUSE_MATRIX, &p));
+    if (!p.local_dofs.empty()) PetscCall(Factorise(s, p.local[0], nullptr, &p.factor));
   }
-  {  // every rank learns whether any local factorisation failed
-    int failed = s->failed;
-    PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &failed, 1, MPI_INT, MPI_LOR, comm));
-    s->failed = failed;
-    if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
-  }
-  const int interior = static_cast<int>(p.interior), separator = static_cast<int>(p.separator);
-  // The trailing block L_SS of this rank's factor, dense, then C_r = L_SS L_SS^T.
+  PetscCall(AgreeOnFailure(comm, -1, &s->failed));  // any local factorisation
+  if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
+  const int separator = static_cast<int>(p.separator);
   std::vector<double> schur(static_cast<size_t>(separator) * separator, 0.0);
   double entries = 0, flops = 0;
-  if (static_cast<PetscInt>(p.local_dofs.size()) > 0) {
-    const cholmod_factor *L = p.factor;
-    const int *super = static_cast<const int *>(L->super), *pi = static_cast<const int *>(L->pi),
-              *px = static_cast<const int *>(L->px), *srow = static_cast<const int *>(L->s);
-    const double *x = static_cast<const double *>(L->x);
-    std::vector<double> trailing(static_cast<size_t>(separator) * separator, 0.0);
-    for (size_t k = 0; k < L->nsuper; ++k) {
-      const int first = super[k], last = super[k + 1], height = pi[k + 1] - pi[k];
-      for (int j = std::max(first, interior); j < last; ++j)
-        for (int q = j - first; q < height; ++q) {
-          const int row = srow[pi[k] + q];
-          trailing[static_cast<size_t>(j - interior) * separator + (row - interior)] =
-              x[px[k] + static_cast<size_t>(j - first) * height + q];
-        }
-    }
-    if (s->precision == kSingle) {
-      p.single.From(L);
-      entries = p.single.EntriesBefore(interior);
-    } else {
-      p.full.From(L);
-      entries = p.full.EntriesBefore(interior);
-    }
-    flops = s->common.fl;
-    PetscCall(DropValues(s, p.factor));
-    if (separator > 0) {
-      const double one = 1.0, zero = 0.0;
-      dsyrk_("L", "N", &separator, &separator, &one, trailing.data(), &separator, &zero,
-             schur.data(), &separator);
-    }
-  }
+  if (!p.local_dofs.empty()) PetscCall(KeepLocalFactor(s, &schur, &entries, &flops));
   // Rank 0: S = sum_r C_r - (ranks - 1) A_SS, factorised densely.
   if (separator > 0) {
     PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : schur.data(), schur.data(),
                             separator * separator, MPI_DOUBLE, MPI_SUM, 0, comm));
-    if (rank == 0) {
-      PetscInt m;
-      const PetscInt *row_start, *columns;
-      PetscBool done;
-      const PetscScalar *values;
-      PetscCall(
-          MatGetRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns, &done));
-      PetscCall(MatSeqAIJGetArrayRead(p.local[0], &values));
-      std::vector<PetscInt> separator_index(m, -1);
-      for (PetscInt k = 0; k < p.separator; ++k) separator_index[p.separator_local[k]] = k;
-      for (PetscInt k = 0; k < p.separator; ++k) {
-        const PetscInt l = p.separator_local[k];
-        for (PetscInt e = row_start[l]; e < row_start[l + 1]; ++e) {
-          const PetscInt c = separator_index[columns[e]];
-          if (c >= 0 && c >= k)
-            schur[static_cast<size_t>(k) * separator + c] -= (size - 1) * values[e];
-        }
-      }
-      PetscCall(MatSeqAIJRestoreArrayRead(p.local[0], &values));
-      PetscCall(MatRestoreRowIJ(p.local[0], 0, PETSC_FALSE, PETSC_FALSE, &m, &row_start, &columns,
-                                &done));
-      int info = 0;
-      dpotrf_("L", &separator, schur.data(), &separator, &info);
-      PetscCheck(info >= 0, PETSC_COMM_SELF, PETSC_ERR_LIB,
-                 "supernodal: LAPACK dpotrf failed (info %d)", info);
-      if (info > 0) {
-        PetscCall(PetscInfo(
-            nullptr, "supernodal: the separator's Schur complement is not positive definite\n"));
-        s->failed = true;
-      }
-    }
-    int failed = s->failed;  // rank 0's verdict on the separator
-    PetscCallMPI(MPI_Bcast(&failed, 1, MPI_INT, 0, comm));
-    s->failed = failed;
+    if (rank == 0) PetscCall(FactoriseSeparator(s, size, &schur));
+    PetscCall(AgreeOnFailure(comm, 0, &s->failed));  // rank 0's verdict on the separator
     if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
-    if (rank == 0) {
-      for (int j = 0; j < separator; ++j)  // dpotrf leaves the upper triangle as it was
-        for (int i = 0; i < j; ++i) schur[static_cast<size_t>(j) * separator + i] = 0.0;
-      if (s->precision == kSingle)
-        p.dense_single.From(schur, separator);
-      else
-        p.dense_full.From(schur, separator);
-      entries += 0.5 * separator * (separator + 1.0);
-      flops += separator * (double)separator * separator / 3.0;
-    }
+    if (rank == 0) KeepSeparatorFactor(s, &schur, &entries, &flops);
   }
   double sums[2] = {entries, flops};
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, sums, 2, MPI_DOUBLE, MPI_SUM, comm));
@@ -751,6 +842,25 @@ PetscErrorCode PCSetUp_Supernodal(PC pc) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// One rank, double precision: x = A^-1 b by CHOLMOD's own solve (BLAS-2 per
+// supernode), which streams the double factor fastest.
+PetscErrorCode CholmodSolve(Supernodal *s, PetscInt n, const PetscScalar *b, PetscScalar *x) {
+  PetscFunctionBeginUser;
+  cholmod_dense dense;
+  std::memset(&dense, 0, sizeof(dense));
+  dense.nrow = dense.d = dense.nzmax = n;
+  dense.ncol = 1;
+  dense.x = const_cast<PetscScalar *>(b);
+  dense.xtype = CHOLMOD_REAL;
+  dense.dtype = CHOLMOD_DOUBLE;
+  const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr,
+                                &s->work_y, &s->work_e, &s->common);
+  PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)",
+             s->common.status);
+  std::memcpy(x, s->solution->x, sizeof(PetscScalar) * n);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
   PetscFunctionBeginUser;
   Supernodal *s = static_cast<Supernodal *>(pc->data);
@@ -772,24 +882,14 @@ PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
       PetscCall(ApplySplit(comm, s->split, s->split.full, s->split.dense_full, rhs, out));
   } else if (s->precision == kSingle) {
     s->single.Solve(rhs, out);
-  } else {  // CHOLMOD's own solve (BLAS-2 per supernode) streams the double factor fastest
+  } else {
     PetscInt n;
     PetscCall(VecGetLocalSize(b, &n));
-    cholmod_dense dense;
-    std::memset(&dense, 0, sizeof(dense));
-    dense.nrow = dense.d = dense.nzmax = n;
-    dense.ncol = 1;
-    dense.x = const_cast<PetscScalar *>(rhs);
-    dense.xtype = CHOLMOD_REAL;
-    dense.dtype = CHOLMOD_DOUBLE;
-    const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr,
-                                  &s->work_y, &s->work_e, &s->common);
-    PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)",
-               s->common.status);
-    std::memcpy(out, s->solution->x, sizeof(PetscScalar) * n);
+    PetscCall(CholmodSolve(s, n, rhs, out));
   }
   PetscCall(VecRestoreArrayWrite(x, &out));
   PetscCall(VecRestoreArrayRead(b, &rhs));
+  // A solve streams every factor entry twice at two flops each, shared by the ranks.
   PetscCall(PetscLogFlops(4.0 * s->nonzeros / size));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -38,33 +38,37 @@ PetscErrorCode PCDestroy_Warp(PC pc) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// The inner PC on A0: supernodal Cholesky in single precision by default, its
+// options under the prefix warp_ (after the warp PC's own prefix).
+PetscErrorCode CreateInnerPC(PC pc, Warp *w) {
+  PetscFunctionBeginUser;
+  PetscCall(RegisterSupernodalPC());
+  PetscCall(PCCreate(PetscObjectComm((PetscObject)pc), &w->inner));
+  PetscCall(PCSetOptionsPrefix(w->inner, "warp_"));
+  const char *prefix;
+  PetscCall(PCGetOptionsPrefix(pc, &prefix));
+  if (prefix) PetscCall(PCAppendOptionsPrefix(w->inner, prefix));
+  PetscCall(PCSetType(w->inner, kPCSupernodal));
+  // A preconditioner needs no more than single precision, and its triangular
+  // solves then stream half the bytes (-warp_pc_supernodal_precision double
+  // to compare).
+  PetscCall(PCSupernodalSetSinglePrecision(w->inner, true));
+  PetscCall(PCSetOperators(w->inner, w->linear, w->linear));
+  PetscCall(PCSetFromOptions(w->inner));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode PCSetUp_Warp(PC pc) {
   PetscFunctionBeginUser;
   Warp *w = static_cast<Warp *>(pc->data);
   PetscCheck(w->linear, PetscObjectComm((PetscObject)pc), PETSC_ERR_ORDER,
              "warp: PCWarpSetLinearOperator was not called");
-  if (!w->inner) {
-    PetscCall(RegisterSupernodalPC());
-    PetscCall(PCCreate(PetscObjectComm((PetscObject)pc), &w->inner));
-    PetscCall(PCSetOptionsPrefix(w->inner, "warp_"));
-    const char *prefix;
-    PetscCall(PCGetOptionsPrefix(pc, &prefix));
-    if (prefix) PetscCall(PCAppendOptionsPrefix(w->inner, prefix));
-    PetscCall(PCSetType(w->inner, kPCSupernodal));
-    // A preconditioner needs no more than single precision, and its triangular
-    // solves then stream half the bytes (-warp_pc_supernodal_precision double
-    // to compare).
-    PetscCall(PCSupernodalSetSinglePrecision(w->inner, true));
-    PetscCall(PCSetOperators(w->inner, w->linear, w->linear));
-    PetscCall(PCSetFromOptions(w->inner));
-  }
+  if (!w->inner) PetscCall(CreateInnerPC(pc, w));
   PetscCall(PCSetUp(w->inner));  // factorises only when A0 changed
   PCFailedReason inner_reason;   // A0 not positive definite: the KSP stops (supernodal.hpp)
   PetscCall(PCGetFailedReason(w->inner, &inner_reason));
   PetscCall(PCSetFailedReason(pc, inner_reason));
-  if (!w->rotated) {
-    PetscCall(MatCreateVecs(w->linear, &w->rotated, &w->inner_solution));
-  }
+  if (!w->rotated) PetscCall(MatCreateVecs(w->linear, &w->rotated, &w->inner_solution));
   PetscInt n;
   PetscCall(VecGetLocalSize(w->rotated, &n));
   PetscCheck(static_cast<size_t>(3 * n) == w->rotations.size(), PETSC_COMM_SELF, PETSC_ERR_ORDER,

@@ -12,7 +12,7 @@
 // which is symmetric positive definite (CG can use it) and exact where a
 // neighbourhood turns rigidly. A0 is factorised once per time step size by the
 // inner PC (options prefix -warp_, default -warp_pc_type supernodal in single
-// precision: half the bytes per solve, and 1e-7 accuracy costs no iterations); a
+// precision: half the bytes per solve, and a preconditioner needs no more); a
 // step costs the rotations and, per CG iteration, two block-diagonal products and
 // one pair of triangular solves.
 //
