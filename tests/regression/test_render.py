@@ -24,7 +24,6 @@ Skips (77) when python3-vtk9 is missing, or when there is no X display and no Xv
 """
 import os
 import shutil
-import struct
 import subprocess
 import sys
 
@@ -56,14 +55,6 @@ def write_cube_mesh(path):
         for t in oriented:
             f.write(" ".join(str(i + 1) for i in t) + " 0\n")
         f.write("End\n")
-
-
-def png_size(path):
-    with open(path, "rb") as f:
-        head = f.read(24)
-    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return struct.unpack(">II", head[16:24])
 
 
 def read_png(path):
@@ -128,7 +119,7 @@ def check_falling_beam(args, checks, work):
             images.append(None)
             continue
         checks.check(path in run.stdout, f"{name} listed in the output")
-        size = png_size(path)
+        size = harness.png_size(path)
         checks.check(size == SIZE, f"{name} is a PNG of {SIZE[0]}x{SIZE[1]} pixels (header says {size})")
         image = read_png(path)
         colours = distinct_colours(image)
@@ -214,7 +205,7 @@ def check_cube_and_api(args, checks, work):
     if os.path.exists(single):
         os.remove(single)
     render.render_frame(result, 7, single, color="speed", size=(200, 150))
-    size = png_size(single) if os.path.isfile(single) else None
+    size = harness.png_size(single) if os.path.isfile(single) else None
     checks.check(size == (200, 150), f"render_frame(..., color='speed') wrote a 200x150 PNG (got {size})")
     if size:
         colours = distinct_colours(read_png(single))
@@ -225,7 +216,7 @@ def check_cube_and_api(args, checks, work):
     run = run_render([result, "--out", out, "--size", "160x120", "--frames", "0,10",
                       "--camera", "fixed", "--color", "displacement"])
     written = [os.path.join(out, f"frame_{k:05d}.png") for k in (0, 10)]
-    checks.check(run.returncode == 0 and all(png_size(p) == (160, 120) for p in written if os.path.isfile(p))
+    checks.check(run.returncode == 0 and all(harness.png_size(p) == (160, 120) for p in written if os.path.isfile(p))
                  and all(os.path.isfile(p) for p in written),
                  f"--name-with-dashes aliases work (exit {run.returncode} {run.stderr.strip()[-300:]})")
     return result
