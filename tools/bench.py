@@ -17,7 +17,7 @@ the memory traffic a step needs at least (the nonzeros of K or A and of the
 Cholesky factor) over that bandwidth: bound_fraction = bound / step time.
 
 Writes into -study_dir DIR (default bench/): bench.csv (one row per run, failed
-runs with their error line), bench.md (the table, the targets of issue 6 with a
+runs with their error line), bench.md (the table, the performance targets with a
 verdict each, the reference figures), meshes/ (the meshes and scenes, reused
 when present) and runs/ (one log per run).
 
@@ -61,7 +61,7 @@ ATTRIBUTE = {"assemble_s": "assemble_s", "factor_s": "factor_s", "step_s": "step
              "factor_nonzeros": "factor_nonzeros", "steps": "bench_steps", "vertices": "bench_vertices",
              "tets": "bench_tets"}
 
-# Per implicit step on one core of this kind of machine (issue 6): tets -> seconds.
+# Per implicit step on one core of this kind of machine: tets -> seconds.
 CHOLMOD_COURSEWORK = [(2.5e3, 0.23e-3), (22e3, 8.5e-3), (104e3, 75e-3)]  # linear, factorised once
 VEGA_COROTATIONAL = [(2.5e3, 5.2e-3), (22e3, 107e-3), (104e3, 709e-3)]   # PCG + Jacobi
 DOLFINX_ASSEMBLY_RATE = 0.55e6  # P1 elasticity tets/s per core
@@ -239,7 +239,7 @@ def _fmt(value, digits=3):
 
 
 def targets(rows):
-    """The targets of issue 6, each as (target, figures, verdict), for the default presets
+    """The performance targets, each as (target, figures, verdict), for the default presets
     (linear: direct; corotational: cg-warp, or another iterative preset when it did not run)."""
     ok = [r for r in rows if r["status"] == "ok"]
     lines = []
@@ -340,14 +340,14 @@ def write_outputs(args, rows, started):
     md.append("")
     lines = targets(rows)
     if lines:
-        md.append("## Targets (issue 6)")
+        md.append("## Targets")
         md.append("")
         md.append("| target | measured | verdict |")
         md.append("|---|---|---|")
         for target, figures, verdict in lines:
             md.append(f"| {target} | {figures} | {verdict} |")
         md.append("")
-    md.append("Reference figures per implicit step on one core of this kind of machine (issue 6): the "
+    md.append("Reference figures per implicit step on one core of this kind of machine: the "
               "coursework's Eigen + CHOLMOD (linear, factorised once) 0.23 ms at 2.5k tets, 8.5 ms at 22k, 75 ms "
               "at 104k; Vega FEM corotational, PCG + Jacobi, 5.2 ms, 107 ms, 709 ms; DOLFINx 0.5 assembles P1 "
               "elasticity at about 0.55 M tets/s per core. Sizes in between are interpolated log-log.")

@@ -1,4 +1,4 @@
-"""Determinism (issue 7, item 6): the same command twice gives byte-identical
+"""Determinism: the same command twice gives byte-identical
 datasets (every dataset of the result file, the checkpoints included, compared
 byte for byte; of the root attributes all but the measured times).
 

@@ -1,4 +1,4 @@
-"""The progress line and -quiet (issue 7, item 1).
+"""The progress line and -quiet.
 
 Runs the beam scene (150 steps; 40 corotational ones on one rank, to last
 about a second) with stderr on a pseudo-terminal (python's pty module) or on a

@@ -1,4 +1,4 @@
-"""Checkpoints and restart (issue 7, item 4) and the restart file's early
+"""Checkpoints and restart and the restart file's early
 checks (item 8).
 
 Each case runs N steps uninterrupted, then N/2 steps with -checkpoint_every,

@@ -1,4 +1,4 @@
-"""Signals and crashes lose nothing (issue 7, item 5).
+"""Signals and crashes lose nothing.
 
 The beam scene runs "forever" (-steps 1000000) until a signal arrives once the
 .xdmf lists a few frames:

@@ -76,7 +76,7 @@ def main():
     for row in rows:
         known = (row["case"], row["mode"]) in KNOWN_FAILURES
         ok = (row["verdict"] == "pass") != known
-        message = f"{row['case']} ({row['mode']})" + (" [known failure, issue 5]" if known else "")
+        message = f"{row['case']} ({row['mode']})" + (" [known failure]" if known else "")
         if row["verdict"] != "pass":
             message += f": {row['reason']}\n     reproduce: {row['command']}"
         elif known:

@@ -1,5 +1,5 @@
 """The .xdmf beside every result file is a ParaView time series of the deformed
-mesh with velocity as a point field (issue 7, item 3).
+mesh with velocity as a point field.
 
 (a) A 2-rank run of the beam scene, frames every 2 steps: ParaView's own Xdmf3
     reader (pvpython, Debian's python3-paraview; this part is skipped without
