@@ -350,7 +350,10 @@ class Result:
         return deformation(positions, self.rest, self.masses, self.vertex_body, self.nbodies)
 
     def colour_scale(self, frames):
-        """Top of the colour scale: -vmax, else the largest free-vertex value over `frames`."""
+        """Top of the colour scale: -vmax, else the largest over `frames` of each frame's
+        SCALE_PERCENTILE-th percentile of the free vertices' values (a few flapping tips
+        would otherwise leave the rest of the body one colour; values above the top are
+        drawn in the top colour)."""
         if self.user_vmax is not None:
             return float(self.user_vmax)
         top = 0.0
@@ -361,7 +364,7 @@ class Result:
                 values = self.values(p, v)[self.free_vertices]
                 values = values[np.isfinite(values)]
                 if values.size:
-                    top = max(top, float(values.max()))
+                    top = max(top, float(np.percentile(values, SCALE_PERCENTILE)))
         return top if top > 0 else 1.0
 
 
@@ -582,6 +585,7 @@ def colormap_points(name):
     return [(s, *cmap(s)[:3]) for s in np.linspace(0, 1, 33)]
 
 
+SCALE_PERCENTILE = 99  # percent of a frame's free vertices below the top of the colour scale
 NO_GROUND = "none"  # -ground none: no ground plane even when the file records one
 
 
@@ -1100,8 +1104,8 @@ def build_parser():
                    help="frames per second of the GIF/MP4 (default 20)")
     p.add_argument("-title", "--title", help="title printed at the top of every frame")
     p.add_argument("-vmax", "--vmax", type=float,
-                   help="top of the colour scale (m or m/s; default: the largest vertex value "
-                        "of the rendered frames)")
+                   help="top of the colour scale (m or m/s; default: the largest over the "
+                        f"rendered frames of the {SCALE_PERCENTILE}th percentile of the free vertices)")
     p.add_argument("-antialias", "--antialias", choices=("fxaa", "none"), default="fxaa", metavar="HOW",
                    help="smooth the edges with FXAA (default; on Mesa's CPU renderer it costs about "
                         "as much as drawing the frame) or not")
