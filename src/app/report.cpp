@@ -42,8 +42,9 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
     min_dofs = std::min(min_dofs, dofs);
     max_dofs = std::max(max_dofs, dofs);
   }
-  PetscCall(PetscPrintf(comm, "  scene        %s: %zu bodies (%d fixed), %d vertices, %lld tets\n",
-                        scene.path.c_str(), scene.bodies.size(), b.fixed_bodies,
+  const size_t bodies = scene.bodies.size();
+  PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets\n",
+                        scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets()));
   PetscCall(PetscPrintf(comm,
                         "  unknowns     %" PetscInt_FMT " DOFs on %d ranks (%" PetscInt_FMT
