@@ -20,6 +20,7 @@
 
 #include "common/errors.hpp"
 #include "fem/mesh.hpp"
+#include "input_checks.hpp"
 #include "io/mesh_io.hpp"
 #include "io/scene.hpp"
 
@@ -30,28 +31,8 @@ namespace fs = std::filesystem;
 
 const std::string kMeshes = "meshes/";
 
-// The message of the InputError that `read` throws, or a test failure.
-template <class Read>
-std::string InputErrorOf(Read read) {
-  try {
-    read();
-  } catch (const InputError &error) {
-    return error.what();
-  }
-  ADD_FAILURE() << "no InputError thrown";
-  return "";
-}
-
-::testing::AssertionResult Contains(const std::string &text, const std::string &part) {
-  if (text.find(part) != std::string::npos) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << "'" << text << "' lacks '" << part << "'";
-}
-
-#define EXPECT_CONTAINS(text, part) EXPECT_TRUE(Contains((text), (part)))
-
-std::string At(const std::string &path, int line) {
-  return path + ":" + std::to_string(line) + ":";
-}
+using testing::At;
+using testing::InputErrorOf;
 
 // ------------------------------------------------ independent geometry
 
@@ -389,21 +370,7 @@ TEST(ReadGmsh, Versions22And41GiveTheSameMesh) {
   EXPECT_EQ(Vertex(mesh41, 1), Eigen::Vector3d(1, 0, 0));  // node 2
 }
 
-class GmshTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    std::random_device entropy;
-    folder_ = fs::temp_directory_path() / ("softbody_test_gmsh_" + std::to_string(entropy()));
-    fs::create_directories(folder_);
-  }
-  void TearDown() override { fs::remove_all(folder_); }
-  std::string Write(const std::string &name, const std::string &text) const {
-    const fs::path path = folder_ / name;
-    std::ofstream(path, std::ios::binary) << text;
-    return path.string();
-  }
-  fs::path folder_;
-};
+using GmshTest = testing::TempFolderTest;
 
 // Two tets sharing the face {0, 1, 2}, their 5 nodes tagged 10, 20, 30, 40, 50,
 // and a stray node 60 that no tet uses (kept: it stays where it is).

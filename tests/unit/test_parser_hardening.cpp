@@ -13,6 +13,7 @@
 #include <string>
 
 #include "common/errors.hpp"
+#include "input_checks.hpp"
 #include "io/mesh_io.hpp"
 #include "io/scene.hpp"
 
@@ -21,43 +22,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class HardeningTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    std::random_device entropy;
-    const auto *info = ::testing::UnitTest::GetInstance()->current_test_info();
-    folder_ = fs::temp_directory_path() / ("softbody_test_hardening_" + std::string(info->name()) +
-                                           "_" + std::to_string(entropy()));
-    fs::create_directories(folder_);
-  }
-  void TearDown() override { fs::remove_all(folder_); }
-
-  std::string Write(const std::string &name, const std::string &text) const {
-    const fs::path path = folder_ / name;
-    std::ofstream(path, std::ios::binary) << text;
-    return path.string();
-  }
-
-  fs::path folder_;
-};
-
-// The message of the InputError that `read` throws, or a test failure.
-template <class Read>
-std::string InputErrorOf(Read read) {
-  try {
-    read();
-  } catch (const InputError &error) {
-    return error.what();
-  } catch (const std::exception &error) {
-    ADD_FAILURE() << "not an InputError: " << error.what();
-    return "";
-  }
-  ADD_FAILURE() << "no InputError thrown";
-  return "";
-}
-
-#define EXPECT_CONTAINS(text, part) \
-  EXPECT_NE(std::string(text).find(part), std::string::npos) << text
+using HardeningTest = testing::TempFolderTest;
+using testing::InputErrorOf;
 
 // An OFF file with one polygon of n vertices (0 .. n-1, the last one repeated
 // when `repeat`) and three triangles.

@@ -13,6 +13,7 @@
 
 #include "common/errors.hpp"
 #include "fem/mesh.hpp"
+#include "input_checks.hpp"
 #include "io/mesh_io.hpp"
 #include "io/scene.hpp"
 
@@ -21,51 +22,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class TempFolder : public ::testing::Test {
- protected:
-  void SetUp() override {
-    std::random_device entropy;
-    const auto *info = ::testing::UnitTest::GetInstance()->current_test_info();
-    folder_ = fs::temp_directory_path() / ("softbody_test_readers_" + std::string(info->name()) +
-                                           "_" + std::to_string(entropy()));
-    fs::create_directories(folder_);
-  }
-  void TearDown() override { fs::remove_all(folder_); }
-
-  // Writes `text` to folder/name and returns the full path.
-  std::string Write(const std::string &name, const std::string &text) const {
-    const fs::path path = folder_ / name;
-    fs::create_directories(path.parent_path());
-    std::ofstream(path, std::ios::binary) << text;
-    return path.string();
-  }
-
-  fs::path folder_;
-};
-
-// The message of the InputError that `read` throws, or a test failure.
-template <class Read>
-std::string InputErrorOf(Read read) {
-  try {
-    read();
-  } catch (const InputError &error) {
-    return error.what();
-  }
-  ADD_FAILURE() << "no InputError thrown";
-  return "";
-}
-
-::testing::AssertionResult Contains(const std::string &text, const std::string &part) {
-  if (text.find(part) != std::string::npos) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << "'" << text << "' lacks '" << part << "'";
-}
-
-#define EXPECT_CONTAINS(text, part) EXPECT_TRUE(Contains((text), (part)))
-
-// "path:line:" as errors.hpp's Where() spells it.
-std::string At(const std::string &path, int line) {
-  return path + ":" + std::to_string(line) + ":";
-}
+using TempFolder = testing::TempFolderTest;
+using testing::At;
+using testing::InputErrorOf;
 
 // A unit cube in MEDIT format: 8 corners (corner i + 2j + 4k at (i, j, k)) and the
 // 6 tets around the main diagonal.
