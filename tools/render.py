@@ -490,7 +490,17 @@ def _die_with_parent():
 
 class VirtualDisplay:
     """An Xvfb server of our own when there is no X display (Debian's VTK renders through
-    GLX only). Started on a free display number chosen by Xvfb (-displayfd)."""
+    GLX only), on the first free display number from FIRST_DISPLAY up.
+
+    Why not let Xvfb choose (-displayfd alone picks the lowest free number, usually :0):
+    hwloc's GL plugin, loaded by every mpiexec and MPI rank on Debian, opens each of the
+    displays :0 to :9 while it reads the machine's topology. A simulation started while a
+    render's Xvfb holds one of those numbers connects to it, and if the render ends at that
+    moment Xlib aborts the simulation ("X connection to :0 broken"). Displays from :20 up
+    are never probed."""
+
+    FIRST_DISPLAY = 20   # above hwloc's probe range :0..:9, and clear of the usual :10..:19
+    LAST_DISPLAY = 199   # tried in turn; one render needs one
 
     def __init__(self):
         self.process = None
@@ -502,24 +512,35 @@ class VirtualDisplay:
         if xvfb is None:
             raise RenderError("no X display and no Xvfb: apt-get install -y --no-install-recommends xvfb "
                               "(Debian's VTK renders off-screen through GLX only)")
+        for number in range(self.FIRST_DISPLAY, self.LAST_DISPLAY + 1):
+            if not os.path.exists("/tmp/.X%d-lock" % number) and self._start(xvfb, number):
+                os.environ["DISPLAY"] = ":%d" % number
+                atexit.register(self.stop)
+                return
+        raise RenderError("Xvfb did not start on any display :%d to :%d"
+                          % (self.FIRST_DISPLAY, self.LAST_DISPLAY))
+
+    def _start(self, xvfb, number):
+        """Starts Xvfb on :number; True once it accepts clients (it writes the number to the
+        -displayfd pipe then), False when it exits first (the number was taken meanwhile)."""
         read_end, write_end = os.pipe()
         self.process = subprocess.Popen(
-            [xvfb, "-displayfd", str(write_end), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+            [xvfb, ":%d" % number, "-displayfd", str(write_end), "-screen", "0", "640x480x24",
+             "-nolisten", "tcp"],
             pass_fds=(write_end,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             preexec_fn=_die_with_parent)
         os.close(write_end)
-        number = b""
-        while not number.endswith(b"\n"):
+        ready = b""
+        while not ready.endswith(b"\n"):
             byte = os.read(read_end, 1)
             if not byte:
                 break
-            number += byte
+            ready += byte
         os.close(read_end)
-        if not number.strip():
-            self.stop()
-            raise RenderError("Xvfb did not start")
-        os.environ["DISPLAY"] = ":" + number.decode().strip()
-        atexit.register(self.stop)
+        if ready.strip():
+            return True
+        self.stop()
+        return False
 
     @staticmethod
     def _display_works():

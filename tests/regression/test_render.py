@@ -18,7 +18,11 @@ Runs softbody (2 ranks) on the project's own scenes, nothing from ../shared:
    the --name-with-dashes aliases work (--out, --size, --frames, --camera fixed).
 3. render.deformation() is zero for a rigid motion (rotation + translation of the
    rest shape) and not for a stretch.
-4. Bad input gives one line on stderr and a non-zero exit, no traceback: a missing
+4. The Xvfb a render starts (no $DISPLAY) takes a display number outside :0..:9, the
+   ones hwloc's GL plugin opens in every mpiexec and MPI rank (a render ending while a
+   simulation started once ended the simulation with "X connection to :0 broken"), and
+   the next free one when its first choice is taken.
+5. Bad input gives one line on stderr and a non-zero exit, no traceback: a missing
    file, an unknown option, a bad -color, a frame index out of range.
 Skips (77) when python3-vtk9 is missing, or when there is no X display and no Xvfb.
 """
@@ -26,6 +30,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
@@ -163,7 +168,8 @@ def check_falling_beam(args, checks, work):
                           folder, "-background", "1,1,1", "-title", "test_render"] + extra)
         path = os.path.join(folder, "frame_00040.png")
         if checks.check(run.returncode == 0 and os.path.isfile(path),
-                        f"render.py with the ground {name} exits 0 ({run.stderr.strip()[-300:]})"):
+                        f"render.py with the ground {name} exits 0 (exit {run.returncode}, "
+                        f"{(run.stdout + run.stderr).strip()[-300:]})"):
             renders[name] = read_png(path)
     if len(renders) == 3:
         same = float(np.mean(np.any(np.abs(renders["given"] - renders["recorded"]) > 0.05, axis=-1)))
@@ -242,6 +248,39 @@ def check_deformation(checks):
                  f"{values[20:].max():.1e})")
 
 
+def display_of_own_xvfb():
+    """The $DISPLAY render.py's own Xvfb gets (in a child process with $DISPLAY unset)."""
+    code = ("import os, sys; sys.path.insert(0, %r); import render; "
+            "os.environ.pop('DISPLAY', None); render._DISPLAY.ensure(); print(os.environ['DISPLAY'])"
+            % TOOLS)
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    return run.stdout.strip() if run.returncode == 0 else "failed: " + run.stderr.strip()[-200:]
+
+
+def check_virtual_display(checks):
+    import render
+    first = display_of_own_xvfb()
+    checks.check(first.startswith(":") and int(first[1:]) >= 10,
+                 f"render.py's own Xvfb uses a display outside hwloc's :0..:9 (got {first})")
+    taken = render.VirtualDisplay.FIRST_DISPLAY
+    squatter = None
+    if not os.path.exists("/tmp/.X%d-lock" % taken):
+        squatter = subprocess.Popen([shutil.which("Xvfb"), ":%d" % taken, "-nolisten", "tcp"],
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        for _ in range(100):
+            if os.path.exists("/tmp/.X11-unix/X%d" % taken):
+                break
+            time.sleep(0.05)
+    try:
+        second = display_of_own_xvfb()
+        checks.check(second.startswith(":") and int(second[1:]) > taken,
+                     f"with :{taken} taken, the next free display is used (got {second})")
+    finally:
+        if squatter is not None:
+            squatter.terminate()
+            squatter.wait(timeout=10)
+
+
 def check_bad_input(checks, work, result):
     check_one_line_failure(checks, "a missing file", run_render([os.path.join(work, "missing.h5")]),
                            "no such file")
@@ -267,9 +306,12 @@ def main():
         sys.exit(harness.SKIP)
     sys.path.insert(0, TOOLS)
     work = os.path.abspath(args.work)
+    has_display = bool(os.environ.get("DISPLAY"))  # before render.py sets it for its own Xvfb
     check_falling_beam(args, checks, work)
     result = check_cube_and_api(args, checks, work)
     check_deformation(checks)
+    if not has_display:
+        check_virtual_display(checks)
     check_bad_input(checks, work, result)
     checks.exit()
 
