@@ -126,6 +126,11 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layo
   std::vector<PetscInt> next(layout->vertex_start.begin(), layout->vertex_start.end() - 1);
   layout->petsc_of_free.resize(n);
   for (PetscInt f = 0; f < n; ++f) layout->petsc_of_free[f] = next[part[f]]++;
+  layout->natural_of_owned.resize(layout->local_count());
+  for (PetscInt f = 0; f < n; ++f) {
+    const PetscInt local = layout->LocalOfFree(f);
+    if (local >= 0) layout->natural_of_owned[local] = layout->natural_of_free[f];
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

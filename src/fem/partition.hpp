@@ -23,6 +23,9 @@ struct DofLayout {
   std::vector<PetscInt> natural_of_free;  // free index -> natural vertex
   std::vector<PetscInt> petsc_of_free;    // free index -> PETSc vertex
   std::vector<PetscInt> vertex_start;     // size ranks + 1: ownership of PETSc vertices
+  // This rank's share only (O(local), what scalable code should use): the natural
+  // vertex of each owned PETSc vertex, in PETSc order.
+  std::vector<PetscInt> natural_of_owned;
   PetscMPIInt rank = 0, size = 1;
 
   PetscInt num_free() const { return static_cast<PetscInt>(natural_of_free.size()); }
