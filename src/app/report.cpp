@@ -32,6 +32,18 @@ BodiesWithoutUnknowns CountBodiesWithoutUnknowns(const Scene &scene, const DofLa
   return b;
 }
 
+// How the unknowns were split, for the "unknowns" line.
+const char *PartitionNote(Partitioner partitioner) {
+  switch (partitioner) {
+    case Partitioner::kMetis:
+      return ", METIS partition on rank 0";
+    case Partitioner::kPtScotch:
+      return ", PT-Scotch partition";
+    default:
+      return "";
+  }
+}
+
 // "  scene ..." and "  unknowns ..." lines.
 PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                      const BodiesWithoutUnknowns &b) {
@@ -48,8 +60,9 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
                         scene.num_vertices(), (long long)scene.num_tets()));
   PetscCall(PetscPrintf(comm,
                         "  unknowns     %" PetscInt_FMT " DOFs on %d ranks (%" PetscInt_FMT
-                        " to %" PetscInt_FMT " per rank, METIS partition)\n",
-                        3 * layout.num_free(), layout.size, min_dofs, max_dofs));
+                        " to %" PetscInt_FMT " per rank%s)\n",
+                        3 * layout.num_free(), layout.size, min_dofs, max_dofs,
+                        PartitionNote(layout.partitioner)));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
