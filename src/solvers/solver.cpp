@@ -1,5 +1,6 @@
 #include "solvers/solver.hpp"
 
+#include <cstdio>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -47,10 +48,19 @@ std::string Grouped(double value) {
   return grouped;
 }
 
+// Megabytes: digits grouped from 100 MB on, three significant digits below.
+std::string Megabytes(double bytes) {
+  const double mb = bytes / kBytesPerMB;
+  if (mb >= 100) return Grouped(mb) + " MB";
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.3g MB", mb);
+  return text;
+}
+
 // Why the factor stays or gives way, one phrase.
 std::string Reason(const SupernodalPrediction &p, PetscMPIInt ranks) {
-  const std::string need = Grouped(p.bytes / kBytesPerMB) + " MB per rank",
-                    budget = "budget " + Grouped(p.limits.budget_mb) + " MB";
+  const std::string need = Megabytes(p.bytes) + " per rank",
+                    budget = "budget " + Megabytes(p.limits.budget_mb * kBytesPerMB);
   const std::string separator = "separator n_S = " + Grouped(static_cast<double>(p.separator));
   if (p.affordable)
     return (ranks == 1 ? "" : separator + ", ") + "predicted " + need + " <= " + budget;

@@ -489,6 +489,8 @@ PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_orde
   PetscCall(MatSeqAIJGetArrayRead(A, &values));
   cholmod_sparse view = LowerView(n, row_start, columns, values);
   if (!*factor) PetscCall(Analyse(s, &view, user_order, factor));
+  PetscCall(PetscInfo(nullptr, "supernodal: factorising %" PetscInt_FMT " DOFs (%.4g entries)\n", n,
+                      static_cast<double>((*factor)->xsize)));
   const int ok = cholmod_factorize(&view, *factor, &s->common);
   PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
   PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
