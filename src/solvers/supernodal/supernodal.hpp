@@ -53,9 +53,10 @@ PetscErrorCode PCSupernodalGetFactorSize(PC pc, double *stored_entries, double *
 struct SupernodalLimits {
   double budget_mb = 0;  // per rank, MB (2^20 bytes); <= 0 before the options are read
   // n_S above which rank 0's dense separator factor (n_S^3 / 3 flops, alone,
-  // at every refactorisation) costs more than the ranks' interiors gain: 1e4
-  // DOFs are 3.3e11 flops, about a minute on one core of this machine.
-  PetscInt max_separator = 10000;
+  // at every refactorisation) costs more than the split saves: 5 000 DOFs are
+  // 4.2e10 flops, about 15 s on one core here, as long as one rank's whole
+  // factor of the 2e5-tet beam (docs/performance.md: its 8 949 took 89 s).
+  PetscInt max_separator = 5000;
 };
 
 // What a set-up would allocate, predicted from A's pattern before any of it is.
