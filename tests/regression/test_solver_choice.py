@@ -98,9 +98,12 @@ checks.check(len(info) >= 1 and not factorising,
              f"(c) -info: {len(info)} 'solver choice' lines, {len(factorising)} supernodal factorisations")
 agree("(c) budget 1 MB", low, direct, 1e-6)
 # The factorisations are there under -info when the factor is chosen (so their absence above means something).
+# The prediction's symbolic analysis is the set-up's: one per rank, not two.
 shown = simulate("shown", 2, ["-info"])
 checks.check(any("supernodal: factorising" in line for line in shown["out"].splitlines()),
              "(c) -info with the factor: its 'supernodal: factorising' lines are printed")
+analyses = sum("supernodal: analysing" in line for line in shown["out"].splitlines())
+checks.check(analyses == 2, f"(a) -info: {analyses} symbolic analyses on 2 ranks (one each: the prediction's, kept)")
 
 # (d) the separator's own limit.
 small = simulate("max-separator", 2, ["-pc_supernodal_max_separator", "10"])

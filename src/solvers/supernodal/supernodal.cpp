@@ -455,6 +455,7 @@ void StartCholmod(Supernodal *s) {
 PetscErrorCode Analyse(Supernodal *s, cholmod_sparse *view, const std::vector<int> *user_order,
                        cholmod_factor **factor) {
   PetscFunctionBeginUser;
+  PetscCall(PetscInfo(nullptr, "supernodal: analysing %d DOFs\n", static_cast<int>(view->nrow)));
   if (user_order) {
     const int methods = s->common.nmethods, postorder = s->common.postorder,
               ordering = s->common.method[0].ordering;
