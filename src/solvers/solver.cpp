@@ -67,7 +67,9 @@ std::string Reason(const SupernodalPrediction &p, PetscMPIInt ranks) {
   if (ranks == 1) return "the factor would need " + need + " > " + budget;
   if (p.separator > p.limits.max_separator)
     return "the split factor's " + separator + " > -pc_supernodal_max_separator " +
-           Grouped(static_cast<double>(p.limits.max_separator));
+           Grouped(static_cast<double>(p.limits.max_separator)) +
+           " (its dense blocks alone: " + Megabytes(p.separator_bytes) + " per rank, " + budget +
+           ")";
   return "the split factor's " + separator + " would need " + need + " > " + budget;
 }
 
