@@ -222,9 +222,11 @@ PetscErrorCode PrintSolver(MPI_Comm comm, KSP ksp, const IntegratorOptions &o,
     PetscCall(PetscPrintf(comm,
                           "; %" PetscInt_FMT
                           " solves broke down and were repeated by the direct fallback "
-                          "(MUMPS Cholesky)",
+                          "(SuperLU_dist LU)",
                           solver.fallback_solves));
   PetscCall(PetscPrintf(comm, "\n"));
+  if (!solver.choice.empty())
+    PetscCall(PetscPrintf(comm, "  choice       %s\n", solver.choice.c_str()));
   if (solver.newton_iterations > 0)
     PetscCall(PetscPrintf(comm,
                           "  corotational %" PetscInt_FMT
