@@ -59,10 +59,10 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets()));
   PetscCall(PetscPrintf(comm,
-                        "  unknowns     %" PetscInt_FMT " DOFs on %d ranks (%" PetscInt_FMT
+                        "  unknowns     %" PetscInt_FMT " DOFs on %d %s (%" PetscInt_FMT
                         " to %" PetscInt_FMT " per rank%s)\n",
-                        3 * layout.num_free(), layout.size, min_dofs, max_dofs,
-                        PartitionNote(layout.partitioner)));
+                        3 * layout.num_free(), layout.size, layout.size == 1 ? "rank" : "ranks",
+                        min_dofs, max_dofs, PartitionNote(layout.partitioner)));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
