@@ -11,6 +11,8 @@
     output extension, no file names) gives one line on stderr naming the file and
     a non-zero exit, at 1 and 2 ranks, and leaves no output file, complete or
     partial, behind.
+(d) A mesh file written by h5py (variable-length string attributes, its own
+    chunks) runs as the .mesh it was made from.
 """
 import argparse
 import glob
@@ -98,6 +100,23 @@ for scene, sources in (("mixed-scene.txt", ["box_quads.off", "cube.mesh", "cube-
         checks.check(not different and len(ours) > 0,
                      f"(b) {scene} with .h5 meshes, {ranks} rank(s): {len(ours)} datasets byte-identical"
                      + (f"; differing: {different}" if different else ""))
+
+# (d) a mesh file written by another program (h5py: variable-length string
+# attributes, h5py's own chunks) runs as the .mesh it was made from
+with h5py.File(os.path.join(work, "by_h5py.h5"), "w") as f:
+    f.create_dataset("vertices", data=np.asarray(reference[0], dtype=np.float64), chunks=True)
+    f.create_dataset("tets", data=np.asarray(reference[3], dtype=np.int64), chunks=True)
+    f.attrs["format"] = "softbody-mesh"
+    f.attrs["version"] = np.int64(1)
+scene_line = " 1000 1e5 0.3 0  0 0 0  1 0 0 0\n1\n0 1  0 0 1\n"
+for name, mesh in (("h5py_scene.txt", os.path.join(work, "by_h5py.h5")),
+                   ("medit_scene.txt", os.path.join(meshes, "cube.mesh"))):
+    with open(os.path.join(work, name), "w") as f:
+        f.write("1\n" + mesh + scene_line)
+ours = result_of(os.path.join(work, "h5py_scene.txt"), "h5py", 2)
+theirs = result_of(os.path.join(work, "medit_scene.txt"), "medit", 2)
+checks.check(sorted(ours) == sorted(theirs) and all(ours[k].tobytes() == theirs[k].tobytes() for k in ours),
+             f"(d) a mesh file written by h5py runs as its .mesh ({len(ours)} datasets byte-identical)")
 
 # (c) bad input: one line naming the file, non-zero exit on every rank, no output
 unwritable = os.path.join(work, "no_such_folder", "out.h5")
