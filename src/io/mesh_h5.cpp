@@ -338,11 +338,9 @@ TetMesh ReadMeshH5(const std::string &path) {
 
 namespace {
 
-// Collective. Reads this rank's rows of both datasets; empty error when done.
-std::string ReadSlabs(const MeshFile &file, MPI_Comm comm, MeshSlabs *slabs) {
-  int rank = 0, size = 1;
-  MPI_Comm_rank(comm, &rank);
-  MPI_Comm_size(comm, &size);
+// Collective (rank `rank` of `size`). Reads this rank's rows of both datasets;
+// empty error when done.
+std::string ReadSlabs(const MeshFile &file, int rank, int size, MeshSlabs *slabs) {
   slabs->num_vertices = file.num_vertices;
   slabs->num_tets = file.num_tets;
   slabs->first_vertex = BlockStart(file.num_vertices, rank, size);
@@ -373,7 +371,10 @@ PetscErrorCode ReadMeshSlabs(MPI_Comm comm, const std::string &path, MeshSlabs *
   MeshFile mesh_file;
   error = CheckMeshFile(file, &mesh_file);
   SOFTBODY_AGREE_OR_FAIL(comm, path, error);
-  error = ReadSlabs(mesh_file, comm, slabs);
+  PetscMPIInt rank = 0, size = 1;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  error = ReadSlabs(mesh_file, rank, size, slabs);
   SOFTBODY_AGREE_OR_FAIL(comm, path, error);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
