@@ -199,6 +199,17 @@ bool IsDegenerateTet(const TetPositions &X) {
   return !(std::abs(SignedVolume(X)) > kDegenerateVolume * length * length * length);
 }
 
+// Empty when no tet of `mesh` is degenerate, otherwise the first that is.
+std::string FirstDegenerateTet(const TetMesh &mesh) {
+  for (int32_t t = 0; t < mesh.num_tets(); ++t) {
+    TetPositions X;
+    for (int a = 0; a < kTetColumns; ++a) X.row(a) = mesh.vertices.row(mesh.tets(t, a));
+    if (IsDegenerateTet(X))
+      return "tetrahedron " + std::to_string(t + 1) + " is degenerate (zero volume)";
+  }
+  return "";
+}
+
 // Collective. The message of the lowest rank that has one, on every rank (empty
 // on all when no rank has one).
 PetscErrorCode AgreeOnError(MPI_Comm comm, std::string *error) {
@@ -224,7 +235,7 @@ PetscErrorCode AgreeOnError(MPI_Comm comm, std::string *error) {
   } while (0)
 
 // First row of rank r's block of n rows among P ranks: floor(n r / P), without
-// overflow for any n below 2^63 / P.
+// forming n r (which could overflow).
 int64_t BlockStart(int64_t n, int rank, int size) {
   return (n / size) * rank + (n % size) * rank / size;
 }
@@ -235,12 +246,7 @@ void CheckMeshForWriting(const std::string &path, const TetMesh &mesh) {
   if (mesh.num_vertices() == 0 || mesh.num_tets() == 0)
     throw InputError(Where(path, 0, "cannot write an empty mesh"));
   std::string error = CheckIndices(mesh.tets, 0, mesh.num_vertices());
-  for (int32_t t = 0; error.empty() && t < mesh.num_tets(); ++t) {
-    TetPositions X;
-    for (int a = 0; a < kTetColumns; ++a) X.row(a) = mesh.vertices.row(mesh.tets(t, a));
-    if (IsDegenerateTet(X))
-      error = "tetrahedron " + std::to_string(t + 1) + " is degenerate (zero volume)";
-  }
+  if (error.empty()) error = FirstDegenerateTet(mesh);
   if (!error.empty()) throw InputError(Where(path, 0, "cannot write: " + error));
 }
 
@@ -324,13 +330,8 @@ TetMesh ReadMeshH5(const std::string &path) {
                 false, mesh.vertices.data()))
     throw InputError(Where(path, 0, "cannot read /vertices"));
   ReadTets(path, mesh_file, &mesh);
-  for (int32_t t = 0; t < mesh.num_tets(); ++t) {
-    TetPositions X;
-    for (int a = 0; a < kTetColumns; ++a) X.row(a) = mesh.vertices.row(mesh.tets(t, a));
-    if (IsDegenerateTet(X))
-      throw InputError(
-          Where(path, 0, "tetrahedron " + std::to_string(t + 1) + " is degenerate (zero volume)"));
-  }
+  const std::string degenerate = FirstDegenerateTet(mesh);
+  if (!degenerate.empty()) throw InputError(Where(path, 0, degenerate));
   return mesh;
 }
 
