@@ -53,13 +53,17 @@ class Handle {
   herr_t (*close_)(hid_t);
 };
 
-// Opens `path` read-only: with MPI-IO on `comm` (collective), or serially when
-// comm is MPI_COMM_NULL.
+// Opens `path` read-only: with MPI-IO on `comm` (collective; every later
+// metadata read on the file must then be made by all its ranks alike), or
+// serially when comm is MPI_COMM_NULL.
 hid_t OpenMeshFile(const std::string &path, MPI_Comm comm) {
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // failures are reported by the callers
   if (comm == MPI_COMM_NULL) return H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
   const Handle access(H5Pcreate(H5P_FILE_ACCESS), H5Pclose);
   if (!access.ok() || H5Pset_fapl_mpio(access, comm, MPI_INFO_NULL) < 0) return -1;
+  // Metadata (attributes, dataset headers) read once and broadcast, not by every
+  // rank: the ranks make the same metadata calls in the same order.
+  if (H5Pset_all_coll_metadata_ops(access, true) < 0) return -1;
   return H5Fopen(path.c_str(), H5F_ACC_RDONLY, access);
 }
 
