@@ -1,10 +1,11 @@
 // The softbody HDF5 mesh file (io/mesh_h5.hpp): WriteMeshH5 then ReadMeshH5 (and
 // ReadTetMesh of the .h5) give the source reader's mesh bit for bit for every
 // source format; a failed write leaves no file; the serial reader rejects bad
-// files with one line naming the file. The collective slab reader, run by ctest at
-// 1, 3 and 4 ranks, gives each rank rows [N r / P, N (r + 1) / P) of the serial
+// files with one line naming the file. The collective slab reader, at 1, 3 and 4
+// ranks, gives each rank rows [N r / P, N (r + 1) / P) of the serial
 // reader's mesh of the source .mesh, the slabs tile the mesh, ranks with no rows
 // get empty slabs, and on bad input every rank fails with the same message.
+// Runs on ranks: 1 3 4
 #include <gtest/gtest.h>
 #include <hdf5.h>
 #include <petscsys.h>
