@@ -13,16 +13,15 @@
 // exits with rank 0's status (a bad input is one line naming the file).
 #include <petscsys.h>
 
-#include <cmath>
 #include <string>
 #include <vector>
 
 #include "common/errors.hpp"
-#include "common/number_format.hpp"
 #include "common/options.hpp"
 #include "common/unused_options.hpp"
 #include "io/mesh_h5.hpp"
 #include "io/mesh_io.hpp"
+#include "io/scene.hpp"
 
 static const char help[] =
     "softbody-convert: converts a tetrahedral mesh to a softbody mesh file (.h5) that all ranks\n"
@@ -40,33 +39,6 @@ struct ConvertOptions {
   std::string output;      // OUT.h5
   MeshingOptions meshing;  // -tetgen_switches, -tetgen_max_volume
 };
-
-// Collective. -tetgen_switches and -tetgen_max_volume (as the softbody program's).
-PetscErrorCode ProcessMeshingOptions(MPI_Comm comm, MeshingOptions *meshing) {
-  PetscFunctionBeginUser;
-  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kReal, "-tetgen_max_volume"}}));
-  char switches[256];
-  PetscCall(PetscStrncpy(switches, meshing->tetgen_switches.c_str(), sizeof(switches)));
-  PetscOptionsBegin(comm, nullptr, "Mesh conversion", nullptr);
-  PetscCall(PetscOptionsString("-tetgen_switches",
-                               "TetGen switches for an .off surface, without '-' (p: mesh the "
-                               "surface, required; q<r>: radius-edge ratio bound r; Y: keep the "
-                               "surface triangles; softbody adds J and Q)",
-                               nullptr, switches, switches, sizeof(switches), nullptr));
-  PetscCall(PetscOptionsReal("-tetgen_max_volume",
-                             "Largest tetrahedron volume for an .off surface, in the OFF file's "
-                             "units^3 (m^3; 0: no bound; TetGen's a switch)",
-                             nullptr, meshing->max_volume, &meshing->max_volume, nullptr));
-  PetscOptionsEnd();
-  meshing->tetgen_switches = switches;
-  const std::string bad_switches = CheckTetgenSwitches(meshing->tetgen_switches);
-  PetscCheck(bad_switches.empty(), comm, PETSC_ERR_USER_INPUT, "option -tetgen_switches: %s",
-             bad_switches.c_str());
-  PetscCheck(meshing->max_volume >= 0 && std::isfinite(meshing->max_volume), comm,
-             PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %s)",
-             FormatNumber(meshing->max_volume).c_str());
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
 
 bool EndsWith(const std::string &s, const std::string &suffix) {
   return s.size() >= suffix.size() &&

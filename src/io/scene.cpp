@@ -158,16 +158,12 @@ Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
 
 namespace softbody {
 
-PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
+PetscErrorCode ProcessMeshingOptions(MPI_Comm comm, MeshingOptions *meshing) {
   PetscFunctionBeginUser;
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kReal, "-tetgen_max_volume"}}));
-  char path[PETSC_MAX_PATH_LEN] = "";
   char switches[256];
-  MeshingOptions &meshing = options->meshing;
-  PetscCall(PetscStrncpy(switches, meshing.tetgen_switches.c_str(), sizeof(switches)));
-  PetscOptionsBegin(comm, nullptr, "Scene", nullptr);
-  PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
-                               nullptr, path, path, sizeof(path), nullptr));
+  PetscCall(PetscStrncpy(switches, meshing->tetgen_switches.c_str(), sizeof(switches)));
+  PetscOptionsBegin(comm, nullptr, "Meshing of .off surfaces (TetGen)", nullptr);
   PetscCall(PetscOptionsString("-tetgen_switches",
                                "TetGen switches for .off surfaces, without '-' (p: mesh the "
                                "surface, required; q<r>: radius-edge ratio bound r; Y: keep the "
@@ -176,16 +172,27 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscCall(PetscOptionsReal("-tetgen_max_volume",
                              "Largest tetrahedron volume for .off surfaces, in the OFF file's "
                              "units^3 (m^3; 0: no bound; TetGen's a switch)",
-                             nullptr, meshing.max_volume, &meshing.max_volume, nullptr));
+                             nullptr, meshing->max_volume, &meshing->max_volume, nullptr));
   PetscOptionsEnd();
-  options->path = path;
-  meshing.tetgen_switches = switches;
-  const std::string bad_switches = CheckTetgenSwitches(meshing.tetgen_switches);
+  meshing->tetgen_switches = switches;
+  const std::string bad_switches = CheckTetgenSwitches(meshing->tetgen_switches);
   PetscCheck(bad_switches.empty(), comm, PETSC_ERR_USER_INPUT, "option -tetgen_switches: %s",
              bad_switches.c_str());
-  PetscCheck(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume), comm,
+  PetscCheck(meshing->max_volume >= 0 && std::isfinite(meshing->max_volume), comm,
              PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %s)",
-             FormatNumber(meshing.max_volume).c_str());
+             FormatNumber(meshing->max_volume).c_str());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
+  PetscFunctionBeginUser;
+  char path[PETSC_MAX_PATH_LEN] = "";
+  PetscOptionsBegin(comm, nullptr, "Scene", nullptr);
+  PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
+                               nullptr, path, path, sizeof(path), nullptr));
+  PetscOptionsEnd();
+  options->path = path;
+  PetscCall(ProcessMeshingOptions(comm, &options->meshing));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

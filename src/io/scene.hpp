@@ -71,8 +71,12 @@ struct SceneOptions {
   MeshingOptions meshing;  // -tetgen_switches, -tetgen_max_volume: for .off meshes
 };
 
-// Collective. Reads -scene (the scene file path; required unless -help),
-// -tetgen_switches and -tetgen_max_volume, and checks them.
+// Collective. Reads -tetgen_switches and -tetgen_max_volume (how .off surfaces
+// are meshed) and checks them.
+PetscErrorCode ProcessMeshingOptions(MPI_Comm comm, MeshingOptions *meshing);
+
+// Collective. Reads -scene (the scene file path; required unless -help) and the
+// meshing options (ProcessMeshingOptions).
 PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options);
 
 // Collective: rank 0 reads the scene and its meshes (TetGen runs once, there) and
