@@ -17,18 +17,12 @@
 #include "input_checks.hpp"
 #include "io/mesh_h5.hpp"
 #include "io/mesh_io.hpp"
+#include "petsc_environment.hpp"
 
 using namespace softbody;
 using namespace softbody::testing;
 
 namespace {
-
-class PetscEnvironment : public ::testing::Environment {
- public:
-  void SetUp() override { PetscInitializeNoArguments(); }
-  void TearDown() override { PetscFinalize(); }
-};
-const auto *const kPetsc = ::testing::AddGlobalTestEnvironment(new PetscEnvironment);
 
 void ExpectSameMesh(const TetMesh &ours, const TetMesh &reference) {
   ASSERT_EQ(ours.vertices.rows(), reference.vertices.rows());

@@ -24,17 +24,11 @@
 #include "fem/partition.hpp"
 #include "fem/vertex_graph.hpp"
 #include "io/scene.hpp"
+#include "petsc_environment.hpp"
 
 using namespace softbody;
 
 namespace {
-
-class PetscEnvironment : public ::testing::Environment {
- public:
-  void SetUp() override { PetscInitializeNoArguments(); }
-  void TearDown() override { PetscFinalize(); }
-};
-const auto *const kPetsc = ::testing::AddGlobalTestEnvironment(new PetscEnvironment);
 
 constexpr double kLargestPartOverMean = 1.10;
 
@@ -117,12 +111,22 @@ long CutEdges(const std::vector<std::set<PetscInt>> &adjacency, const std::vecto
   return cut / 2;
 }
 
-TEST(VertexGraph, RowsPutTogetherAreTheAdjacencyOfTheTets) {
-  const Scene scene = ThreeBoxes();
-  PetscInt n;
-  const std::vector<PetscInt> free_of_natural = FreeOfNatural(scene, &n);
+// The scene, its free numbering and this rank's graph rows.
+struct ThreeBoxGraph {
+  Scene scene = ThreeBoxes();
+  PetscInt n = 0;
+  std::vector<PetscInt> free_of_natural = FreeOfNatural(scene, &n);
   VertexGraphRows graph;
-  ASSERT_EQ(BuildVertexGraphRows(PETSC_COMM_WORLD, scene, free_of_natural, n, &graph), 0);
+  PetscErrorCode status = BuildVertexGraphRows(PETSC_COMM_WORLD, scene, free_of_natural, n, &graph);
+};
+
+TEST(VertexGraph, RowsPutTogetherAreTheAdjacencyOfTheTets) {
+  const ThreeBoxGraph built;
+  ASSERT_EQ(built.status, 0);
+  const Scene &scene = built.scene;
+  const PetscInt n = built.n;
+  const std::vector<PetscInt> &free_of_natural = built.free_of_natural;
+  const VertexGraphRows &graph = built.graph;
   EXPECT_EQ(graph.num_vertices, n);
   EXPECT_EQ(graph.row_begin, EvenShareBegin(n, Size(), Rank()));
   EXPECT_EQ(graph.num_rows(), EvenShareBegin(n, Size(), Rank() + 1) - graph.row_begin);
@@ -145,14 +149,12 @@ TEST(VertexGraph, RowsPutTogetherAreTheAdjacencyOfTheTets) {
 class Partitioners : public ::testing::TestWithParam<Partitioner> {};
 
 TEST_P(Partitioners, BalancedAndBetterThanNaturalBlocks) {
-  const Scene scene = ThreeBoxes();
-  PetscInt n;
-  const std::vector<PetscInt> free_of_natural = FreeOfNatural(scene, &n);
-  VertexGraphRows graph;
-  ASSERT_EQ(BuildVertexGraphRows(PETSC_COMM_WORLD, scene, free_of_natural, n, &graph), 0);
+  ThreeBoxGraph built;
+  ASSERT_EQ(built.status, 0);
+  const PetscInt n = built.n;
   std::vector<PetscInt> part;
   Partitioner used;
-  ASSERT_EQ(PartitionVertexGraph(PETSC_COMM_WORLD, &graph, GetParam(), &part, &used), 0);
+  ASSERT_EQ(PartitionVertexGraph(PETSC_COMM_WORLD, &built.graph, GetParam(), &part, &used), 0);
   const PetscMPIInt size = Size();
   EXPECT_EQ(used, size == 1 ? Partitioner::kAuto : GetParam());
   const std::vector<PetscInt> all = AllGather(part);
@@ -169,7 +171,7 @@ TEST_P(Partitioners, BalancedAndBetterThanNaturalBlocks) {
   for (PetscMPIInt q = 0; q < size; ++q)
     std::fill(blocks.begin() + EvenShareBegin(n, size, q),
               blocks.begin() + EvenShareBegin(n, size, q + 1), q);
-  const auto adjacency = SerialAdjacency(scene, free_of_natural, n);
+  const auto adjacency = SerialAdjacency(built.scene, built.free_of_natural, n);
   EXPECT_LT(CutEdges(adjacency, all), CutEdges(adjacency, blocks));
 }
 

@@ -15,18 +15,12 @@
 #include "fem/partition.hpp"
 #include "fem/row_assembly.hpp"
 #include "io/scene.hpp"
+#include "petsc_environment.hpp"
 
 using namespace softbody;
 using namespace softbody::coo_reference;
 
 namespace {
-
-class PetscEnvironment : public ::testing::Environment {
- public:
-  void SetUp() override { PetscInitializeNoArguments(); }
-  void TearDown() override { PetscFinalize(); }
-};
-const auto *const kPetsc = ::testing::AddGlobalTestEnvironment(new PetscEnvironment);
 
 Scene BoxScene(int nx, int ny, int nz) {
   Scene scene;

@@ -8,19 +8,13 @@
 
 #include <string>
 
+#include "petsc_environment.hpp"
 #include "solvers/solver.hpp"
 #include "solvers/supernodal/supernodal.hpp"
 
 using namespace softbody;
 
 namespace {
-
-class PetscEnvironment : public ::testing::Environment {
- public:
-  void SetUp() override { PetscInitializeNoArguments(); }
-  void TearDown() override { PetscFinalize(); }
-};
-const auto *const kPetsc = ::testing::AddGlobalTestEnvironment(new PetscEnvironment);
 
 // A symmetric, strictly diagonally dominant (so SPD) matrix with block size 3
 // and the pattern of a 3D mesh: every component of a node of an n x n x n grid

@@ -475,13 +475,11 @@ PetscErrorCode Analyse(Supernodal *s, cholmod_sparse *view, const std::vector<in
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Analyses (when `*factor` is null: with `user_order`, given in full, if not
-// null) and factorises the SeqAIJ matrix A into *factor; a matrix that is not
-// positive definite sets s->failed.
-PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_order,
-                         cholmod_factor **factor) {
+// Calls use(view) with a CHOLMOD view of the lower triangle of the SeqAIJ matrix A
+// (no copy: valid during the call only).
+template <typename Use>
+PetscErrorCode WithLowerView(Mat A, Use use) {
   PetscFunctionBeginUser;
-  StartCholmod(s);
   PetscInt n;
   const PetscInt *row_start, *columns;
   PetscBool done;
@@ -490,12 +488,27 @@ PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_orde
   const PetscScalar *values;
   PetscCall(MatSeqAIJGetArrayRead(A, &values));
   cholmod_sparse view = LowerView(n, row_start, columns, values);
-  if (!*factor) PetscCall(Analyse(s, &view, user_order, factor));
-  PetscCall(PetscInfo(nullptr, "supernodal: factorising %" PetscInt_FMT " DOFs (%.4g entries)\n", n,
-                      static_cast<double>((*factor)->xsize)));
-  const int ok = cholmod_factorize(&view, *factor, &s->common);
+  PetscCall(use(&view));
   PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
   PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Analyses (when `*factor` is null: with `user_order`, given in full, if not
+// null) and factorises the SeqAIJ matrix A into *factor; a matrix that is not
+// positive definite sets s->failed.
+PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_order,
+                         cholmod_factor **factor) {
+  PetscFunctionBeginUser;
+  StartCholmod(s);
+  int ok = 0;
+  PetscCall(WithLowerView(A, [&](cholmod_sparse *view) -> PetscErrorCode {
+    if (!*factor) PetscCall(Analyse(s, view, user_order, factor));
+    PetscCall(PetscInfo(nullptr, "supernodal: factorising %d DOFs (%.4g entries)\n",
+                        static_cast<int>(view->nrow), static_cast<double>((*factor)->xsize)));
+    ok = cholmod_factorize(view, *factor, &s->common);
+    return PETSC_SUCCESS;
+  }));
   PetscCheck(ok && (s->common.status == CHOLMOD_OK || s->common.status == CHOLMOD_NOT_POSDEF),
              PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD factorisation failed (status %d)",
              s->common.status);
@@ -516,17 +529,9 @@ PetscErrorCode AnalysePattern(Supernodal *s, Mat A, const std::vector<int> *user
                               cholmod_factor **factor) {
   PetscFunctionBeginUser;
   StartCholmod(s);
-  PetscInt n;
-  const PetscInt *row_start, *columns;
-  PetscBool done;
-  PetscCall(MatGetRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
-  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "supernodal: no CSR access to the matrix");
-  const PetscScalar *values;
-  PetscCall(MatSeqAIJGetArrayRead(A, &values));
-  cholmod_sparse view = LowerView(n, row_start, columns, values);
-  PetscCall(Analyse(s, &view, user_order, factor));
-  PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
-  PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
+  PetscCall(WithLowerView(A, [&](cholmod_sparse *view) -> PetscErrorCode {
+    return Analyse(s, view, user_order, factor);
+  }));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
