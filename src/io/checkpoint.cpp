@@ -233,8 +233,8 @@ std::string ReadSlot(hid_t file, int slot_index, int32_t num_vertices, RowSlab s
   const std::vector<hsize_t> expected{static_cast<hsize_t>(num_vertices), 3};
   const auto read_state = [&](const char *name, double *values) {
     const hid_t set = LinkExists(slot, name) ? H5Dopen2(slot, name, H5P_DEFAULT) : -1;
-    const bool ok = set >= 0 && DatasetDims(set) == expected &&
-                    ReadRows(set, H5T_NATIVE_DOUBLE, slab, values);
+    const bool ok =
+        set >= 0 && DatasetDims(set) == expected && ReadRows(set, H5T_NATIVE_DOUBLE, slab, values);
     if (set >= 0) H5Dclose(set);
     return ok;
   };
@@ -283,8 +283,8 @@ namespace {
 // checking it against the scene: the loop state and this rank's slabs of the
 // natural vectors. "" or why not (equal on every rank).
 PetscErrorCode ReadNewestCheckpoint(MPI_Comm comm, hid_t file, const std::string &path,
-                                    const Scene &scene, RowSlab slab, Vec natural_x,
-                                    Vec natural_v, LoopState *state, std::string *why) {
+                                    const Scene &scene, RowSlab slab, Vec natural_x, Vec natural_v,
+                                    LoopState *state, std::string *why) {
   PetscFunctionBeginUser;
   int64_t step;
   const int slot = file < 0 ? -1 : NewestSlot(file, &step);
@@ -366,14 +366,15 @@ PetscErrorCode WriteSlotData(MPI_Comm comm, hid_t slot, const NaturalSlab &natur
     resting.insert(resting.end(), contact.begin(), contact.end());
   hsize_t contacts = resting.size() / 2;
   PetscCallMPI(MPI_Bcast(&contacts, 1, MPI_UINT64_T, 0, comm));
-  const hsize_t V = static_cast<hsize_t>(natural.num_vertices()), D = state.deformations_applied.size();
+  const hsize_t V = static_cast<hsize_t>(natural.num_vertices()),
+                D = state.deformations_applied.size();
   const PetscScalar *nx, *nv;
   PetscCall(VecGetArrayRead(natural_x, &nx));
   PetscCall(VecGetArrayRead(natural_v, &nv));
   *ok = *ok && WriteTable(slot, "positions", H5T_NATIVE_DOUBLE, V, 3, natural.vertices(), nx) &&
         WriteTable(slot, "velocities", H5T_NATIVE_DOUBLE, V, 3, natural.vertices(), nv) &&
-        WriteTable(slot, "deformations_applied", H5T_NATIVE_INT32, D, 1,
-                   {0, rank == 0 ? D : 0}, state.deformations_applied.data()) &&
+        WriteTable(slot, "deformations_applied", H5T_NATIVE_INT32, D, 1, {0, rank == 0 ? D : 0},
+                   state.deformations_applied.data()) &&
         WriteTable(slot, "resting_contacts", H5T_NATIVE_INT32, contacts, 2,
                    {0, rank == 0 ? contacts : 0}, resting.data());
   PetscCall(VecRestoreArrayRead(natural_x, &nx));

@@ -173,8 +173,8 @@ PetscErrorCode NaturalSlab::Setup(const Scene &scene, const DofLayout &layout, V
   // Each rank sends its owned vertices (PETSc block local_begin + i) to their
   // natural blocks, wherever those live.
   const PetscInt owned = layout.local_count();
-  std::vector<PetscInt> from(owned), to(layout.natural_of_owned.begin(),
-                                        layout.natural_of_owned.end());
+  std::vector<PetscInt> from(owned),
+      to(layout.natural_of_owned.begin(), layout.natural_of_owned.end());
   for (PetscInt i = 0; i < owned; ++i) from[i] = layout.local_begin() + i;
   IS is_from, is_to;
   PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, owned, from.data(), PETSC_COPY_VALUES, &is_from));
@@ -233,52 +233,61 @@ bool MarkComplete(hid_t file, int complete) {
 // one-dimensional [rows]) and writes this rank's rows `slab` from `values`.
 bool WriteSlabDataset(hid_t location, const char *name, hid_t type, hsize_t rows, hsize_t columns,
                       RowSlab slab, const void *values) {
-  const hid_t set = CreateRowDataset(location, name, type,
-                                     columns ? std::vector<hsize_t>{rows, columns}
-                                             : std::vector<hsize_t>{rows},
-                                     false);
+  const hid_t set = CreateRowDataset(
+      location, name, type,
+      columns ? std::vector<hsize_t>{rows, columns} : std::vector<hsize_t>{rows}, false);
   const bool ok = set >= 0 && WriteRows(set, type, slab, values);
   if (set >= 0) H5Dclose(set);
   return ok;
 }
 
-// Not collective. Boundary triangles [begin, end) of the scene in natural order
-// (body by body, each body's as BoundaryTriangles orders them), 3 per row, and
-// their total count. Reads the bodies' whole meshes (the scene is replicated);
-// once the mesh is distributed this becomes a distributed sort of the faces.
-std::vector<int32_t> SlabBoundaryTriangles(const Scene &scene, int rank, int size,
-                                           hsize_t *total) {
-  std::vector<Eigen::Matrix<int32_t, Eigen::Dynamic, 3, Eigen::RowMajor>> boundaries;
-  *total = 0;
-  for (const Body &body : scene.bodies) {
-    boundaries.push_back(BoundaryTriangles(body.mesh));
-    *total += boundaries.back().rows();
-  }
-  const RowSlab slab = EvenSlab(*total, rank, size);
+// Not collective. The boundary triangles (3 natural vertices per row, each
+// body's as BoundaryTriangles orders them) of bodies [bodies.begin, bodies.end).
+// Each body's boundary needs its whole mesh: the bodies are split between the
+// ranks, not the triangles.
+std::vector<int32_t> BodiesBoundaryTriangles(const Scene &scene, RowSlab bodies) {
   std::vector<int32_t> triangles;
-  hsize_t first = 0;
-  for (size_t b = 0; b < boundaries.size(); ++b) {
-    const hsize_t rows = boundaries[b].rows();
-    for (hsize_t f = std::max(first, slab.begin); f < std::min(first + rows, slab.end); ++f)
-      for (int a = 0; a < 3; ++a)
-        triangles.push_back(scene.bodies[b].first_vertex + boundaries[b](f - first, a));
-    first += rows;
+  for (hsize_t b = bodies.begin; b < bodies.end; ++b) {
+    const Body &body = scene.bodies[b];
+    const auto boundary = BoundaryTriangles(body.mesh);
+    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
+      for (int a = 0; a < 3; ++a) triangles.push_back(body.first_vertex + boundary(f, a));
   }
   return triangles;
+}
+
+// Collective. Rows [begin, end) of /mesh/boundary_triangles that `local` rows
+// computed on this rank fill (the ranks' rows follow each other in rank order),
+// and the total number of rows.
+PetscErrorCode RowsInRankOrder(MPI_Comm comm, hsize_t local, RowSlab *rows, hsize_t *total) {
+  PetscFunctionBeginUser;
+  uint64_t count = local, before = 0, all = 0;
+  PetscCallMPI(MPI_Exscan(&count, &before, 1, MPI_UINT64_T, MPI_SUM, comm));
+  PetscCallMPI(MPI_Allreduce(&count, &all, 1, MPI_UINT64_T, MPI_SUM, comm));
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  if (rank == 0) before = 0;  // MPI_Exscan leaves rank 0's result undefined
+  *rows = {before, before + count};
+  *total = all;
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 }  // namespace
 
 // Collective. The static mesh datasets under /mesh, every rank its slabs.
-bool ResultWriter::WriteMesh(const Scene &scene) {
+PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, bool *written) {
+  PetscFunctionBeginUser;
   const hid_t group = H5Gcreate2(file_, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   const RowSlab vertices = natural_.vertices();
   const RowSlab tets = EvenSlab(static_cast<hsize_t>(num_tets_), rank_, size_);
   const hsize_t V = static_cast<hsize_t>(num_vertices_), T = static_cast<hsize_t>(num_tets_);
-  hsize_t B = 0;
-  const std::vector<int32_t> triangles = SlabBoundaryTriangles(scene, rank_, size_, &B);
-  // The per-body tables are small: rank 0 writes them whole.
   const hsize_t bodies = scene.bodies.size();
+  const std::vector<int32_t> triangles =
+      BodiesBoundaryTriangles(scene, EvenSlab(bodies, rank_, size_));
+  hsize_t B = 0;
+  RowSlab triangle_rows;
+  PetscCall(RowsInRankOrder(comm_, triangles.size() / 3, &triangle_rows, &B));
+  // The per-body tables are small: rank 0 writes them whole.
   const RowSlab body_rows{0, rank_ == 0 ? bodies : 0};
   std::vector<int32_t> body_fixed;
   std::vector<double> materials;
@@ -288,10 +297,10 @@ bool ResultWriter::WriteMesh(const Scene &scene) {
                      {body.material.density, body.material.young, body.material.poisson});
   }
   bool ok = group >= 0;
-  ok = ok && WriteSlabDataset(group, "tets", H5T_NATIVE_INT32, T, 4, tets,
-                              SlabTets(scene, tets).data());
-  ok = ok && WriteSlabDataset(group, "boundary_triangles", H5T_NATIVE_INT32, B, 3,
-                              EvenSlab(B, rank_, size_), triangles.data());
+  ok = ok &&
+       WriteSlabDataset(group, "tets", H5T_NATIVE_INT32, T, 4, tets, SlabTets(scene, tets).data());
+  ok = ok && WriteSlabDataset(group, "boundary_triangles", H5T_NATIVE_INT32, B, 3, triangle_rows,
+                              triangles.data());
   ok = ok && WriteSlabDataset(group, "vertex_body", H5T_NATIVE_INT32, V, 0, vertices,
                               SlabVertexBodies(scene, vertices).data());
   ok = ok && WriteSlabDataset(group, "rest_positions", H5T_NATIVE_DOUBLE, V, 3, vertices,
@@ -302,7 +311,8 @@ bool ResultWriter::WriteMesh(const Scene &scene) {
                               materials.data());
   ok = ok && SetAttribute(group, "scene", scene.path);
   if (group >= 0) H5Gclose(group);
-  return ok;
+  *written = ok;
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 ResultWriter::~ResultWriter() {
@@ -313,20 +323,26 @@ ResultWriter::~ResultWriter() {
 }
 
 // Collective. A new file with the mesh and the empty series.
-bool ResultWriter::CreateFile(const Scene &scene) {
+PetscErrorCode ResultWriter::CreateFile(const Scene &scene, bool *created) {
+  PetscFunctionBeginUser;
   file_ = CreateParallelFile(comm_, options_.path);
-  if (file_ < 0) return false;
+  *created = file_ >= 0;
+  if (file_ < 0) PetscFunctionReturn(PETSC_SUCCESS);
   const hsize_t V = static_cast<hsize_t>(num_vertices_);
   const hid_t energy = H5Gcreate2(file_, "/energy", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   bool ok = energy >= 0;
   if (energy >= 0) H5Gclose(energy);
   for (const SeriesName &series : kSeries) {
-    const hid_t set = CreateFrameDataset(
-        file_, series.name, series.per_vertex ? std::vector<hsize_t>{V, 3} : std::vector<hsize_t>{});
+    const hid_t set =
+        CreateFrameDataset(file_, series.name,
+                           series.per_vertex ? std::vector<hsize_t>{V, 3} : std::vector<hsize_t>{});
     ok = ok && set >= 0;
     if (set >= 0) H5Dclose(set);
   }
-  return ok && WriteMesh(scene) && MarkComplete(file_, 0);
+  bool mesh = false;
+  PetscCall(WriteMesh(scene, &mesh));
+  *created = ok && mesh && MarkComplete(file_, 0);
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 namespace {
@@ -434,7 +450,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
     what = "cannot continue HDF5 file";
     ok = ContinueInPlace(*continuation);
   } else {
-    ok = CreateFile(scene);
+    PetscCall(CreateFile(scene, &ok));
     if (ok && continuation) {
       what = "cannot copy the first frames of '" + continuation->source + "' into";
       ok = CopyFrames(*continuation);
@@ -452,10 +468,11 @@ PetscErrorCode ResultWriter::OpenXdmf() {
   bool ok = true;
   if (rank_ == 0) {
     xdmf_ = std::fopen(XdmfPath(options_.path).c_str(), "w");
-    ok = xdmf_ && std::fputs("<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n<Domain>\n<Grid "
-                             "Name=\"softbody\" GridType=\"Collection\" "
-                             "CollectionType=\"Temporal\">\n",
-                             xdmf_) >= 0;
+    ok = xdmf_ && std::fputs(
+                      "<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n<Domain>\n<Grid "
+                      "Name=\"softbody\" GridType=\"Collection\" "
+                      "CollectionType=\"Temporal\">\n",
+                      xdmf_) >= 0;
     xdmf_tail_ = ok ? std::ftell(xdmf_) : 0;
     ok = ok && ExtendXdmf();
   }
@@ -475,10 +492,11 @@ PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec veloc
   PetscCall(VecGetArrayRead(positions_, &x));
   PetscCall(VecGetArrayRead(velocities_, &v));
   const std::pair<const char *, const double *> rows[] = {{"/positions", x}, {"/velocities", v}};
-  const std::pair<const char *, double> scalars[] = {{"/time", time},
-                                                     {"/energy/kinetic", energy.kinetic},
-                                                     {"/energy/elastic", energy.elastic},
-                                                     {"/energy/gravitational", energy.gravitational}};
+  const std::pair<const char *, double> scalars[] = {
+      {"/time", time},
+      {"/energy/kinetic", energy.kinetic},
+      {"/energy/elastic", energy.elastic},
+      {"/energy/gravitational", energy.gravitational}};
   bool ok = true;
   for (const auto &[name, values] : rows) {
     const hid_t set = H5Dopen2(file_, name, H5P_DEFAULT);

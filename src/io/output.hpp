@@ -119,10 +119,9 @@ class ResultWriter {
   ~ResultWriter();
 
   // Collective. Creates the file (every rank its slab of the mesh) with the
-  // empty series, and rank 0 its .xdmf; fails on every rank when one cannot. With `continuation`, the
-  // file starts with the continued file's first frames instead: the same file,
-  // cut back to them (source == path), or a new file with a copy of them.
-  // `like` is a PETSc-ordered DOF vector.
+  // empty series, and rank 0 its .xdmf; fails on every rank when one cannot. With `continuation`,
+  // the file starts with the continued file's first frames instead: the same file, cut back to them
+  // (source == path), or a new file with a copy of them. `like` is a PETSc-ordered DOF vector.
   PetscErrorCode Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
                       const DofLayout &layout, Vec like,
                       const Continuation *continuation = nullptr);
@@ -151,8 +150,8 @@ class ResultWriter {
   MPI_Comm comm() const { return comm_; }
 
  private:
-  bool CreateFile(const Scene &scene);
-  bool WriteMesh(const Scene &scene);
+  PetscErrorCode CreateFile(const Scene &scene, bool *created);
+  PetscErrorCode WriteMesh(const Scene &scene, bool *written);
   bool ContinueInPlace(const Continuation &continuation);
   bool CopyFrames(const Continuation &continuation);
   PetscErrorCode OpenXdmf();

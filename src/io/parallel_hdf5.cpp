@@ -107,7 +107,8 @@ hid_t CreateFrameDataset(hid_t location, const char *name, const std::vector<hsi
   std::vector<hsize_t> dims{0}, chunk{frame_dims.empty() ? kScalarFramesPerChunk : 1};
   dims.insert(dims.end(), frame_dims.begin(), frame_dims.end());
   chunk.insert(chunk.end(), frame_dims.begin(), frame_dims.end());
-  if (!frame_dims.empty()) chunk[1] = ChunkRows(frame_dims[0], RowBytes(H5T_NATIVE_DOUBLE, dims, 1));
+  if (!frame_dims.empty())
+    chunk[1] = ChunkRows(frame_dims[0], RowBytes(H5T_NATIVE_DOUBLE, dims, 1));
   return CreateChunked(location, name, H5T_NATIVE_DOUBLE, dims, chunk);
 }
 

@@ -64,8 +64,7 @@ hid_t CreateRowDataset(hid_t location, const char *name, hid_t type,
 // chunks of one frame and ChunkRows rows of it ([1][rows][frame_dims[1]...]),
 // or of kScalarFramesPerChunk frames for a series of scalars (frame_dims empty).
 // Caller closes (H5Dclose).
-hid_t CreateFrameDataset(hid_t location, const char *name,
-                         const std::vector<hsize_t> &frame_dims);
+hid_t CreateFrameDataset(hid_t location, const char *name, const std::vector<hsize_t> &frame_dims);
 
 // Collective. The dataset's first dimension becomes `rows` (equal on every rank).
 bool ExtendRows(hid_t dataset, hsize_t rows);
