@@ -376,7 +376,7 @@ bool ReadTimes(hid_t file, PetscInt frames, std::vector<double> *times) {
 // Collective. Copies frame `frame` of series `series` from `source` to `target`,
 // every rank the rows of its vertex slab (rank 0 the scalars).
 bool CopyFrame(hid_t source, hid_t target, const SeriesName &series, hsize_t frame, RowSlab slab,
-               std::vector<double> *buffer) {
+               bool first_rank, std::vector<double> *buffer) {
   const hid_t from = H5Dopen2(source, series.name, H5P_DEFAULT);
   const hid_t to = H5Dopen2(target, series.name, H5P_DEFAULT);
   bool ok = from >= 0 && to >= 0;
@@ -386,7 +386,7 @@ bool CopyFrame(hid_t source, hid_t target, const SeriesName &series, hsize_t fra
          WriteFrameRows(to, frame, H5T_NATIVE_DOUBLE, slab, buffer->data());
   } else if (ok) {
     double value = 0;
-    ok = ReadScalarFrame(from, frame, &value) && WriteScalarFrame(to, frame, value);
+    ok = ReadScalarFrame(from, frame, &value) && WriteScalarFrame(to, frame, value, first_rank);
   }
   if (from >= 0) H5Dclose(from);
   if (to >= 0) H5Dclose(to);
@@ -416,7 +416,7 @@ bool ResultWriter::CopyFrames(const Continuation &continuation) {
   bool ok = ReadTimes(source, continuation.frames, &times_);
   for (PetscInt f = 0; ok && f < continuation.frames; ++f)
     for (const SeriesName &series : kSeries)
-      ok = ok && CopyFrame(source, file_, series, f, natural_.vertices(), &buffer);
+      ok = ok && CopyFrame(source, file_, series, f, natural_.vertices(), rank_ == 0, &buffer);
   H5Fclose(source);
   return ok && H5Fflush(file_, H5F_SCOPE_LOCAL) >= 0;
 }
@@ -506,7 +506,7 @@ PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec veloc
   }
   for (const auto &[name, value] : scalars) {
     const hid_t set = H5Dopen2(file_, name, H5P_DEFAULT);
-    ok = ok && set >= 0 && WriteScalarFrame(set, frame, value);
+    ok = ok && set >= 0 && WriteScalarFrame(set, frame, value, rank_ == 0);
     if (set >= 0) H5Dclose(set);
   }
   PetscCall(VecRestoreArrayRead(positions_, &x));
@@ -586,6 +586,10 @@ PetscErrorCode ResultWriter::Close(const std::vector<std::pair<std::string, doub
   // Attributes are metadata: every rank writes rank 0's values (timings differ).
   std::vector<double> values;
   for (const auto &entry : statistics) values.push_back(entry.second);
+  int counts[2] = {static_cast<int>(values.size()), -static_cast<int>(values.size())};
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, counts, 2, MPI_INT, MPI_MAX, comm_));
+  PetscCheck(counts[0] == -counts[1], comm_, PETSC_ERR_PLIB,
+             "the ranks hold different numbers of statistics for '%s'", options_.path.c_str());
   PetscCallMPI(MPI_Bcast(values.data(), static_cast<int>(values.size()), MPI_DOUBLE, 0, comm_));
   bool ok = true;
   for (size_t i = 0; i < statistics.size(); ++i)

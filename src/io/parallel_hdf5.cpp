@@ -170,25 +170,6 @@ bool TransferSlab(hid_t dataset, const std::vector<hsize_t> &prefix, hid_t memor
   return ok;
 }
 
-// Not collective. Whether this is rank 0 of the communicator `object`'s file was
-// opened on (true for a file not opened with MPI-IO).
-bool IsFirstRank(hid_t object) {
-  const hid_t file = H5Iget_file_id(object);
-  const hid_t access = file < 0 ? -1 : H5Fget_access_plist(file);
-  MPI_Comm comm = MPI_COMM_NULL;
-  MPI_Info info = MPI_INFO_NULL;
-  int rank = 0;
-  if (access >= 0 && H5Pget_driver(access) == H5FD_MPIO &&
-      H5Pget_fapl_mpio(access, &comm, &info) >= 0) {
-    MPI_Comm_rank(comm, &rank);
-    MPI_Comm_free(&comm);
-    if (info != MPI_INFO_NULL) MPI_Info_free(&info);
-  }
-  if (access >= 0) H5Pclose(access);
-  if (file >= 0) H5Fclose(file);
-  return rank == 0;
-}
-
 }  // namespace
 
 bool WriteRows(hid_t dataset, hid_t memory_type, RowSlab slab, const void *values) {
@@ -210,10 +191,10 @@ bool ReadFrameRows(hid_t dataset, hsize_t frame, hid_t memory_type, RowSlab slab
   return TransferSlab(dataset, {frame}, memory_type, slab, values, false);
 }
 
-bool WriteScalarFrame(hid_t dataset, hsize_t frame, double value) {
+bool WriteScalarFrame(hid_t dataset, hsize_t frame, double value, bool writer) {
   const std::vector<hsize_t> dims = DatasetDims(dataset);
   if (dims.size() != 1 || (frame >= dims[0] && !ExtendRows(dataset, frame + 1))) return false;
-  const RowSlab slab = IsFirstRank(dataset) ? RowSlab{frame, frame + 1} : RowSlab{frame, frame};
+  const RowSlab slab = writer ? RowSlab{frame, frame + 1} : RowSlab{frame, frame};
   return WriteRows(dataset, H5T_NATIVE_DOUBLE, slab, &value);
 }
 

@@ -84,10 +84,10 @@ bool WriteFrameRows(hid_t dataset, hsize_t frame, hid_t memory_type, RowSlab sla
                     const void *values);
 bool ReadFrameRows(hid_t dataset, hsize_t frame, hid_t memory_type, RowSlab slab, void *values);
 
-// Collective. Scalar frame `frame` of a series of scalars ([frames]): rank 0
-// writes `value` (equal on every rank), extending the series when needed; every
-// rank reads it.
-bool WriteScalarFrame(hid_t dataset, hsize_t frame, double value);
+// Collective. Scalar frame `frame` of a series of scalars ([frames]): the one
+// rank with `writer` true (e.g. rank 0) writes `value`, after every rank has
+// extended the series when needed; every rank reads it.
+bool WriteScalarFrame(hid_t dataset, hsize_t frame, double value, bool writer);
 bool ReadScalarFrame(hid_t dataset, hsize_t frame, double *value);
 
 }  // namespace softbody

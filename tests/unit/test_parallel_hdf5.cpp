@@ -110,7 +110,7 @@ TEST(ParallelHdf5, ScalarSeriesGrowsByFrames) {
   const hid_t file = CreateParallelFile(PETSC_COMM_WORLD, path);
   ASSERT_GE(file, 0);
   const hid_t series = CreateFrameDataset(file, "time", {});
-  for (hsize_t f = 0; f < 5; ++f) EXPECT_TRUE(WriteScalarFrame(series, f, 0.25 * f));
+  for (hsize_t f = 0; f < 5; ++f) EXPECT_TRUE(WriteScalarFrame(series, f, 0.25 * f, true));
   EXPECT_EQ(DatasetDims(series), std::vector<hsize_t>{5});
   double value = -1;
   EXPECT_TRUE(ReadScalarFrame(series, 3, &value));
