@@ -98,9 +98,10 @@ PetscErrorCode CheckOutputPath(MPI_Comm comm, const char *option, const std::str
 
 namespace {
 
-// Calls visit(body, first, last) for each body's part [first, last) of the
-// natural range [begin, end), where `first_of(b)` is body b's first natural index
-// and `count_of(b)` its number of items (vertices or tets).
+// Calls visit(body, b, from, to) for each body b that meets the natural range
+// `slab`, with [from, to) its part of the range counted from the body's first
+// item; `first_of(b)` is body b's first natural index and `count_of(b)` its
+// number of items (vertices or tets).
 template <typename First, typename Count, typename Visit>
 void ForEachBodyPart(const Scene &scene, RowSlab slab, First first_of, Count count_of,
                      Visit visit) {

@@ -20,21 +20,43 @@ hsize_t ChunkRows(hsize_t rows, hsize_t row_bytes) {
 
 namespace {
 
-// File access through MPI-IO on every rank of comm (-1 on failure).
+// File access through MPI-IO on every rank of comm, or HDF5's default POSIX
+// driver on a single rank (-1 on failure).
 hid_t MpioAccess(MPI_Comm comm) {
   const hid_t access = H5Pcreate(H5P_FILE_ACCESS);
   if (access < 0) return -1;
-  if (H5Pset_fapl_mpio(access, comm, MPI_INFO_NULL) < 0) {
+  int size = 1;
+  if (MPI_Comm_size(comm, &size) != MPI_SUCCESS) {
+    H5Pclose(access);
+    return -1;
+  }
+  if (size > 1 && H5Pset_fapl_mpio(access, comm, MPI_INFO_NULL) < 0) {
     H5Pclose(access);
     return -1;
   }
   return access;
 }
 
-// Collective transfers (-1 on failure); the caller closes.
-hid_t CollectiveTransfer() {
+// Not collective. Whether `object`'s file was opened with MPI-IO (a single
+// rank's file was not: MpioAccess).
+bool OpenedWithMpio(hid_t object) {
+  const hid_t file = H5Iget_file_id(object);
+  hbool_t atomic = false;
+  herr_t status = -1;
+  H5E_BEGIN_TRY {
+    status = H5Fget_mpi_atomicity(file, &atomic);
+  }
+  H5E_END_TRY;
+  if (file >= 0) H5Fclose(file);
+  return status >= 0;
+}
+
+// Transfers for `dataset`: collective on a file opened with MPI-IO, HDF5's
+// default on others (-1 on failure); the caller closes.
+hid_t CollectiveTransfer(hid_t dataset) {
   const hid_t transfer = H5Pcreate(H5P_DATASET_XFER);
-  if (transfer >= 0 && H5Pset_dxpl_mpio(transfer, H5FD_MPIO_COLLECTIVE) < 0) {
+  if (transfer >= 0 && OpenedWithMpio(dataset) &&
+      H5Pset_dxpl_mpio(transfer, H5FD_MPIO_COLLECTIVE) < 0) {
     H5Pclose(transfer);
     return -1;
   }
@@ -151,7 +173,7 @@ bool TransferSlab(hid_t dataset, const std::vector<hsize_t> &prefix, hid_t memor
   memory_dims[0] = std::max<hsize_t>(memory_dims[0], 1);  // an empty slab selects none of one row
   const hid_t memory_space =
       H5Screate_simple(static_cast<int>(memory_dims.size()), memory_dims.data(), nullptr);
-  const hid_t transfer = CollectiveTransfer();
+  const hid_t transfer = CollectiveTransfer(dataset);
   bool ok = file_space >= 0 && memory_space >= 0 && transfer >= 0;
   if (ok && slab.count() == 0) {
     ok = H5Sselect_none(file_space) >= 0 && H5Sselect_none(memory_space) >= 0;

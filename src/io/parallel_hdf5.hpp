@@ -50,7 +50,10 @@ constexpr hsize_t kScalarFramesPerChunk = 1024;
 hsize_t ChunkRows(hsize_t rows, hsize_t row_bytes);
 
 // Collective. Creates (truncating) or opens `path` with the MPI-IO driver on
-// every rank of comm; the caller closes it with H5Fclose (collective).
+// every rank of comm; the caller closes it with H5Fclose (collective). On a
+// single rank the file is opened with HDF5's default POSIX driver instead: the
+// same file, and a flush that does not sync to disk (MPI-IO's flush calls
+// MPI_File_sync, about 4 ms per flush here, measured in docs/long-runs.md).
 hid_t CreateParallelFile(MPI_Comm comm, const std::string &path);
 hid_t OpenParallelFile(MPI_Comm comm, const std::string &path, bool writable);
 

@@ -23,9 +23,15 @@ ranks cut through both bodies and through vertices without unknowns.
     no hang: a restart file of another scene (another body count, other
     vertex counts, other rest positions), a missing restart file, output into
     a missing folder.
+(e) A 2-rank run (MPI-IO) whose rank 1 is killed by SIGKILL: the file opens
+    with complete = 0, the .xdmf lists its frames (all, or all but the last
+    flush's), and their times and positions equal the file's.
 """
 import os
+import signal
+import subprocess
 import sys
+import time
 
 import h5py
 import numpy as np
@@ -175,4 +181,29 @@ for label, options, keys in cases:
     ok = (r.returncode != 0 and len(errors) == 1 and all(k in errors[0] for k in keys)
           and "PETSC ERROR" not in r.stderr and not os.path.exists(fresh))
     checks.check(ok, f"(d) {label}: exit {r.returncode}, '{errors[0] if errors else r.stderr.strip()[:300]}'")
+
+print("(e) SIGKILL of one rank of two")
+out = harness.fresh_result(work, "killed")
+process = subprocess.Popen([args.mpiexec, "-n", "2", args.softbody, "-scene", scene, "-steps", "1000000",
+                            "-output", out, "-quiet"], env=harness.mpi_environment(),
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+xdmf, deadline = out[:-3] + ".xdmf", time.time() + 120
+while time.time() < deadline and process.poll() is None and \
+        not (os.path.exists(xdmf) and open(xdmf).read().count("<Time ") >= 6):
+    time.sleep(0.02)
+ranks = subprocess.run(["pgrep", "-P", str(process.pid)], capture_output=True, text=True).stdout.split()
+if ranks:
+    os.kill(int(ranks[-1]), signal.SIGKILL)
+try:
+    process.wait(timeout=60)
+except subprocess.TimeoutExpired:
+    process.kill()
+    process.wait()
+r = harness.read_frames(out)
+times, positions, _ = harness.xdmf_frames(xdmf)
+n = len(times)
+checks.check(len(ranks) == 2 and r["complete"] == 0 and n >= 6 and len(r["time"]) - 1 <= n <= len(r["time"]) and
+             np.array_equal(times, r["time"][:n]) and np.array_equal(positions, r["positions"][:n]),
+             f"(e) rank {ranks[-1] if ranks else '?'} of {ranks} killed: the file opens with {len(r['time'])} frames, "
+             f"complete = {r['complete']}, the .xdmf lists {n} of them, equal to the file's")
 checks.exit()

@@ -2,7 +2,9 @@
 // arithmetic and against what was written: even slabs cover the rows exactly
 // once; chunks stay within kMaxChunkBytes; rows written slab by slab (empty
 // slabs included, in any order) read back equal, whole and by slab; frame
-// datasets grow frame by frame; int32 and int64 memory types convert.
+// datasets grow frame by frame; int32 and int64 memory types convert. (One rank
+// opens the file with HDF5's POSIX driver; the MPI-IO path at 2 and 3 ranks is
+// tests/regression/test_parallel_output.py's.)
 #include <gtest/gtest.h>
 #include <petscsys.h>
 
