@@ -1,7 +1,8 @@
 // Results on disk.
 //
 // HDF5 (natural vertex order, every vertex of every body, fixed ones included),
-// written by all ranks together through MPI-IO (parallel_hdf5.hpp): rank r of P
+// written by all ranks together through MPI-IO (parallel_hdf5.hpp; a single
+// rank uses HDF5's POSIX driver): rank r of P
 // writes the rows of its natural slab, vertices [V r / P, V (r + 1) / P) and
 // tets [T r / P, T (r + 1) / P), at their natural offsets; rank 0 writes the
 // scalars and the .xdmf.
