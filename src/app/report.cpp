@@ -32,6 +32,18 @@ BodiesWithoutUnknowns CountBodiesWithoutUnknowns(const Scene &scene, const DofLa
   return b;
 }
 
+// How the unknowns were split, for the "unknowns" line.
+const char *PartitionNote(Partitioner partitioner) {
+  switch (partitioner) {
+    case Partitioner::kMetis:
+      return ", METIS partition on rank 0";
+    case Partitioner::kPtScotch:
+      return ", PT-Scotch partition";
+    default:
+      return "";
+  }
+}
+
 // "  scene ..." and "  unknowns ..." lines.
 PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                      const BodiesWithoutUnknowns &b) {
@@ -47,9 +59,10 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets()));
   PetscCall(PetscPrintf(comm,
-                        "  unknowns     %" PetscInt_FMT " DOFs on %d ranks (%" PetscInt_FMT
-                        " to %" PetscInt_FMT " per rank, METIS partition)\n",
-                        3 * layout.num_free(), layout.size, min_dofs, max_dofs));
+                        "  unknowns     %" PetscInt_FMT " DOFs on %d %s (%" PetscInt_FMT
+                        " to %" PetscInt_FMT " per rank%s)\n",
+                        3 * layout.num_free(), layout.size, layout.size == 1 ? "rank" : "ranks",
+                        min_dofs, max_dofs, PartitionNote(layout.partitioner)));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -209,9 +222,11 @@ PetscErrorCode PrintSolver(MPI_Comm comm, KSP ksp, const IntegratorOptions &o,
     PetscCall(PetscPrintf(comm,
                           "; %" PetscInt_FMT
                           " solves broke down and were repeated by the direct fallback "
-                          "(MUMPS Cholesky)",
+                          "(SuperLU_dist LU)",
                           solver.fallback_solves));
   PetscCall(PetscPrintf(comm, "\n"));
+  if (!solver.choice.empty())
+    PetscCall(PetscPrintf(comm, "  choice       %s\n", solver.choice.c_str()));
   if (solver.newton_iterations > 0)
     PetscCall(PetscPrintf(comm,
                           "  corotational %" PetscInt_FMT

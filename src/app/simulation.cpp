@@ -8,6 +8,7 @@ namespace softbody {
 PetscErrorCode ProcessRunOptions(MPI_Comm comm, RunOptions *o) {
   PetscFunctionBeginUser;
   PetscCall(ProcessSceneOptions(comm, &o->scene));
+  PetscCall(ProcessPartitionOptions(comm, &o->partition));
   PetscCall(ProcessIntegratorOptions(comm, &o->integration));
   PetscCall(ProcessContactOptions(comm, &o->contact));
   PetscCall(ProcessDeformationOptions(comm, &o->deformations));
@@ -117,7 +118,7 @@ PetscErrorCode Simulation::SetUp() {
   PetscFunctionBeginUser;
   PetscCall(CheckFiles());
   PetscCall(ReadScene());
-  PetscCall(BuildDofLayout(comm_, scene_, &layout_));
+  PetscCall(BuildDofLayout(comm_, scene_, options_.partition, &layout_));
   PetscCall(CreateInitialState());
   PetscCall(OpenOutput());
   PetscCall(SetUpSolvers());

@@ -35,6 +35,7 @@ namespace softbody {
 // Every module's options.
 struct RunOptions {
   SceneOptions scene;
+  PartitionOptions partition;
   std::string deformations;  // -deform, parsed once the scene is known
   IntegratorOptions integration;
   ContactOptions contact;

@@ -6,8 +6,9 @@
 // The handler installed by InstallErrorHandler() prints such an error, and a
 // linear solve that did not converge (PETSC_ERR_NOT_CONVERGED), as one line,
 // "softbody: error: <message>", on rank 0 only; every other PETSc error keeps
-// PETSc's usual traceback. Input is replicated on every rank, so every rank raises
-// the same input error and all of them exit non-zero without waiting on each other.
+// PETSc's usual traceback. Input read by one rank is broadcast with its verdict, and
+// input every rank reads is the same on every rank, so every rank raises the same
+// input error and all of them exit non-zero without waiting on each other.
 #pragma once
 
 #include <petscsys.h>

@@ -1,58 +1,11 @@
 #include "fem/partition.hpp"
 
-#include <metis.h>
+#include <petscis.h>
 
 #include <algorithm>
 #include <numeric>
 
 namespace softbody {
-
-namespace {
-
-// METIS's random seed, fixed so that a scene is partitioned the same way at
-// every run (results reproducible bit for bit); any fixed value would do.
-constexpr idx_t kMetisSeed = 1;
-
-// Rank 0 only: METIS k-way partition of the free-vertex adjacency graph.
-PetscErrorCode PartitionFreeVertices(const Scene &scene, const DofLayout &layout, idx_t nparts,
-                                     std::vector<idx_t> *part) {
-  PetscFunctionBeginUser;
-  const PetscInt n = layout.num_free();
-  // Neighbour lists from the tets, then CSR without self loops or repeats.
-  std::vector<std::vector<idx_t>> neighbours(n);
-  for (const Body &body : scene.bodies) {
-    if (body.fixed) continue;
-    for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-      for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b)
-          if (a != b)
-            neighbours[layout.free_of_natural[body.first_vertex + body.mesh.tets(t, a)]].push_back(
-                static_cast<idx_t>(
-                    layout.free_of_natural[body.first_vertex + body.mesh.tets(t, b)]));
-  }
-  std::vector<idx_t> xadj(n + 1, 0), adjncy;
-  for (PetscInt v = 0; v < n; ++v) {
-    auto &list = neighbours[v];
-    std::sort(list.begin(), list.end());
-    list.erase(std::unique(list.begin(), list.end()), list.end());
-    adjncy.insert(adjncy.end(), list.begin(), list.end());
-    xadj[v + 1] = static_cast<idx_t>(adjncy.size());
-    std::vector<idx_t>().swap(list);
-  }
-  idx_t nvtxs = static_cast<idx_t>(n), ncon = 1, objval = 0;
-  idx_t options[METIS_NOPTIONS];
-  METIS_SetDefaultOptions(options);
-  options[METIS_OPTION_SEED] = kMetisSeed;
-  part->assign(n, 0);
-  const int status =
-      METIS_PartGraphKway(&nvtxs, &ncon, xadj.data(), adjncy.data(), nullptr, nullptr, nullptr,
-                          &nparts, nullptr, nullptr, options, &objval, part->data());
-  PetscCheck(status == METIS_OK, PETSC_COMM_SELF, PETSC_ERR_LIB, "METIS_PartGraphKway failed (%d)",
-             status);
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
-}  // namespace
 
 int MarkBodiesAtRest(const MotionSources &sources, Scene *scene) {
   if (sources.gravity || sources.ground || sources.constraints) return 0;
@@ -90,12 +43,35 @@ int MarkBodiesAtRest(const MotionSources &sources, Scene *scene) {
   return marked;
 }
 
-PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layout) {
+PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options) {
   PetscFunctionBeginUser;
-  PetscCallMPI(MPI_Comm_rank(comm, &layout->rank));
-  PetscCallMPI(MPI_Comm_size(comm, &layout->size));
+  static const char *const kNames[] = {"auto", "metis", "ptscotch", "Partitioner", "", nullptr};
+  PetscEnum chosen = static_cast<PetscEnum>(options->partitioner);
+  PetscOptionsBegin(comm, nullptr, "Partition of the free vertices over the ranks", nullptr);
+  PetscCall(PetscOptionsEnum("-partitioner",
+                             "auto (METIS on up to 2 ranks, else PT-Scotch), metis (the whole "
+                             "graph on rank 0) or ptscotch (on the distributed graph)",
+                             nullptr, kNames, chosen, &chosen, nullptr));
+  PetscOptionsEnd();
+  options->partitioner = static_cast<Partitioner>(chosen);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
-  // Free vertices in natural order.
+const char *PartitionerName(Partitioner partitioner) {
+  switch (partitioner) {
+    case Partitioner::kMetis:
+      return "metis";
+    case Partitioner::kPtScotch:
+      return "ptscotch";
+    default:
+      return "auto";
+  }
+}
+
+namespace {
+
+// Free vertices in natural order: layout->free_of_natural and natural_of_free.
+void NumberFreeVertices(const Scene &scene, DofLayout *layout) {
   std::vector<char> in_free_tet(scene.num_vertices(), 0);
   for (const Body &body : scene.bodies)
     if (!body.fixed)
@@ -108,26 +84,54 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layo
       layout->free_of_natural[v] = layout->num_free();
       layout->natural_of_free.push_back(v);
     }
-  const PetscInt n = layout->num_free();
+}
 
-  // Part of every free vertex: METIS on rank 0 when there is more than one rank.
-  std::vector<idx_t> part(n, 0);
-  if (layout->size > 1 && n > 0) {
-    if (layout->rank == 0) PetscCall(PartitionFreeVertices(scene, *layout, layout->size, &part));
-    static_assert(sizeof(idx_t) == sizeof(int32_t), "METIS built with 32-bit indices expected");
-    PetscCallMPI(MPI_Bcast(part.data(), static_cast<int>(n), MPI_INT32_T, 0, comm));
-  }
-
-  // Renumber part by part, natural order within a part.
+// PETSc numbers from the parts of this rank's graph rows: part by part, natural
+// order inside a part (ISPartitioningToNumbering). Sets vertex_start, and the
+// PETSc vertex of every free vertex (gathered to every rank while the rest of the
+// program reads the scene whole).
+PetscErrorCode NumberByPart(MPI_Comm comm, const std::vector<PetscInt> &part, DofLayout *layout) {
+  PetscFunctionBeginUser;
+  IS parts, numbers;
+  PetscCall(ISCreateGeneral(comm, static_cast<PetscInt>(part.size()), part.data(),
+                            PETSC_USE_POINTER, &parts));
+  PetscCall(ISPartitioningToNumbering(parts, &numbers));
+  std::vector<PetscInt> counts(layout->size);
+  PetscCall(ISPartitioningCount(parts, layout->size, counts.data()));
   layout->vertex_start.assign(layout->size + 1, 0);
-  for (PetscInt f = 0; f < n; ++f) ++layout->vertex_start[part[f] + 1];
-  std::partial_sum(layout->vertex_start.begin(), layout->vertex_start.end(),
-                   layout->vertex_start.begin());
-  std::vector<PetscInt> next(layout->vertex_start.begin(), layout->vertex_start.end() - 1);
-  layout->petsc_of_free.resize(n);
-  for (PetscInt f = 0; f < n; ++f) layout->petsc_of_free[f] = next[part[f]]++;
+  for (PetscMPIInt q = 0; q < layout->size; ++q)
+    layout->vertex_start[q + 1] = layout->vertex_start[q] + counts[q];
+  const PetscInt *mine;
+  PetscCall(ISGetIndices(numbers, &mine));
+  std::vector<int> rows(layout->size), offsets(layout->size + 1, 0);
+  const int my_rows = static_cast<int>(part.size());
+  PetscCallMPI(MPI_Allgather(&my_rows, 1, MPI_INT, rows.data(), 1, MPI_INT, comm));
+  for (PetscMPIInt q = 0; q < layout->size; ++q) offsets[q + 1] = offsets[q] + rows[q];
+  layout->petsc_of_free.resize(layout->num_free());
+  PetscCallMPI(MPI_Allgatherv(mine, my_rows, MPIU_INT, layout->petsc_of_free.data(), rows.data(),
+                              offsets.data(), MPIU_INT, comm));
+  PetscCall(ISRestoreIndices(numbers, &mine));
+  PetscCall(ISDestroy(&numbers));
+  PetscCall(ISDestroy(&parts));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
+PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, const PartitionOptions &options,
+                              DofLayout *layout) {
+  PetscFunctionBeginUser;
+  PetscCallMPI(MPI_Comm_rank(comm, &layout->rank));
+  PetscCallMPI(MPI_Comm_size(comm, &layout->size));
+  NumberFreeVertices(scene, layout);
+  VertexGraphRows graph;
+  PetscCall(BuildVertexGraphRows(comm, scene, layout->free_of_natural, layout->num_free(), &graph));
+  std::vector<PetscInt> part;
+  PetscCall(PartitionVertexGraph(comm, &graph, options.partitioner, &part, &layout->partitioner));
+  graph = VertexGraphRows();
+  PetscCall(NumberByPart(comm, part, layout));
   layout->natural_of_owned.resize(layout->local_count());
-  for (PetscInt f = 0; f < n; ++f) {
+  for (PetscInt f = 0; f < layout->num_free(); ++f) {
     const PetscInt local = layout->LocalOfFree(f);
     if (local >= 0) layout->natural_of_owned[local] = layout->natural_of_free[f];
   }

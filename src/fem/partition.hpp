@@ -3,20 +3,32 @@
 // Free vertices are the vertices of bodies that are not fixed and that belong to
 // at least one tet (a stray vertex has no mass and no stiffness: it stays put).
 // Their natural order ("free index") follows the scene's natural vertex order.
-// METIS splits the free-vertex graph (vertices adjacent when they share a tet)
-// into one part per rank; the vertices are renumbered part by part, keeping the
-// natural order inside a part, so rank r owns the contiguous block
-// [vertex_start[r], vertex_start[r+1]) of "PETSc vertex" indices. DOF 3 p + c is
-// coordinate c of PETSc vertex p (block size 3).
+// The free-vertex graph (vertices adjacent when they share a tet; vertex_graph.hpp)
+// is split into one part per rank by METIS or PT-Scotch (-partitioner); the
+// vertices are renumbered part by part, keeping the natural order inside a part,
+// so rank r owns the contiguous block [vertex_start[r], vertex_start[r+1]) of
+// "PETSc vertex" indices. DOF 3 p + c is coordinate c of PETSc vertex p (block
+// size 3).
 #pragma once
 
 #include <petscsys.h>
 
 #include <vector>
 
+#include "fem/vertex_graph.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
+
+struct PartitionOptions {
+  Partitioner partitioner = Partitioner::kAuto;  // -partitioner auto|metis|ptscotch
+};
+
+// Collective. Reads -partitioner.
+PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options);
+
+// The partitioner's name as -partitioner spells it ("auto" for none: one rank).
+const char *PartitionerName(Partitioner partitioner);
 
 struct DofLayout {
   std::vector<PetscInt> free_of_natural;  // natural vertex -> free index, or -1
@@ -27,6 +39,7 @@ struct DofLayout {
   // vertex of each owned PETSc vertex, in PETSc order.
   std::vector<PetscInt> natural_of_owned;
   PetscMPIInt rank = 0, size = 1;
+  Partitioner partitioner = Partitioner::kAuto;  // the one that ran (kAuto: one rank, none)
 
   PetscInt num_free() const { return static_cast<PetscInt>(natural_of_free.size()); }
   PetscInt local_begin() const { return vertex_start[rank]; }
@@ -54,8 +67,10 @@ struct DofLayout {
   }
 };
 
-// Collective. Rank 0 partitions with METIS and broadcasts the parts.
-PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, DofLayout *layout);
+// Collective. Partitions the free-vertex graph (vertex_graph.hpp) and numbers the
+// free vertices part by part (PETSc's ISPartitioningToNumbering).
+PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, const PartitionOptions &options,
+                              DofLayout *layout);
 
 // Not collective. The body of each vertex this rank owns, in PETSc order.
 std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout);

@@ -21,6 +21,7 @@
 #include "common/errors.hpp"
 #include "common/text_reader.hpp"
 #include "fem/element.hpp"
+#include "io/mesh_h5.hpp"
 
 extern char **environ;
 
@@ -37,9 +38,10 @@ TetMesh ReadTetMesh(const std::string &path, const MeshingOptions &meshing) {
   if (EndsWith(path, ".mesh")) return ReadMedit(path);
   if (EndsWith(path, ".off")) return ReadOff(path, meshing);
   if (EndsWith(path, ".msh")) return ReadGmsh(path);
+  if (EndsWith(path, ".h5")) return ReadMeshH5(path);
   throw InputError(Where(path, 0,
-                         "unknown mesh format (expected a MEDIT .mesh, an OFF surface .off or a "
-                         "gmsh .msh file)"));
+                         "unknown mesh format (expected a MEDIT .mesh, an OFF surface .off, a "
+                         "gmsh .msh or a softbody mesh .h5 file)"));
 }
 
 namespace {

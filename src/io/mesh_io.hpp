@@ -29,7 +29,8 @@ struct MeshingOptions {
 std::string CheckTetgenSwitches(const std::string &switches);
 
 // Reads a tetrahedral mesh, choosing the reader from the extension: .mesh
-// (ReadMedit), .off (ReadOff, meshed with `meshing`) or .msh (ReadGmsh).
+// (ReadMedit), .off (ReadOff, meshed with `meshing`), .msh (ReadGmsh) or .h5 (a
+// softbody mesh file, ReadMeshH5 in mesh_h5.hpp).
 TetMesh ReadTetMesh(const std::string &path, const MeshingOptions &meshing = MeshingOptions());
 
 // MEDIT .mesh: keywords `MeshVersionFormatted v`, `Dimension 3`, then sections

@@ -1,6 +1,7 @@
 #include "io/scene.hpp"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -157,16 +158,12 @@ Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
 
 namespace softbody {
 
-PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
+PetscErrorCode ProcessMeshingOptions(MPI_Comm comm, MeshingOptions *meshing) {
   PetscFunctionBeginUser;
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kReal, "-tetgen_max_volume"}}));
-  char path[PETSC_MAX_PATH_LEN] = "";
   char switches[256];
-  MeshingOptions &meshing = options->meshing;
-  PetscCall(PetscStrncpy(switches, meshing.tetgen_switches.c_str(), sizeof(switches)));
-  PetscOptionsBegin(comm, nullptr, "Scene", nullptr);
-  PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
-                               nullptr, path, path, sizeof(path), nullptr));
+  PetscCall(PetscStrncpy(switches, meshing->tetgen_switches.c_str(), sizeof(switches)));
+  PetscOptionsBegin(comm, nullptr, "Meshing of .off surfaces (TetGen)", nullptr);
   PetscCall(PetscOptionsString("-tetgen_switches",
                                "TetGen switches for .off surfaces, without '-' (p: mesh the "
                                "surface, required; q<r>: radius-edge ratio bound r; Y: keep the "
@@ -175,35 +172,87 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscCall(PetscOptionsReal("-tetgen_max_volume",
                              "Largest tetrahedron volume for .off surfaces, in the OFF file's "
                              "units^3 (m^3; 0: no bound; TetGen's a switch)",
-                             nullptr, meshing.max_volume, &meshing.max_volume, nullptr));
+                             nullptr, meshing->max_volume, &meshing->max_volume, nullptr));
   PetscOptionsEnd();
-  options->path = path;
-  meshing.tetgen_switches = switches;
-  const std::string bad_switches = CheckTetgenSwitches(meshing.tetgen_switches);
+  meshing->tetgen_switches = switches;
+  const std::string bad_switches = CheckTetgenSwitches(meshing->tetgen_switches);
   PetscCheck(bad_switches.empty(), comm, PETSC_ERR_USER_INPUT, "option -tetgen_switches: %s",
              bad_switches.c_str());
-  PetscCheck(meshing.max_volume >= 0 && std::isfinite(meshing.max_volume), comm,
+  PetscCheck(meshing->max_volume >= 0 && std::isfinite(meshing->max_volume), comm,
              PETSC_ERR_USER_INPUT, "option -tetgen_max_volume: must be >= 0 (got %s)",
-             FormatNumber(meshing.max_volume).c_str());
+             FormatNumber(meshing->max_volume).c_str());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
+  PetscFunctionBeginUser;
+  char path[PETSC_MAX_PATH_LEN] = "";
+  PetscOptionsBegin(comm, nullptr, "Scene", nullptr);
+  PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
+                               nullptr, path, path, sizeof(path), nullptr));
+  PetscOptionsEnd();
+  options->path = path;
+  PetscCall(ProcessMeshingOptions(comm, &options->meshing));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 namespace {
 
-// FNV-1a hash of every body's vertices and tets.
-uint64_t HashMeshes(const Scene &scene) {
-  constexpr uint64_t kFnvOffsetBasis = 14695981039346656037ull;  // FNV-1a, 64 bits
-  constexpr uint64_t kFnvPrime = 1099511628211ull;
-  uint64_t hash = kFnvOffsetBasis;
-  const auto add = [&hash](const void *data, size_t bytes) {
-    for (size_t i = 0; i < bytes; ++i)
-      hash = (hash ^ static_cast<const unsigned char *>(data)[i]) * kFnvPrime;
-  };
-  for (const Body &body : scene.bodies) {
-    add(body.mesh.vertices.data(), sizeof(double) * body.mesh.vertices.size());
-    add(body.mesh.tets.data(), sizeof(int32_t) * body.mesh.tets.size());
+// MPI counts are ints: larger arrays travel in pieces of this many elements.
+constexpr size_t kBroadcastPiece = size_t(1) << 28;
+
+template <typename T>
+PetscErrorCode BroadcastArray(MPI_Comm comm, T *data, size_t count) {
+  PetscFunctionBeginUser;
+  for (size_t begin = 0; begin < count; begin += kBroadcastPiece) {
+    const int piece = static_cast<int>(std::min(kBroadcastPiece, count - begin) * sizeof(T));
+    PetscCallMPI(MPI_Bcast(data + begin, piece, MPI_BYTE, 0, comm));
   }
-  return hash;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode BroadcastString(MPI_Comm comm, std::string *text) {
+  PetscFunctionBeginUser;
+  uint64_t size = text->size();
+  PetscCallMPI(MPI_Bcast(&size, 1, MPI_UINT64_T, 0, comm));
+  text->resize(size);
+  PetscCall(BroadcastArray(comm, text->data(), size));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Rank 0's body (material, flags, placed mesh) on every rank.
+PetscErrorCode BroadcastBody(MPI_Comm comm, Body *body) {
+  PetscFunctionBeginUser;
+  PetscCall(BroadcastString(comm, &body->mesh_path));
+  PetscCall(BroadcastArray(comm, &body->material, 1));
+  int64_t sizes[5] = {body->fixed, body->at_rest, body->first_vertex, body->mesh.num_vertices(),
+                      body->mesh.num_tets()};
+  PetscCallMPI(MPI_Bcast(sizes, 5, MPI_INT64_T, 0, comm));
+  body->fixed = sizes[0];
+  body->at_rest = sizes[1];
+  body->first_vertex = static_cast<int32_t>(sizes[2]);
+  body->mesh.vertices.resize(sizes[3], 3);
+  body->mesh.tets.resize(sizes[4], 4);
+  PetscCall(BroadcastArray(comm, body->mesh.vertices.data(), body->mesh.vertices.size()));
+  PetscCall(BroadcastArray(comm, body->mesh.tets.data(), body->mesh.tets.size()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Rank 0's scene on every rank.
+PetscErrorCode BroadcastScene(MPI_Comm comm, Scene *scene) {
+  PetscFunctionBeginUser;
+  PetscCall(BroadcastString(comm, &scene->path));
+  int64_t sizes[4] = {static_cast<int64_t>(scene->bodies.size()), scene->initial_velocities.rows(),
+                      scene->num_velocity_entries, scene->ignored_fixed_velocities};
+  PetscCallMPI(MPI_Bcast(sizes, 4, MPI_INT64_T, 0, comm));
+  scene->bodies.resize(sizes[0]);
+  for (Body &body : scene->bodies) PetscCall(BroadcastBody(comm, &body));
+  scene->initial_velocities.resize(sizes[1], 3);
+  PetscCall(
+      BroadcastArray(comm, scene->initial_velocities.data(), scene->initial_velocities.size()));
+  scene->num_velocity_entries = static_cast<int>(sizes[2]);
+  scene->ignored_fixed_velocities = static_cast<int>(sizes[3]);
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 }  // namespace
@@ -212,15 +261,22 @@ PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scen
   PetscFunctionBeginUser;
   PetscCheck(!options.path.empty(), comm, PETSC_ERR_USER_INPUT,
              "option -scene: required (path to a scene file; see -help)");
-  SOFTBODY_CATCH_INPUT(comm, *scene = ReadScene(options.path, options.meshing));
-  // Every rank ran its own TetGen: check that they agree, max(h) == min(h) =
-  // ~max(~h) over the ranks' mesh hashes h.
-  const uint64_t hash = HashMeshes(*scene);
-  uint64_t local[2] = {hash, ~hash}, largest[2];
-  PetscCallMPI(MPI_Allreduce(local, largest, 2, MPI_UINT64_T, MPI_MAX, comm));
-  PetscCheck(largest[0] == ~largest[1], comm, PETSC_ERR_PLIB,
-             "the ranks hold different meshes for the scene %s (is the mesher not deterministic?)",
-             options.path.c_str());
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  // Rank 0 reads (and runs TetGen) alone; an input error reaches every rank.
+  std::string error;
+  if (rank == 0) {
+    try {
+      *scene = ReadScene(options.path, options.meshing);
+    } catch (const InputError &input_error) {
+      error = input_error.what();
+    } catch (const std::bad_alloc &) {
+      error = "out of memory while reading input";
+    }
+  }
+  PetscCall(BroadcastString(comm, &error));
+  PetscCheck(error.empty(), comm, PETSC_ERR_USER_INPUT, "%s", error.c_str());
+  PetscCall(BroadcastScene(comm, scene));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

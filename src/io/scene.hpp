@@ -71,13 +71,17 @@ struct SceneOptions {
   MeshingOptions meshing;  // -tetgen_switches, -tetgen_max_volume: for .off meshes
 };
 
-// Collective. Reads -scene (the scene file path; required unless -help),
-// -tetgen_switches and -tetgen_max_volume, and checks them.
+// Collective. Reads -tetgen_switches and -tetgen_max_volume (how .off surfaces
+// are meshed) and checks them.
+PetscErrorCode ProcessMeshingOptions(MPI_Comm comm, MeshingOptions *meshing);
+
+// Collective. Reads -scene (the scene file path; required unless -help) and the
+// meshing options (ProcessMeshingOptions).
 PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options);
 
-// Collective: every rank reads the whole scene (and runs TetGen on its OFF
-// surfaces), then the ranks check that they hold the same meshes. Input errors
-// become one PETSC_ERR_USER_INPUT error on every rank.
+// Collective: rank 0 reads the scene and its meshes (TetGen runs once, there) and
+// broadcasts them, so every rank holds the whole scene. Input errors become one
+// PETSC_ERR_USER_INPUT error on every rank.
 PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scene);
 
 }  // namespace softbody

@@ -106,8 +106,8 @@ PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, Integrator
   PetscCall(
       PetscOptionsBool("-fallback_direct",
                        "Repeat a solve that breaks down (factor or preconditioner not positive "
-                       "definite, NaN) by a direct factorisation, MUMPS Cholesky (its options take "
-                       "the prefix -fallback_)",
+                       "definite, NaN) by a distributed direct factorisation, SuperLU_dist LU "
+                       "(its options take the prefix -fallback_)",
                        nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -247,7 +247,9 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
   PetscFunctionBeginUser;
   PetscCall(
       ApplyPresetDefaults(options_.mode == MODE_LINEAR ? kDirectPreset : kCorotationalPreset));
-  PetscCall(CreateSolver(A_, rest_, &ksp_));
+  SolverChoice choice;
+  PetscCall(CreateSolver(A_, rest_, &ksp_, &choice));
+  stats_.choice = choice.reason;
   PC pc;
   PetscCall(KSPGetPC(ksp_, &pc));
   PetscBool gamg;
@@ -258,6 +260,11 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
   if (warp && options_.mode == MODE_COROTATIONAL) {
     // The warp preconditioner: A0 = the linear system, factorised per time step size.
     PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &A_linear_));
+    MatNullSpace rigid_body_modes;  // for an inner GAMG
+    PetscCall(MatGetNearNullSpace(A_, &rigid_body_modes));
+    PetscCall(MatSetNearNullSpace(A_linear_, rigid_body_modes));
+    PetscCall(MatSetOption(A_linear_, MAT_SPD, PETSC_TRUE));
+    PetscCall(MatSetOption(A_linear_, MAT_SPD_ETERNAL, PETSC_TRUE));
     PetscCall(PCWarpSetLinearOperator(pc, A_linear_));
     assembler_.ComputeVertexRotations(true);
   } else if (warp) {  // linear mode: A itself, no rotations (a direct solve in one iteration)
@@ -454,6 +461,24 @@ PetscErrorCode ImplicitEuler::PrimeSolver(Vec x_first, PetscReal dt_first) {
 // preconditioner is not positive definite, or NaN appeared (A numerically
 // singular: a stiff, nearly incompressible sliver has a mass part below K's
 // round-off).
+// The fallback's SuperLU_dist settings, where -fallback_* sets none: the
+// column order by ParMETIS (PT-Scotch's layer in this PETSc), and no
+// equilibration: scaling rows and columns of a matrix whose mass part is below
+// its stiffness's round-off lost the rigid-body modes (angular momentum kept
+// to 4e-9 instead of 2e-15, tests/regression/test_fallback.py). Its
+// parallel symbolic factorisation needs a PETSc built with ParMETIS itself.
+static PetscErrorCode InsertFallbackDefaults() {
+  PetscFunctionBeginUser;
+  const char *const defaults[][2] = {{"-fallback_mat_superlu_dist_colperm", "PARMETIS"},
+                                     {"-fallback_mat_superlu_dist_equil", "false"}};
+  for (const auto &option : defaults) {
+    PetscBool set;
+    PetscCall(PetscOptionsHasName(nullptr, nullptr, option[0], &set));
+    if (!set) PetscCall(PetscOptionsSetValue(nullptr, option[0], option[1]));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 static bool IsBreakdown(KSPConvergedReason reason) {
   return reason == KSP_DIVERGED_PC_FAILED || reason == KSP_DIVERGED_INDEFINITE_PC ||
          reason == KSP_DIVERGED_INDEFINITE_MAT || reason == KSP_DIVERGED_NANORINF ||
@@ -470,8 +495,9 @@ PetscErrorCode ImplicitEuler::SolveDirectly(Vec v, KSPConvergedReason failed,
     PetscCall(KSPSetType(fallback_ksp_, KSPPREONLY));
     PC pc;
     PetscCall(KSPGetPC(fallback_ksp_, &pc));
-    PetscCall(PCSetType(pc, PCCHOLESKY));
-    PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERMUMPS));
+    PetscCall(PCSetType(pc, PCLU));
+    PetscCall(PCFactorSetMatSolverType(pc, MATSOLVERSUPERLU_DIST));
+    PetscCall(InsertFallbackDefaults());
     PetscCall(KSPSetFromOptions(fallback_ksp_));
   }
   PetscCall(PetscInfo(ksp_,
@@ -498,6 +524,13 @@ PetscErrorCode ImplicitEuler::Solve(Vec v, const ContactSolver *contact) {
     PetscCall(PCSetUp(pc));
     PetscCall(PetscTime(&end));
     stats_.last_setup_seconds = end - start;
+    PetscBool warp;
+    PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
+    if (warp && stats_.choice.empty()) {
+      SolverChoice inner;
+      PetscCall(PCWarpGetInnerChoice(pc, &inner));
+      if (inner.checked) stats_.choice = "warp around " + inner.reason;
+    }
   }
   if (!contact || contact->global_constraint_count() == 0) {
     PetscCall(KSPSolve(ksp_, rhs_, v));

@@ -76,7 +76,8 @@ struct IntegratorOptions {
   PetscInt newton_max_it = 50;
   PetscBool newton_always = PETSC_FALSE;
   // A solve that breaks down (a factor or preconditioner that is not positive
-  // definite, NaN) is repeated by a direct factorisation (MUMPS Cholesky).
+  // definite, NaN) is repeated by a distributed direct factorisation
+  // (SuperLU_dist LU, column order by ParMETIS; integrator.cpp).
   PetscBool fallback_direct = PETSC_TRUE;
 };
 
@@ -107,6 +108,7 @@ struct SolverStatistics {
   // corotational: dissipative steps that stalled above -newton_rtol
   PetscInt newton_stopped_short = 0;
   PetscInt fallback_solves = 0;  // solves repeated by the direct fallback after a breakdown
+  std::string choice;            // the default solver's choice and its reason (empty: none checked)
 };
 
 class ImplicitEuler {

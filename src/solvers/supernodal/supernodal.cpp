@@ -6,6 +6,8 @@
 
 #include <cholmod.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstring>
 #include <limits>
@@ -30,6 +32,19 @@ const char *const kOrderings[] = {"best", "amd", "metis", "SupernodalOrdering", 
 enum SupernodalOrdering { kOrderingBest, kOrderingAmd, kOrderingMetis };
 const char *const kPrecisions[] = {"double", "single", "SupernodalPrecision", "", nullptr};
 enum SupernodalPrecision { kDouble, kSingle };
+
+// Entries of the separator's Schur complement summed to rank 0 by one MPI
+// reduction: below INT_MAX (MPI's counts), and small enough that the buffer MPI
+// may allocate for a reduction (128 MB) stays a fraction of the blocks themselves.
+constexpr size_t kReduceChunk = size_t{1} << 24;
+// CHOLMOD factorises in double precision, whatever the solves use.
+constexpr double kCholmodBytesPerEntry = sizeof(double);
+// The default memory budget of the factor: three quarters of a rank's share of
+// its node's physical memory. The factor dominates a direct run (5.8 KB per tet
+// at 1e6 tets against about 1.1 KB for everything else, docs/performance.md);
+// the rest is left to that state, MPI and the system.
+constexpr double kBudgetShareOfMemory = 0.75;
+constexpr double kBytesPerMB = 1024.0 * 1024.0;
 
 // CHOLMOD's supernodal factor copied into softbody's own storage (huge pages,
 // large_array.hpp) in the precision Real, and the two triangular sweeps with
@@ -303,6 +318,7 @@ struct Supernodal {
   PetscObjectState pattern_state = -1;  // nonzero state of the factorised pattern
   SupernodalOrdering ordering = kOrderingBest;
   SupernodalPrecision precision = kDouble;
+  SupernodalLimits limits;
   PackedFactor<float> single;
   cholmod_dense *solution = nullptr, *work_y = nullptr, *work_e = nullptr;  // cholmod_solve2's
   Split split;                                                              // more than one rank
@@ -344,6 +360,24 @@ PetscErrorCode PCDestroy_Supernodal(PC pc) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// The default budget per rank: kBudgetShareOfMemory of the node's physical
+// memory divided by the ranks on the node.
+PetscErrorCode DefaultBudget(MPI_Comm comm, SupernodalLimits *limits) {
+  PetscFunctionBeginUser;
+  MPI_Comm node;
+  PetscMPIInt ranks_on_node;
+  PetscCallMPI(MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node));
+  PetscCallMPI(MPI_Comm_size(node, &ranks_on_node));
+  PetscCallMPI(MPI_Comm_free(&node));
+  const double physical =
+      static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
+  double budget = kBudgetShareOfMemory * physical / ranks_on_node / kBytesPerMB;
+  // Ranks may see different nodes: all take the smallest, so they decide alike.
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &budget, 1, MPI_DOUBLE, MPI_MIN, comm));
+  limits->budget_mb = budget;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode PCSetFromOptions_Supernodal(PC pc, PetscOptionItems *PetscOptionsObject) {
   PetscFunctionBeginUser;
   Supernodal *s = static_cast<Supernodal *>(pc->data);
@@ -358,6 +392,26 @@ PetscErrorCode PCSetFromOptions_Supernodal(PC pc, PetscOptionItems *PetscOptions
       "Precision of the factor in the solves: double, or single (half the memory traffic, "
       "about 1e-7 relative accuracy: for use as a preconditioner)",
       nullptr, kPrecisions, (PetscEnum)s->precision, (PetscEnum *)&s->precision, nullptr));
+  if (s->limits.budget_mb <= 0)
+    PetscCall(DefaultBudget(PetscObjectComm((PetscObject)pc), &s->limits));
+  PetscCall(PetscOptionsReal(
+      "-pc_supernodal_budget_mb",
+      "Largest predicted memory per rank of the factor (MB): the factor in double, its copy "
+      "for the solves and, on several ranks, the separator's dense blocks; a default solver "
+      "whose factor would need more switches to CG + GAMG (default: three quarters of the "
+      "node's physical memory over the ranks on the node)",
+      nullptr, s->limits.budget_mb, &s->limits.budget_mb, nullptr));
+  PetscCall(PetscOptionsInt(
+      "-pc_supernodal_max_separator",
+      "Largest separator (DOFs) of the split factor on several ranks: rank 0 factorises it "
+      "densely alone (n^3/3 flops) and solves with it at every application; above it the "
+      "default solver switches to CG + GAMG",
+      nullptr, s->limits.max_separator, &s->limits.max_separator, nullptr));
+  PetscCheck(s->limits.budget_mb > 0 && s->limits.max_separator >= 0,
+             PetscObjectComm((PetscObject)pc), PETSC_ERR_USER_INPUT,
+             "option -pc_supernodal_budget_mb must be > 0 and -pc_supernodal_max_separator >= 0 "
+             "(got %g and %" PetscInt_FMT ")",
+             s->limits.budget_mb, s->limits.max_separator);
   PetscOptionsHeadEnd();
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -401,6 +455,7 @@ void StartCholmod(Supernodal *s) {
 PetscErrorCode Analyse(Supernodal *s, cholmod_sparse *view, const std::vector<int> *user_order,
                        cholmod_factor **factor) {
   PetscFunctionBeginUser;
+  PetscCall(PetscInfo(nullptr, "supernodal: analysing %d DOFs\n", static_cast<int>(view->nrow)));
   if (user_order) {
     const int methods = s->common.nmethods, postorder = s->common.postorder,
               ordering = s->common.method[0].ordering;
@@ -436,6 +491,8 @@ PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_orde
   PetscCall(MatSeqAIJGetArrayRead(A, &values));
   cholmod_sparse view = LowerView(n, row_start, columns, values);
   if (!*factor) PetscCall(Analyse(s, &view, user_order, factor));
+  PetscCall(PetscInfo(nullptr, "supernodal: factorising %" PetscInt_FMT " DOFs (%.4g entries)\n", n,
+                      static_cast<double>((*factor)->xsize)));
   const int ok = cholmod_factorize(&view, *factor, &s->common);
   PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
   PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
@@ -450,6 +507,26 @@ PetscErrorCode Factorise(Supernodal *s, Mat A, const std::vector<int> *user_orde
   }
   PetscCheck((*factor)->is_super && (*factor)->xtype == CHOLMOD_REAL, PETSC_COMM_SELF,
              PETSC_ERR_LIB, "supernodal: CHOLMOD did not return a real supernodal factor");
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The symbolic factor of the SeqAIJ matrix A's pattern into *factor (in
+// exactly user_order when not null, else CHOLMOD's choice).
+PetscErrorCode AnalysePattern(Supernodal *s, Mat A, const std::vector<int> *user_order,
+                              cholmod_factor **factor) {
+  PetscFunctionBeginUser;
+  StartCholmod(s);
+  PetscInt n;
+  const PetscInt *row_start, *columns;
+  PetscBool done;
+  PetscCall(MatGetRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
+  PetscCheck(done, PETSC_COMM_SELF, PETSC_ERR_SUP, "supernodal: no CSR access to the matrix");
+  const PetscScalar *values;
+  PetscCall(MatSeqAIJGetArrayRead(A, &values));
+  cholmod_sparse view = LowerView(n, row_start, columns, values);
+  PetscCall(Analyse(s, &view, user_order, factor));
+  PetscCall(MatSeqAIJRestoreArrayRead(A, &values));
+  PetscCall(MatRestoreRowIJ(A, 0, PETSC_FALSE, PETSC_FALSE, &n, &row_start, &columns, &done));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -593,7 +670,7 @@ PetscErrorCode InteriorOrder(Supernodal *s, const std::vector<int> &interior_loc
 }
 
 // The separator, the local piece M_r and its order (Split's comment), and the
-// first factorisation of M_r in that order.
+// symbolic factor of M_r in that order (no values yet).
 PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
   PetscFunctionBeginUser;
   Split &p = s->split;
@@ -616,9 +693,8 @@ PetscErrorCode SplitStructure(Supernodal *s, Mat A) {
   cholmod_free_factor(&p.factor, &s->common);
   const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
   if (n > 0) {
-    PetscCall(Factorise(s, p.local[0], &order, &p.factor));
-    PetscCheck(s->failed ||
-                   std::equal(order.begin(), order.end(), static_cast<const int *>(p.factor->Perm)),
+    PetscCall(AnalysePattern(s, p.local[0], &order, &p.factor));
+    PetscCheck(std::equal(order.begin(), order.end(), static_cast<const int *>(p.factor->Perm)),
                PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD changed the given order");
   }
   p.local_b.assign(n, 0.0);
@@ -737,6 +813,20 @@ void KeepSeparatorFactor(Supernodal *s, std::vector<double> *schur, double *entr
   *flops += separator * (double)separator * separator / 3.0;
 }
 
+// Rank 0's values[i] becomes the sum over the ranks of values[i], i < count
+// (64-bit), in pieces of kReduceChunk entries (MPI counts are int).
+PetscErrorCode ReduceSumToRoot(MPI_Comm comm, double *values, size_t count) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  for (size_t first = 0; first < count; first += kReduceChunk) {
+    const int piece = static_cast<int>(std::min(kReduceChunk, count - first));
+    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : values + first, values + first, piece,
+                            MPI_DOUBLE, MPI_SUM, 0, comm));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   PetscFunctionBeginUser;
   Split &p = s->split;
@@ -744,12 +834,11 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   PetscCallMPI(MPI_Comm_size(comm, &size));
-  if (new_pattern || !p.local) {
-    PetscCall(SplitStructure(s, A));  // also factorises
-  } else {
+  if (new_pattern || !p.local)
+    PetscCall(SplitStructure(s, A));
+  else
     PetscCall(ExtractLocalPiece(A, MAT_REUSE_MATRIX, &p));
-    if (!p.local_dofs.empty()) PetscCall(Factorise(s, p.local[0], nullptr, &p.factor));
-  }
+  if (!p.local_dofs.empty()) PetscCall(Factorise(s, p.local[0], nullptr, &p.factor));
   PetscCall(AgreeOnFailure(comm, -1, &s->failed));  // any local factorisation
   if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
   const int separator = static_cast<int>(p.separator);
@@ -758,8 +847,7 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   if (!p.local_dofs.empty()) PetscCall(KeepLocalFactor(s, &schur, &entries, &flops));
   // Rank 0: S = sum_r C_r - (ranks - 1) A_SS, factorised densely.
   if (separator > 0) {
-    PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : schur.data(), schur.data(),
-                            separator * separator, MPI_DOUBLE, MPI_SUM, 0, comm));
+    PetscCall(ReduceSumToRoot(comm, schur.data(), schur.size()));
     if (rank == 0) PetscCall(FactoriseSeparator(s, size, &schur));
     PetscCall(AgreeOnFailure(comm, 0, &s->failed));  // rank 0's verdict on the separator
     if (s->failed) PetscFunctionReturn(PETSC_SUCCESS);
@@ -932,7 +1020,93 @@ PetscErrorCode PCCreate_Supernodal(PC pc) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// One rank: the symbolic factor of A (kept for the set-up); its entries.
+PetscErrorCode PredictOneRank(Supernodal *s, Mat A, SupernodalPrediction *prediction) {
+  PetscFunctionBeginUser;
+  cholmod_free_factor(&s->factor, &s->common);
+  PetscCall(AnalysePattern(s, A, nullptr, &s->factor));
+  prediction->factor_entries = prediction->factor_entries_total =
+      static_cast<double>(s->factor->xsize);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Several ranks: the separator's size n_S first (a count, nothing allocated);
+// when its dense blocks fit the budget, the split structure and the symbolic
+// factors of the ranks' pieces (kept for the set-up) and their entries.
+PetscErrorCode PredictSplit(Supernodal *s, Mat A, double budget_bytes,
+                            SupernodalPrediction *prediction) {
+  PetscFunctionBeginUser;
+  MPI_Comm comm = PetscObjectComm((PetscObject)A);
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  const PetscInt *ranges;
+  PetscCall(MatGetOwnershipRanges(A, &ranges));
+  std::vector<PetscInt> mine;
+  PetscCall(OwnedSeparatorDofs(A, ranges[rank], ranges[rank + 1], &mine));
+  PetscInt64 separator = static_cast<PetscInt64>(mine.size());
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &separator, 1, MPIU_INT64, MPI_SUM, comm));
+  prediction->separator = separator;
+  prediction->separator_bytes =
+      SupernodalSeparatorBytes(separator, s->precision == kSingle ? 4 : 8);
+  if (prediction->separator_bytes > budget_bytes || separator > s->limits.max_separator)
+    PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCall(SplitStructure(s, A));
+  const double entries = s->split.factor ? static_cast<double>(s->split.factor->xsize) : 0.0;
+  double largest = entries, total = entries;
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &largest, 1, MPI_DOUBLE, MPI_MAX, comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &total, 1, MPI_DOUBLE, MPI_SUM, comm));
+  prediction->factor_entries = largest;
+  prediction->factor_entries_total = total;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 }  // namespace
+
+double SupernodalSeparatorBytes(PetscInt64 separator, int bytes_per_entry) {
+  const double square = static_cast<double>(separator) * static_cast<double>(separator);
+  // Every rank: the trailing block of its factor copied out, and its
+  // contribution to the Schur complement (sum on rank 0); MPI's reduction
+  // buffer; rank 0: the dense factor kept for the solves.
+  return 2.0 * sizeof(double) * square +
+         sizeof(double) * std::min(square, static_cast<double>(kReduceChunk)) +
+         bytes_per_entry * square;
+}
+
+PetscErrorCode PCSupernodalPredict(PC pc, SupernodalPrediction *prediction) {
+  PetscFunctionBeginUser;
+  PetscBool is_supernodal;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &is_supernodal));
+  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG,
+             "not a supernodal PC");
+  PetscCheck(pc->pmat, PetscObjectComm((PetscObject)pc), PETSC_ERR_ORDER,
+             "supernodal: the operator must be set before the prediction");
+  Supernodal *s = static_cast<Supernodal *>(pc->data);
+  *prediction = SupernodalPrediction();
+  prediction->limits = s->limits;
+  const double budget_bytes = s->limits.budget_mb * kBytesPerMB;
+  const int bytes_per_entry = s->precision == kSingle ? 4 : 8;
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)pc), &size));
+  if (size == 1)
+    PetscCall(PredictOneRank(s, pc->pmat, prediction));
+  else
+    PetscCall(PredictSplit(s, pc->pmat, budget_bytes, prediction));
+  prediction->analysed = size == 1 || (prediction->separator_bytes <= budget_bytes &&
+                                       prediction->separator <= s->limits.max_separator);
+  if (prediction->analysed) {
+    PetscCall(MatGetNonzeroState(pc->pmat, &s->pattern_state));  // the set-up reuses the analysis
+    // The numeric factor in double and its copy in the solves' precision (one
+    // rank in double: CHOLMOD's own, no copy) beside the separator's blocks.
+    const bool copy = size > 1 || s->precision == kSingle;
+    prediction->bytes =
+        prediction->factor_entries * (kCholmodBytesPerEntry + (copy ? bytes_per_entry : 0)) +
+        prediction->separator_bytes;
+  } else {
+    prediction->bytes = prediction->separator_bytes;
+  }
+  prediction->affordable = prediction->analysed && prediction->bytes <= budget_bytes;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
 PetscErrorCode RegisterSupernodalPC() {
   PetscFunctionBeginUser;

@@ -22,7 +22,9 @@
 // return NaN), so the KSP stops with DIVERGED_PC_FAILED everywhere.
 //
 // Options (prefix of the PC): -pc_supernodal_ordering best|amd|metis,
-// -pc_supernodal_precision double|single.
+// -pc_supernodal_precision double|single, and the limits within which softbody's
+// default solvers keep the factor (SupernodalLimits, solver.hpp):
+// -pc_supernodal_budget_mb, -pc_supernodal_max_separator.
 #pragma once
 
 #include <petscksp.h>
@@ -45,5 +47,43 @@ PetscErrorCode PCSupernodalSetSinglePrecision(PC pc, bool single);
 // the solves (8, or 4 in single precision). Zeros before any set-up.
 PetscErrorCode PCSupernodalGetFactorSize(PC pc, double *stored_entries, double *nonzeros,
                                          double *factor_flops, int *bytes_per_entry);
+
+// When the factor is affordable (options -pc_supernodal_budget_mb and
+// -pc_supernodal_max_separator).
+struct SupernodalLimits {
+  double budget_mb = 0;  // per rank, MB (2^20 bytes); <= 0 before the options are read
+  // n_S above which rank 0's dense separator factor (n_S^3 / 3 flops, alone,
+  // at every refactorisation) costs more than the split saves: 5 000 DOFs are
+  // 4.2e10 flops, about 15 s on one core here, as long as one rank's whole
+  // factor of the 2e5-tet beam (docs/performance.md: its 8 949 took 89 s).
+  PetscInt max_separator = 5000;
+};
+
+// What a set-up would allocate, predicted from A's pattern before any of it is.
+struct SupernodalPrediction {
+  SupernodalLimits limits;          // the PC's, at the prediction
+  bool affordable = false;          // bytes within the budget and n_S within the largest separator
+  PetscInt64 separator = 0;         // n_S, DOFs of the separator (0 on one rank)
+  double separator_bytes = 0;       // the separator's dense blocks, on rank 0 (the most)
+  bool analysed = false;            // the symbolic factors were computed (below)
+  double factor_entries = 0;        // largest rank: entries of CHOLMOD's factor (xsize)
+  double factor_entries_total = 0;  // the same summed over the ranks
+  // Largest rank: the factor in double, its copy in the solves' precision and
+  // the separator's blocks, bytes (only separator_bytes when not analysed).
+  double bytes = 0;
+};
+
+// Not collective. Bytes of the separator's dense blocks for n_S = separator
+// (the trailing block of a rank's factor and its Schur contribution in double,
+// MPI's reduction buffer, and on rank 0 the dense factor at bytes_per_entry).
+double SupernodalSeparatorBytes(PetscInt64 separator, int bytes_per_entry);
+
+// Collective. Predicts the set-up of the PC on its operator (set, type
+// supernodal, options read): on several ranks counts the separator (64-bit)
+// and, only when its dense blocks and n_S are within the PC's limits, builds
+// the split structure and CHOLMOD's symbolic factors; on one rank the symbolic
+// factor of A. The symbolic work is kept, so the next set-up on the same
+// pattern does not redo it; nothing of the numeric factor is allocated.
+PetscErrorCode PCSupernodalPredict(PC pc, SupernodalPrediction *prediction);
 
 }  // namespace softbody

@@ -6,6 +6,7 @@
 
 #include <vector>
 
+#include "solvers/solver.hpp"
 #include "solvers/supernodal/supernodal.hpp"
 
 namespace softbody {
@@ -16,6 +17,7 @@ struct Warp {
   Mat linear = nullptr;           // A0 (referenced)
   PC inner = nullptr;             // A0^-1
   std::vector<double> rotations;  // 9 per owned vertex, row-major
+  SolverChoice choice;            // of the inner PC
   Vec rotated = nullptr, inner_solution = nullptr;
 };
 
@@ -38,8 +40,9 @@ PetscErrorCode PCDestroy_Warp(PC pc) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The inner PC on A0: supernodal Cholesky in single precision by default, its
-// options under the prefix warp_ (after the warp PC's own prefix).
+// The inner PC on A0: supernodal Cholesky in single precision by default while
+// affordable (else GAMG, solver.hpp), its options under the prefix warp_ (after
+// the warp PC's own prefix).
 PetscErrorCode CreateInnerPC(PC pc, Warp *w) {
   PetscFunctionBeginUser;
   PetscCall(RegisterSupernodalPC());
@@ -55,6 +58,8 @@ PetscErrorCode CreateInnerPC(PC pc, Warp *w) {
   PetscCall(PCSupernodalSetSinglePrecision(w->inner, true));
   PetscCall(PCSetOperators(w->inner, w->linear, w->linear));
   PetscCall(PCSetFromOptions(w->inner));
+  // The factor only within its limits, else a multigrid cycle on A0.
+  PetscCall(ChooseFactorOrMultigrid(nullptr, w->inner, &w->choice));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -160,6 +165,12 @@ PetscErrorCode PCWarpSetRotations(PC pc, PetscInt vertices, const double *rotati
   PetscFunctionBeginUser;
   Warp *w = static_cast<Warp *>(pc->data);
   w->rotations.assign(rotations, rotations + 9 * vertices);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCWarpGetInnerChoice(PC pc, SolverChoice *choice) {
+  PetscFunctionBeginUser;
+  *choice = static_cast<Warp *>(pc->data)->choice;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

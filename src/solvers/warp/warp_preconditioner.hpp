@@ -12,7 +12,8 @@
 // which is symmetric positive definite (CG can use it) and exact where a
 // neighbourhood turns rigidly. A0 is factorised once per time step size by the
 // inner PC (options prefix -warp_, default -warp_pc_type supernodal in single
-// precision: half the bytes per solve, and a preconditioner needs no more); a
+// precision: half the bytes per solve, and a preconditioner needs no more;
+// GAMG's cycle instead where the factor is over its limits, solver.hpp); a
 // step costs the rotations and, per CG iteration, two block-diagonal products and
 // one pair of triangular solves.
 //
@@ -23,6 +24,8 @@
 #pragma once
 
 #include <petscksp.h>
+
+#include "solvers/solver.hpp"
 
 namespace softbody {
 
@@ -38,6 +41,10 @@ PetscErrorCode PCWarpSetLinearOperator(PC pc, Mat linear);
 // Not collective. Per owned vertex a rotation, 9 values row-major (the
 // preconditioner applies R_v^T, then A0^-1, then R_v); copied.
 PetscErrorCode PCWarpSetRotations(PC pc, PetscInt vertices, const double *rotations);
+
+// Not collective. What the inner PC became at the first set-up (the factor
+// while affordable, else GAMG: ChooseFactorOrMultigrid); empty before.
+PetscErrorCode PCWarpGetInnerChoice(PC pc, SolverChoice *choice);
 
 // Collective. The inner PC (factor of A0); null before PCSetUp.
 PetscErrorCode PCWarpGetInnerPC(PC pc, PC *inner);
