@@ -19,10 +19,14 @@
 // [V][3], velocities [V][3], deformations_applied [D][1], resting_contacts
 // [n][2] (natural vertex, obstacle body; -1 the ground). A slot is marked
 // invalid and flushed before it is overwritten, and marked valid and flushed
-// after, so a run killed while checkpointing still holds the other slot.
+// after, so a run killed while checkpointing still holds the other slot. Every
+// rank writes the rows of its natural vertex slab (output.hpp's NaturalSlab);
+// rank 0 the small tables.
 //
 // -restart FILE.h5 continues from the newest valid slot: -steps still counts
-// from the original start. The scene must be the one the file was written with
+// from the original start. Every rank reads its own natural slab of the slot
+// (and checks its slab of the file's mesh), so the file may come from a run on
+// any number of ranks. The scene must be the one the file was written with
 // (same bodies, vertices, tets, rest positions and materials) and -deform must
 // list as many events; otherwise the run stops before set-up with one line. On
 // the same number of ranks with the same options, the continued run equals the
@@ -65,9 +69,10 @@ struct LoopState {
 // file holding a valid checkpoint.
 PetscErrorCode CheckRestartFile(MPI_Comm comm, const std::string &path);
 
-// Collective. Reads the newest checkpoint of `path`, checks it against the scene,
-// the number of -deform events and -steps, and sets the PETSc-ordered positions x
-// and velocities v. Every rank gets the whole LoopState.
+// Collective. Reads the newest checkpoint of `path` (every rank its slab),
+// checks it against the scene, the number of -deform events and -steps, and
+// sets the PETSc-ordered positions x and velocities v. Every rank reads the
+// whole LoopState. On failure, every rank fails with one message.
 PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, const Scene &scene,
                               const DofLayout &layout, size_t deformations, PetscInt steps, Vec x,
                               Vec v, LoopState *state);

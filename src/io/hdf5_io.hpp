@@ -1,7 +1,10 @@
 // Small HDF5 helpers shared by the result file and its checkpoints (output.cpp,
-// checkpoint.cpp). Not collective: only the rank that holds the file calls them.
-// Every function returns false (or a negative id) on failure and prints nothing:
-// the callers turn failures into one user-facing message.
+// checkpoint.cpp): attributes, groups, whole small datasets. On a file opened by
+// every rank with MPI-IO (parallel_hdf5.hpp) the writing ones (attributes,
+// groups) are collective and need equal arguments on every rank; reading is
+// independent (any rank may read). Every function returns false (or a negative
+// id) on failure and prints nothing: the callers turn failures into one
+// user-facing message.
 #pragma once
 
 #include <hdf5.h>
@@ -11,32 +14,6 @@
 #include <vector>
 
 namespace softbody {
-
-// Extendible dataset of frames: dims [0, frame_dims...], chunks of one frame
-// (1024 values for scalar series). Returns the open dataset (caller closes).
-hid_t CreateSeries(hid_t location, const char *name, const std::vector<hsize_t> &frame_dims);
-
-// Writes frame `frame` of a series created by CreateSeries (extending it to
-// frame + 1 frames when needed).
-bool WriteSeriesFrame(hid_t location, const char *name, hsize_t frame, const double *values);
-
-// Reads frame `frame` of a series into values (frame_size doubles).
-bool ReadSeriesFrame(hid_t location, const char *name, hsize_t frame, double *values);
-
-// Number of frames of a series (-1 when it does not exist).
-int64_t SeriesLength(hid_t location, const char *name);
-
-// Shrinks (or grows) a series to `frames` frames.
-bool ResizeSeries(hid_t location, const char *name, hsize_t frames);
-
-// A fixed-size dataset written at once.
-bool WriteArray(hid_t location, const char *name, hid_t type, const std::vector<hsize_t> &dims,
-                const void *values);
-
-// A two-dimensional dataset [rows][columns] whose row count may change between
-// writes (chunked, unlimited rows): created at the first write, resized after.
-bool WriteResizableArray(hid_t location, const char *name, hid_t type, hsize_t rows,
-                         hsize_t columns, const void *values);
 
 // Reads a whole dataset of `type` (any shape) into values, and its dims.
 template <typename T>

@@ -2,11 +2,13 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <string_view>
 
 #include "common/options.hpp"
 #include "io/hdf5_io.hpp"
+#include "io/parallel_hdf5.hpp"
 
 namespace softbody {
 
@@ -42,6 +44,14 @@ PetscErrorCode AgreeOnSuccess(MPI_Comm comm, bool ok, const std::string &message
   PetscFunctionBeginUser;
   int flag = ok ? 1 : 0;
   PetscCallMPI(MPI_Bcast(&flag, 1, MPI_INT, 0, comm));
+  PetscCheck(flag, comm, PETSC_ERR_USER_INPUT, "%s", message.c_str());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode AgreeOnAllRanks(MPI_Comm comm, bool ok, const std::string &message) {
+  PetscFunctionBeginUser;
+  int flag = ok ? 1 : 0;
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &flag, 1, MPI_INT, MPI_LAND, comm));
   PetscCheck(flag, comm, PETSC_ERR_USER_INPUT, "%s", message.c_str());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -86,58 +96,118 @@ PetscErrorCode CheckOutputPath(MPI_Comm comm, const char *option, const std::str
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-NaturalOrder::~NaturalOrder() {
+namespace {
+
+// Calls visit(body, b, from, to) for each body b that meets the natural range
+// `slab`, with [from, to) its part of the range counted from the body's first
+// item; `first_of(b)` is body b's first natural index and `count_of(b)` its
+// number of items (vertices or tets).
+template <typename First, typename Count, typename Visit>
+void ForEachBodyPart(const Scene &scene, RowSlab slab, First first_of, Count count_of,
+                     Visit visit) {
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const hsize_t first = first_of(b), last = first + count_of(b);
+    const hsize_t from = std::max(first, slab.begin), to = std::min(last, slab.end);
+    if (from < to) visit(scene.bodies[b], b, from - first, to - first);
+  }
+}
+
+template <typename Visit>
+void ForEachBodyVertices(const Scene &scene, RowSlab slab, Visit visit) {
+  ForEachBodyPart(
+      scene, slab, [&](size_t b) { return hsize_t(scene.bodies[b].first_vertex); },
+      [&](size_t b) { return hsize_t(scene.bodies[b].mesh.num_vertices()); }, visit);
+}
+
+}  // namespace
+
+std::vector<double> SlabRestPositions(const Scene &scene, RowSlab vertices) {
+  std::vector<double> rest;
+  rest.reserve(3 * vertices.count());
+  ForEachBodyVertices(scene, vertices, [&](const Body &body, size_t, hsize_t from, hsize_t to) {
+    for (hsize_t v = from; v < to; ++v)
+      for (int c = 0; c < 3; ++c) rest.push_back(body.mesh.vertices(v, c));
+  });
+  return rest;
+}
+
+std::vector<int32_t> SlabVertexBodies(const Scene &scene, RowSlab vertices) {
+  std::vector<int32_t> bodies;
+  bodies.reserve(vertices.count());
+  ForEachBodyVertices(scene, vertices, [&](const Body &, size_t b, hsize_t from, hsize_t to) {
+    bodies.insert(bodies.end(), to - from, static_cast<int32_t>(b));
+  });
+  return bodies;
+}
+
+std::vector<int32_t> SlabTets(const Scene &scene, RowSlab tets) {
+  std::vector<hsize_t> first_tet(scene.bodies.size() + 1, 0);
+  for (size_t b = 0; b < scene.bodies.size(); ++b)
+    first_tet[b + 1] = first_tet[b] + scene.bodies[b].mesh.num_tets();
+  std::vector<int32_t> corners;
+  corners.reserve(4 * tets.count());
+  ForEachBodyPart(
+      scene, tets, [&](size_t b) { return first_tet[b]; },
+      [&](size_t b) { return first_tet[b + 1] - first_tet[b]; },
+      [&](const Body &body, size_t, hsize_t from, hsize_t to) {
+        for (hsize_t t = from; t < to; ++t)
+          for (int a = 0; a < 4; ++a) corners.push_back(body.first_vertex + body.mesh.tets(t, a));
+      });
+  return corners;
+}
+
+NaturalSlab::~NaturalSlab() {
   VecScatterDestroy(&scatter_);
   VecDestroy(&natural_template_);
 }
 
-PetscErrorCode NaturalOrder::Setup(const Scene &scene, const DofLayout &layout, Vec like) {
+PetscErrorCode NaturalSlab::Setup(const Scene &scene, const DofLayout &layout, Vec like) {
   PetscFunctionBeginUser;
   scene_ = &scene;
-  // Rank 0 receives every free DOF at its natural all-vertex slot.
-  const PetscInt n_free = layout.rank == 0 ? layout.num_free() : 0;
-  std::vector<PetscInt> from(3 * n_free), to(3 * n_free);
-  for (PetscInt f = 0; f < n_free; ++f)
-    for (int c = 0; c < 3; ++c) {
-      from[3 * f + c] = 3 * layout.petsc_of_free[f] + c;
-      to[3 * f + c] = 3 * layout.natural_of_free[f] + c;
-    }
-  PetscCall(VecCreateSeq(PETSC_COMM_SELF, layout.rank == 0 ? 3 * scene.num_vertices() : 0,
-                         &natural_template_));
+  MPI_Comm comm = PetscObjectComm((PetscObject)like);
+  slab_ = EvenSlab(static_cast<hsize_t>(scene.num_vertices()), layout.rank, layout.size);
+  PetscCall(VecCreate(comm, &natural_template_));
+  PetscCall(VecSetSizes(natural_template_, 3 * static_cast<PetscInt>(slab_.count()),
+                        3 * static_cast<PetscInt>(scene.num_vertices())));
+  PetscCall(VecSetBlockSize(natural_template_, 3));
+  PetscCall(VecSetType(natural_template_, VECMPI));
+  // Each rank sends its owned vertices (PETSc block local_begin + i) to their
+  // natural blocks, wherever those live.
+  const PetscInt owned = layout.local_count();
+  std::vector<PetscInt> from(owned),
+      to(layout.natural_of_owned.begin(), layout.natural_of_owned.end());
+  for (PetscInt i = 0; i < owned; ++i) from[i] = layout.local_begin() + i;
   IS is_from, is_to;
-  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, 3 * n_free, from.data(), PETSC_COPY_VALUES, &is_from));
-  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, 3 * n_free, to.data(), PETSC_COPY_VALUES, &is_to));
+  PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, owned, from.data(), PETSC_COPY_VALUES, &is_from));
+  PetscCall(ISCreateBlock(PETSC_COMM_SELF, 3, owned, to.data(), PETSC_COPY_VALUES, &is_to));
   PetscCall(VecScatterCreate(like, is_from, natural_template_, is_to, &scatter_));
   PetscCall(ISDestroy(&is_from));
   PetscCall(ISDestroy(&is_to));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode NaturalOrder::CreateVector(bool rest, Vec *natural) const {
+PetscErrorCode NaturalSlab::CreateVector(bool rest, Vec *natural) const {
   PetscFunctionBeginUser;
   PetscCall(VecDuplicate(natural_template_, natural));
   PetscCall(VecZeroEntries(*natural));
-  PetscInt n;
-  PetscCall(VecGetLocalSize(*natural, &n));
-  if (rest && n > 0) {
+  if (rest && slab_.count() > 0) {
+    const std::vector<double> positions = SlabRestPositions(*scene_, slab_);
     PetscScalar *x;
     PetscCall(VecGetArray(*natural, &x));
-    for (const Body &body : scene_->bodies)
-      for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
-        for (int c = 0; c < 3; ++c) x[3 * (body.first_vertex + v) + c] = body.mesh.vertices(v, c);
+    std::copy(positions.begin(), positions.end(), x);
     PetscCall(VecRestoreArray(*natural, &x));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode NaturalOrder::Gather(Vec dofs, Vec natural) const {
+PetscErrorCode NaturalSlab::Gather(Vec dofs, Vec natural) const {
   PetscFunctionBeginUser;
   PetscCall(VecScatterBegin(scatter_, dofs, natural, INSERT_VALUES, SCATTER_FORWARD));
   PetscCall(VecScatterEnd(scatter_, dofs, natural, INSERT_VALUES, SCATTER_FORWARD));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode NaturalOrder::Scatter(Vec natural, Vec dofs) const {
+PetscErrorCode NaturalSlab::Scatter(Vec natural, Vec dofs) const {
   PetscFunctionBeginUser;
   PetscCall(VecScatterBegin(scatter_, natural, dofs, INSERT_VALUES, SCATTER_REVERSE));
   PetscCall(VecScatterEnd(scatter_, natural, dofs, INSERT_VALUES, SCATTER_REVERSE));
@@ -155,46 +225,96 @@ constexpr SeriesName kSeries[] = {{"/time", false},           {"/positions", tru
                                   {"/velocities", true},      {"/energy/kinetic", false},
                                   {"/energy/elastic", false}, {"/energy/gravitational", false}};
 
-// Root attribute "complete": 0 while the run goes on, 1 once it has finished.
+// Collective. Root attribute "complete": 0 while the run goes on, 1 once it has finished.
 bool MarkComplete(hid_t file, int complete) {
   return SetAttribute(file, "complete", H5T_NATIVE_INT, &complete);
 }
 
-// Rank 0: the static mesh datasets under /mesh.
-bool WriteMesh(hid_t file, const Scene &scene) {
-  const hid_t group = H5Gcreate2(file, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  std::vector<int32_t> tets, triangles, vertex_body, body_fixed;
-  std::vector<double> rest, materials;
-  for (size_t b = 0; b < scene.bodies.size(); ++b) {
-    const Body &body = scene.bodies[b];
-    body_fixed.push_back(body.fixed && !body.at_rest ? 1 : 0);
-    materials.insert(materials.end(),
-                     {body.material.density, body.material.young, body.material.poisson});
-    for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-      for (int a = 0; a < 4; ++a) tets.push_back(body.first_vertex + body.mesh.tets(t, a));
-    const auto boundary = BoundaryTriangles(body.mesh);
-    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-      for (int a = 0; a < 3; ++a) triangles.push_back(body.first_vertex + boundary(f, a));
-    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
-      vertex_body.push_back(static_cast<int32_t>(b));
-      for (int c = 0; c < 3; ++c) rest.push_back(body.mesh.vertices(v, c));
-    }
-  }
-  const hsize_t V = vertex_body.size(), B = body_fixed.size();
-  bool ok = group >= 0;
-  ok = ok && WriteArray(group, "tets", H5T_NATIVE_INT32, {tets.size() / 4, 4}, tets.data());
-  ok = ok && WriteArray(group, "boundary_triangles", H5T_NATIVE_INT32, {triangles.size() / 3, 3},
-                        triangles.data());
-  ok = ok && WriteArray(group, "vertex_body", H5T_NATIVE_INT32, {V}, vertex_body.data());
-  ok = ok && WriteArray(group, "rest_positions", H5T_NATIVE_DOUBLE, {V, 3}, rest.data());
-  ok = ok && WriteArray(group, "body_fixed", H5T_NATIVE_INT32, {B}, body_fixed.data());
-  ok = ok && WriteArray(group, "body_material", H5T_NATIVE_DOUBLE, {B, 3}, materials.data());
-  ok = ok && SetAttribute(group, "scene", scene.path);
-  if (group >= 0) H5Gclose(group);
+// Collective. Creates the fixed dataset location/name [rows][columns] (columns 0:
+// one-dimensional [rows]) and writes this rank's rows `slab` from `values`.
+bool WriteSlabDataset(hid_t location, const char *name, hid_t type, hsize_t rows, hsize_t columns,
+                      RowSlab slab, const void *values) {
+  const hid_t set = CreateRowDataset(
+      location, name, type,
+      columns ? std::vector<hsize_t>{rows, columns} : std::vector<hsize_t>{rows}, false);
+  const bool ok = set >= 0 && WriteRows(set, type, slab, values);
+  if (set >= 0) H5Dclose(set);
   return ok;
 }
 
+// Not collective. The boundary triangles (3 natural vertices per row, each
+// body's as BoundaryTriangles orders them) of bodies [bodies.begin, bodies.end).
+// Each body's boundary needs its whole mesh: the bodies are split between the
+// ranks, not the triangles.
+std::vector<int32_t> BodiesBoundaryTriangles(const Scene &scene, RowSlab bodies) {
+  std::vector<int32_t> triangles;
+  for (hsize_t b = bodies.begin; b < bodies.end; ++b) {
+    const Body &body = scene.bodies[b];
+    const auto boundary = BoundaryTriangles(body.mesh);
+    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
+      for (int a = 0; a < 3; ++a) triangles.push_back(body.first_vertex + boundary(f, a));
+  }
+  return triangles;
+}
+
+// Collective. Rows [begin, end) of /mesh/boundary_triangles that `local` rows
+// computed on this rank fill (the ranks' rows follow each other in rank order),
+// and the total number of rows.
+PetscErrorCode RowsInRankOrder(MPI_Comm comm, hsize_t local, RowSlab *rows, hsize_t *total) {
+  PetscFunctionBeginUser;
+  uint64_t count = local, before = 0, all = 0;
+  PetscCallMPI(MPI_Exscan(&count, &before, 1, MPI_UINT64_T, MPI_SUM, comm));
+  PetscCallMPI(MPI_Allreduce(&count, &all, 1, MPI_UINT64_T, MPI_SUM, comm));
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  if (rank == 0) before = 0;  // MPI_Exscan leaves rank 0's result undefined
+  *rows = {before, before + count};
+  *total = all;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 }  // namespace
+
+// Collective. The static mesh datasets under /mesh, every rank its slabs.
+PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, bool *written) {
+  PetscFunctionBeginUser;
+  const hid_t group = H5Gcreate2(file_, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  const RowSlab vertices = natural_.vertices();
+  const RowSlab tets = EvenSlab(static_cast<hsize_t>(num_tets_), rank_, size_);
+  const hsize_t V = static_cast<hsize_t>(num_vertices_), T = static_cast<hsize_t>(num_tets_);
+  const hsize_t bodies = scene.bodies.size();
+  const std::vector<int32_t> triangles =
+      BodiesBoundaryTriangles(scene, EvenSlab(bodies, rank_, size_));
+  hsize_t B = 0;
+  RowSlab triangle_rows;
+  PetscCall(RowsInRankOrder(comm_, triangles.size() / 3, &triangle_rows, &B));
+  // The per-body tables are small: rank 0 writes them whole.
+  const RowSlab body_rows{0, rank_ == 0 ? bodies : 0};
+  std::vector<int32_t> body_fixed;
+  std::vector<double> materials;
+  for (const Body &body : scene.bodies) {
+    body_fixed.push_back(body.fixed && !body.at_rest ? 1 : 0);
+    materials.insert(materials.end(),
+                     {body.material.density, body.material.young, body.material.poisson});
+  }
+  bool ok = group >= 0;
+  ok = ok &&
+       WriteSlabDataset(group, "tets", H5T_NATIVE_INT32, T, 4, tets, SlabTets(scene, tets).data());
+  ok = ok && WriteSlabDataset(group, "boundary_triangles", H5T_NATIVE_INT32, B, 3, triangle_rows,
+                              triangles.data());
+  ok = ok && WriteSlabDataset(group, "vertex_body", H5T_NATIVE_INT32, V, 0, vertices,
+                              SlabVertexBodies(scene, vertices).data());
+  ok = ok && WriteSlabDataset(group, "rest_positions", H5T_NATIVE_DOUBLE, V, 3, vertices,
+                              SlabRestPositions(scene, vertices).data());
+  ok = ok && WriteSlabDataset(group, "body_fixed", H5T_NATIVE_INT32, bodies, 0, body_rows,
+                              body_fixed.data());
+  ok = ok && WriteSlabDataset(group, "body_material", H5T_NATIVE_DOUBLE, bodies, 3, body_rows,
+                              materials.data());
+  ok = ok && SetAttribute(group, "scene", scene.path);
+  if (group >= 0) H5Gclose(group);
+  *written = ok;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
 ResultWriter::~ResultWriter() {
   if (file_ >= 0) H5Fclose(file_);
@@ -203,50 +323,101 @@ ResultWriter::~ResultWriter() {
   VecDestroy(&velocities_);
 }
 
-bool ResultWriter::CreateFile(const Scene &scene) {
-  file_ = H5Fcreate(options_.path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-  if (file_ < 0) return false;
+// Collective. A new file with the mesh and the empty series.
+PetscErrorCode ResultWriter::CreateFile(const Scene &scene, bool *created) {
+  PetscFunctionBeginUser;
+  file_ = CreateParallelFile(comm_, options_.path);
+  *created = file_ >= 0;
+  if (file_ < 0) PetscFunctionReturn(PETSC_SUCCESS);
   const hsize_t V = static_cast<hsize_t>(num_vertices_);
   const hid_t energy = H5Gcreate2(file_, "/energy", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   bool ok = energy >= 0;
   if (energy >= 0) H5Gclose(energy);
   for (const SeriesName &series : kSeries) {
     const hid_t set =
-        CreateSeries(file_, series.name,
-                     series.per_vertex ? std::vector<hsize_t>{V, 3} : std::vector<hsize_t>{});
+        CreateFrameDataset(file_, series.name,
+                           series.per_vertex ? std::vector<hsize_t>{V, 3} : std::vector<hsize_t>{});
     ok = ok && set >= 0;
     if (set >= 0) H5Dclose(set);
   }
-  return ok && WriteMesh(file_, scene) && MarkComplete(file_, 0);
+  bool mesh = false;
+  PetscCall(WriteMesh(scene, &mesh));
+  *created = ok && mesh && MarkComplete(file_, 0);
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Rank 0: reopens the continued file and cuts its series back to the kept frames.
+namespace {
+
+// Collective. The number of frames of series `name` (-1: none).
+int64_t SeriesLength(hid_t file, const char *name) {
+  if (!LinkExists(file, name)) return -1;
+  const hid_t set = H5Dopen2(file, name, H5P_DEFAULT);
+  const std::vector<hsize_t> dims = set >= 0 ? DatasetDims(set) : std::vector<hsize_t>{};
+  if (set >= 0) H5Dclose(set);
+  return dims.empty() ? -1 : static_cast<int64_t>(dims[0]);
+}
+
+// Collective. Cuts series `name` to `frames` frames.
+bool ResizeSeries(hid_t file, const char *name, hsize_t frames) {
+  const hid_t set = H5Dopen2(file, name, H5P_DEFAULT);
+  const bool ok = set >= 0 && ExtendRows(set, frames);
+  if (set >= 0) H5Dclose(set);
+  return ok;
+}
+
+// Collective. Every rank reads the first `frames` values of /time.
+bool ReadTimes(hid_t file, PetscInt frames, std::vector<double> *times) {
+  times->resize(frames);
+  const hid_t set = H5Dopen2(file, "/time", H5P_DEFAULT);
+  const bool ok = set >= 0 && ReadRows(set, H5T_NATIVE_DOUBLE, {0, hsize_t(frames)}, times->data());
+  if (set >= 0) H5Dclose(set);
+  return ok;
+}
+
+// Collective. Copies frame `frame` of series `series` from `source` to `target`,
+// every rank the rows of its vertex slab (rank 0 the scalars).
+bool CopyFrame(hid_t source, hid_t target, const SeriesName &series, hsize_t frame, RowSlab slab,
+               bool first_rank, std::vector<double> *buffer) {
+  const hid_t from = H5Dopen2(source, series.name, H5P_DEFAULT);
+  const hid_t to = H5Dopen2(target, series.name, H5P_DEFAULT);
+  bool ok = from >= 0 && to >= 0;
+  if (ok && series.per_vertex) {
+    buffer->resize(3 * slab.count());
+    ok = ReadFrameRows(from, frame, H5T_NATIVE_DOUBLE, slab, buffer->data()) &&
+         WriteFrameRows(to, frame, H5T_NATIVE_DOUBLE, slab, buffer->data());
+  } else if (ok) {
+    double value = 0;
+    ok = ReadScalarFrame(from, frame, &value) && WriteScalarFrame(to, frame, value, first_rank);
+  }
+  if (from >= 0) H5Dclose(from);
+  if (to >= 0) H5Dclose(to);
+  return ok;
+}
+
+}  // namespace
+
+// Collective. Reopens the continued file and cuts its series back to the kept frames.
 bool ResultWriter::ContinueInPlace(const Continuation &continuation) {
-  file_ = H5Fopen(options_.path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  file_ = OpenParallelFile(comm_, options_.path, true);
   if (file_ < 0) return false;
   for (const SeriesName &series : kSeries)
     if (SeriesLength(file_, series.name) < continuation.frames ||
         !ResizeSeries(file_, series.name, continuation.frames))
       return false;
-  times_.resize(continuation.frames);
-  for (PetscInt f = 0; f < continuation.frames; ++f)
-    if (!ReadSeriesFrame(file_, "/time", f, &times_[f])) return false;
-  return MarkComplete(file_, 0) && H5Fflush(file_, H5F_SCOPE_LOCAL) >= 0;
+  return ReadTimes(file_, continuation.frames, &times_) && MarkComplete(file_, 0) &&
+         H5Fflush(file_, H5F_SCOPE_LOCAL) >= 0;
 }
 
-// Rank 0: copies the kept frames of the continued file into the new one, frame by frame.
+// Collective. Copies the kept frames of the continued file into the new one,
+// frame by frame, every rank its slab.
 bool ResultWriter::CopyFrames(const Continuation &continuation) {
-  const hid_t source = H5Fopen(continuation.source.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  const hid_t source = OpenParallelFile(comm_, continuation.source, false);
   if (source < 0) return false;
-  std::vector<double> frame(3 * static_cast<size_t>(num_vertices_));
-  bool ok = true;
-  times_.resize(continuation.frames);
+  std::vector<double> buffer;
+  bool ok = ReadTimes(source, continuation.frames, &times_);
   for (PetscInt f = 0; ok && f < continuation.frames; ++f)
-    for (const SeriesName &series : kSeries) {
-      ok = ok && ReadSeriesFrame(source, series.name, f, frame.data()) &&
-           WriteSeriesFrame(file_, series.name, f, frame.data());
-      if (std::string_view(series.name) == "/time") times_[f] = frame[0];
-    }
+    for (const SeriesName &series : kSeries)
+      ok = ok && CopyFrame(source, file_, series, f, natural_.vertices(), rank_ == 0, &buffer);
   H5Fclose(source);
   return ok && H5Fflush(file_, H5F_SCOPE_LOCAL) >= 0;
 }
@@ -258,6 +429,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
   comm_ = comm;
   options_ = options;
   PetscCallMPI(MPI_Comm_rank(comm, &rank_));
+  PetscCallMPI(MPI_Comm_size(comm, &size_));
   num_vertices_ = scene.num_vertices();
   num_tets_ = scene.num_tets();
   PetscCall(natural_.Setup(scene, layout, like));
@@ -265,42 +437,49 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
   PetscCall(natural_.CreateVector(true, &positions_));
   PetscCall(natural_.CreateVector(false, &velocities_));
 
+  H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // we report failures ourselves
+  int in_place = 0;
+  if (rank_ == 0 && continuation) {
+    std::error_code error;
+    in_place = std::filesystem::exists(options_.path, error) &&
+               std::filesystem::equivalent(options_.path, continuation->source, error);
+  }
+  PetscCallMPI(MPI_Bcast(&in_place, 1, MPI_INT, 0, comm));
   bool ok = true;
   std::string what = "cannot create HDF5 file";
+  if (in_place) {
+    what = "cannot continue HDF5 file";
+    ok = ContinueInPlace(*continuation);
+  } else {
+    PetscCall(CreateFile(scene, &ok));
+    if (ok && continuation) {
+      what = "cannot copy the first frames of '" + continuation->source + "' into";
+      ok = CopyFrames(*continuation);
+    }
+  }
+  PetscCall(AgreeOnAllRanks(comm, ok, "option -output: " + what + " '" + options_.path + "'"));
+  PetscCall(OpenXdmf());
+  xdmf_frames_ = times_.size();  // listed by the .xdmf just written: every rank counts from here
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. Rank 0 writes the .xdmf listing the frames already in the file.
+PetscErrorCode ResultWriter::OpenXdmf() {
+  PetscFunctionBeginUser;
+  bool ok = true;
   if (rank_ == 0) {
-    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // we report failures ourselves
-    std::error_code error;
-    const bool in_place = continuation && std::filesystem::exists(options_.path, error) &&
-                          std::filesystem::equivalent(options_.path, continuation->source, error);
-    if (in_place) {
-      what = "cannot continue HDF5 file";
-      ok = ContinueInPlace(*continuation);
-    } else {
-      ok = CreateFile(scene);
-      if (ok && continuation) {
-        what = "cannot copy the first frames of '" + continuation->source + "' into";
-        ok = CopyFrames(*continuation);
-      }
-    }
-    if (ok) {
-      xdmf_ = std::fopen(XdmfPath(options_.path).c_str(), "w");
-      what = "cannot create '" + XdmfPath(options_.path) + "' beside";
-      ok = xdmf_ && std::fputs(
-                        "<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n<Domain>\n<Grid "
-                        "Name=\"softbody\" GridType=\"Collection\" CollectionType=\"Temporal\">\n",
-                        xdmf_) >= 0;
-      xdmf_tail_ = ok ? std::ftell(xdmf_) : 0;
-      ok = ok && ExtendXdmf();
-    }
+    xdmf_ = std::fopen(XdmfPath(options_.path).c_str(), "w");
+    ok = xdmf_ && std::fputs(
+                      "<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n<Domain>\n<Grid "
+                      "Name=\"softbody\" GridType=\"Collection\" "
+                      "CollectionType=\"Temporal\">\n",
+                      xdmf_) >= 0;
+    xdmf_tail_ = ok ? std::ftell(xdmf_) : 0;
+    ok = ok && ExtendXdmf();
   }
-  PetscCall(AgreeOnSuccess(comm, ok, "option -output: " + what + " '" + options_.path + "'"));
-  if (continuation) {  // every rank counts the kept frames
-    PetscInt count = static_cast<PetscInt>(times_.size());
-    PetscCallMPI(MPI_Bcast(&count, 1, MPIU_INT, 0, comm));
-    times_.resize(count);
-    PetscCallMPI(MPI_Bcast(times_.data(), static_cast<int>(count), MPI_DOUBLE, 0, comm));
-    xdmf_frames_ = times_.size();  // listed by the .xdmf just written: every rank counts from here
-  }
+  PetscCall(AgreeOnSuccess(comm_, ok,
+                           "option -output: cannot create '" + XdmfPath(options_.path) +
+                               "' beside '" + options_.path + "'"));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -309,22 +488,31 @@ PetscErrorCode ResultWriter::WriteFrame(PetscReal time, Vec positions, Vec veloc
   PetscFunctionBeginUser;
   PetscCall(natural_.Gather(positions, positions_));
   PetscCall(natural_.Gather(velocities, velocities_));
+  const hsize_t frame = times_.size();
+  const PetscScalar *x, *v;
+  PetscCall(VecGetArrayRead(positions_, &x));
+  PetscCall(VecGetArrayRead(velocities_, &v));
+  const std::pair<const char *, const double *> rows[] = {{"/positions", x}, {"/velocities", v}};
+  const std::pair<const char *, double> scalars[] = {
+      {"/time", time},
+      {"/energy/kinetic", energy.kinetic},
+      {"/energy/elastic", energy.elastic},
+      {"/energy/gravitational", energy.gravitational}};
   bool ok = true;
-  if (rank_ == 0) {
-    const hsize_t frame = times_.size();
-    const PetscScalar *x, *v;
-    PetscCall(VecGetArrayRead(positions_, &x));
-    PetscCall(VecGetArrayRead(velocities_, &v));
-    ok = WriteSeriesFrame(file_, "/time", frame, &time) &&
-         WriteSeriesFrame(file_, "/positions", frame, x) &&
-         WriteSeriesFrame(file_, "/velocities", frame, v) &&
-         WriteSeriesFrame(file_, "/energy/kinetic", frame, &energy.kinetic) &&
-         WriteSeriesFrame(file_, "/energy/elastic", frame, &energy.elastic) &&
-         WriteSeriesFrame(file_, "/energy/gravitational", frame, &energy.gravitational);
-    PetscCall(VecRestoreArrayRead(positions_, &x));
-    PetscCall(VecRestoreArrayRead(velocities_, &v));
+  for (const auto &[name, values] : rows) {
+    const hid_t set = H5Dopen2(file_, name, H5P_DEFAULT);
+    ok = ok && set >= 0 &&
+         WriteFrameRows(set, frame, H5T_NATIVE_DOUBLE, natural_.vertices(), values);
+    if (set >= 0) H5Dclose(set);
   }
-  PetscCall(AgreeOnSuccess(comm_, ok, "cannot write frame to '" + options_.path + "'"));
+  for (const auto &[name, value] : scalars) {
+    const hid_t set = H5Dopen2(file_, name, H5P_DEFAULT);
+    ok = ok && set >= 0 && WriteScalarFrame(set, frame, value, rank_ == 0);
+    if (set >= 0) H5Dclose(set);
+  }
+  PetscCall(VecRestoreArrayRead(positions_, &x));
+  PetscCall(VecRestoreArrayRead(velocities_, &v));
+  PetscCall(AgreeOnAllRanks(comm_, ok, "cannot write frame to '" + options_.path + "'"));
   times_.push_back(time);
   if (static_cast<PetscInt>(times_.size() - xdmf_frames_) >= options_.flush_every)
     PetscCall(Flush());
@@ -375,8 +563,10 @@ bool ResultWriter::ExtendXdmf() {
 
 PetscErrorCode ResultWriter::Flush() {
   PetscFunctionBeginUser;
-  bool ok = true;
-  if (rank_ == 0) ok = H5Fflush(file_, H5F_SCOPE_LOCAL) >= 0 && ExtendXdmf();
+  // The frames reach the disk (collectively) before the .xdmf lists them.
+  bool ok = H5Fflush(file_, H5F_SCOPE_LOCAL) >= 0;
+  PetscCall(AgreeOnAllRanks(comm_, ok, "cannot flush '" + options_.path + "'"));
+  if (rank_ == 0) ok = ExtendXdmf();
   PetscCall(AgreeOnSuccess(comm_, ok, "cannot flush '" + options_.path + "' and its .xdmf"));
   xdmf_frames_ = times_.size();
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -384,26 +574,34 @@ PetscErrorCode ResultWriter::Flush() {
 
 PetscErrorCode ResultWriter::WriteWorld(const double gravity[3], const double *ground_y) {
   PetscFunctionBeginUser;
-  bool ok = true;
-  if (rank_ == 0) {
-    ok = SetAttribute(file_, "gravity", gravity, 3);
-    if (ground_y) ok = ok && SetAttribute(file_, "ground_y", *ground_y);
-  }
-  PetscCall(AgreeOnSuccess(comm_, ok, "cannot write to '" + options_.path + "'"));
+  bool ok = SetAttribute(file_, "gravity", gravity, 3);
+  if (ground_y) ok = SetAttribute(file_, "ground_y", *ground_y) && ok;
+  PetscCall(AgreeOnAllRanks(comm_, ok, "cannot write to '" + options_.path + "'"));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ResultWriter::Close(const std::vector<std::pair<std::string, double>> &statistics,
                                    int interrupted_by) {
   PetscFunctionBeginUser;
+  if (file_ < 0) PetscFunctionReturn(PETSC_SUCCESS);
+  // Attributes are metadata: every rank writes rank 0's values (timings differ).
+  std::vector<double> values;
+  for (const auto &entry : statistics) values.push_back(entry.second);
+  int counts[2] = {static_cast<int>(values.size()), -static_cast<int>(values.size())};
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, counts, 2, MPI_INT, MPI_MAX, comm_));
+  PetscCheck(counts[0] == -counts[1], comm_, PETSC_ERR_PLIB,
+             "the ranks hold different numbers of statistics for '%s'", options_.path.c_str());
+  PetscCallMPI(MPI_Bcast(values.data(), static_cast<int>(values.size()), MPI_DOUBLE, 0, comm_));
   bool ok = true;
-  if (rank_ == 0 && file_ >= 0) {
-    for (const auto &[name, value] : statistics)
-      ok = ok && SetAttribute(file_, name.c_str(), value);
-    ok = ok && SetAttribute(file_, "interrupted", H5T_NATIVE_INT, &interrupted_by) &&
-         MarkComplete(file_, interrupted_by ? 0 : 1) && H5Fclose(file_) >= 0;
-    file_ = -1;
-    ok = ok && ExtendXdmf() && std::fclose(xdmf_) == 0;
+  for (size_t i = 0; i < statistics.size(); ++i)
+    ok = SetAttribute(file_, statistics[i].first.c_str(), values[i]) && ok;
+  ok = SetAttribute(file_, "interrupted", H5T_NATIVE_INT, &interrupted_by) && ok;
+  ok = MarkComplete(file_, interrupted_by ? 0 : 1) && ok;
+  ok = H5Fclose(file_) >= 0 && ok;
+  file_ = -1;
+  PetscCall(AgreeOnAllRanks(comm_, ok, "cannot finish '" + options_.path + "'"));
+  if (rank_ == 0) {
+    ok = ExtendXdmf() && std::fclose(xdmf_) == 0;
     xdmf_ = nullptr;
   }
   PetscCall(AgreeOnSuccess(comm_, ok, "cannot finish '" + options_.path + "' and its .xdmf"));

@@ -1,7 +1,11 @@
 // Results on disk.
 //
-// HDF5 (written by rank 0 after a gather; natural vertex order, every vertex of
-// every body, fixed ones included):
+// HDF5 (natural vertex order, every vertex of every body, fixed ones included),
+// written by all ranks together through MPI-IO (parallel_hdf5.hpp; a single
+// rank uses HDF5's POSIX driver): rank r of P
+// writes the rows of its natural slab, vertices [V r / P, V (r + 1) / P) and
+// tets [T r / P, T (r + 1) / P), at their natural offsets; rank 0 writes the
+// scalars and the .xdmf.
 //   /time [F] (s), /positions [F][V][3] (m), /velocities [F][V][3] (m/s),
 //   /energy/kinetic [F], /energy/elastic [F], /energy/gravitational [F] (J),
 //   /mesh/tets [T][4], /mesh/boundary_triangles [B][3] (0-based natural vertex
@@ -9,12 +13,14 @@
 //   /mesh/body_fixed [bodies] (1 for fixed bodies), /mesh/body_material
 //   [bodies][3] (density kg/m^3, Young's modulus Pa, Poisson ratio);
 //   /checkpoint (checkpoint.hpp).
-// Frame 0 is the initial state. The file is flushed every -flush_every frames
-// (default: every frame), and OUT.xdmf beside it (a ParaView time series of the
-// deformed mesh with velocity and body index as point fields) is written when
-// the file is opened and extended after every flush, listing only the frames
-// already on disk: a run killed at any moment leaves a file and an .xdmf that
-// open, with every frame up to the last flush. Root attributes: "complete" is 0
+// The frame datasets are chunked by one frame and at most kMaxChunkBytes of
+// its rows. Frame 0 is the initial state. The file is flushed every
+// -flush_every frames (default: every frame), and OUT.xdmf beside it (a
+// ParaView time series of the deformed mesh with velocity and body index as
+// point fields) is written when the file is opened and extended after every
+// flush, listing only the frames already on disk: a run killed at any moment
+// leaves a file and an .xdmf that open, with every frame up to the last flush.
+// Root attributes (rank 0's values, written by every rank): "complete" is 0
 // until the run has finished (1); "interrupted" is the signal that stopped the
 // run early (0: none); "gravity" [3] (m/s^2) and "ground_y" (m, only with a
 // ground plane); then the run's statistics (set-up and loop seconds, solver
@@ -34,6 +40,7 @@
 
 #include "fem/assembly.hpp"
 #include "fem/partition.hpp"
+#include "io/parallel_hdf5.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
@@ -57,29 +64,45 @@ PetscErrorCode CheckOutputPath(MPI_Comm comm, const char *option, const std::str
 // user-facing message when rank 0 failed.
 PetscErrorCode AgreeOnSuccess(MPI_Comm comm, bool ok, const std::string &message);
 
-// PETSc-ordered DOF vectors <-> rank 0's natural-order vectors of every vertex
-// (3 V values on rank 0, none elsewhere). Collective except where noted.
-class NaturalOrder {
- public:
-  NaturalOrder() = default;
-  NaturalOrder(const NaturalOrder &) = delete;
-  NaturalOrder &operator=(const NaturalOrder &) = delete;
-  ~NaturalOrder();
+// Collective: every rank fails with the same user-facing message unless every
+// rank succeeded (`ok` may differ between ranks).
+PetscErrorCode AgreeOnAllRanks(MPI_Comm comm, bool ok, const std::string &message);
 
-  // `like` is a PETSc-ordered DOF vector.
+// Not collective. Natural-order mesh data of a slab of natural vertices or tets,
+// taken from the scene (every body's placed mesh; natural tet order: body 0's
+// tets in file order, then body 1's, ...). Sizes: 3 x, 1 x, 4 x slab.count().
+std::vector<double> SlabRestPositions(const Scene &scene, RowSlab vertices);
+std::vector<int32_t> SlabVertexBodies(const Scene &scene, RowSlab vertices);
+std::vector<int32_t> SlabTets(const Scene &scene, RowSlab tets);
+
+// PETSc-ordered DOF vectors <-> natural-order vectors of every vertex, split in
+// even slabs: rank r of P holds natural vertices [V r / P, V (r + 1) / P) (3
+// values each, block size 3). Memory per rank: O(its slab + its owned DOFs).
+// Collective except where noted.
+class NaturalSlab {
+ public:
+  NaturalSlab() = default;
+  NaturalSlab(const NaturalSlab &) = delete;
+  NaturalSlab &operator=(const NaturalSlab &) = delete;
+  ~NaturalSlab();
+
+  // `like` is a PETSc-ordered DOF vector; the scatter is built from
+  // layout.natural_of_owned (this rank's owned vertices only).
   PetscErrorCode Setup(const Scene &scene, const DofLayout &layout, Vec like);
-  // A natural vector: rank 0 holds the rest positions (rest = true) or zeros.
+  // A natural vector: each rank's slab holds the rest positions (rest = true) or zeros.
   PetscErrorCode CreateVector(bool rest, Vec *natural) const;
   // natural <- dofs at the free vertices (the others keep their values).
   PetscErrorCode Gather(Vec dofs, Vec natural) const;
-  // dofs <- natural (rank 0's values of the free vertices).
+  // dofs <- natural (the values of the free vertices).
   PetscErrorCode Scatter(Vec natural, Vec dofs) const;
-  // Not collective. Vertices of the scene (after Setup).
+  // Not collective. Vertices of the scene, and this rank's slab of them (after Setup).
   int32_t num_vertices() const { return scene_->num_vertices(); }
+  RowSlab vertices() const { return slab_; }
 
  private:
   const Scene *scene_ = nullptr;
-  VecScatter scatter_ = nullptr;  // PETSc-ordered free DOFs -> rank 0, all vertices
+  RowSlab slab_;
+  VecScatter scatter_ = nullptr;  // PETSc-ordered free DOFs -> natural slabs of all vertices
   Vec natural_template_ = nullptr;
 };
 
@@ -96,11 +119,10 @@ class ResultWriter {
   ResultWriter &operator=(const ResultWriter &) = delete;
   ~ResultWriter();
 
-  // Collective. Creates the file with the mesh and the empty series and its
-  // .xdmf; fails on every rank when rank 0 cannot. With `continuation`, the
-  // file starts with the continued file's first frames instead: the same file,
-  // cut back to them (source == path), or a new file with a copy of them.
-  // `like` is a PETSc-ordered DOF vector.
+  // Collective. Creates the file (every rank its slab of the mesh) with the
+  // empty series, and rank 0 its .xdmf; fails on every rank when one cannot. With `continuation`,
+  // the file starts with the continued file's first frames instead: the same file, cut back to them
+  // (source == path), or a new file with a copy of them. `like` is a PETSc-ordered DOF vector.
   PetscErrorCode Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
                       const DofLayout &layout, Vec like,
                       const Continuation *continuation = nullptr);
@@ -123,23 +145,25 @@ class ResultWriter {
 
   PetscInt frames() const { return static_cast<PetscInt>(times_.size()); }
   const std::string &path() const { return options_.path; }
-  // Rank 0: the open HDF5 file (other ranks: -1).
+  // The HDF5 file, open on every rank (MPI-IO): collective use only.
   hid_t file() const { return file_; }
-  const NaturalOrder &natural_order() const { return natural_; }
+  const NaturalSlab &natural_slab() const { return natural_; }
   MPI_Comm comm() const { return comm_; }
 
  private:
-  bool CreateFile(const Scene &scene);
+  PetscErrorCode CreateFile(const Scene &scene, bool *created);
+  PetscErrorCode WriteMesh(const Scene &scene, bool *written);
   bool ContinueInPlace(const Continuation &continuation);
   bool CopyFrames(const Continuation &continuation);
+  PetscErrorCode OpenXdmf();
   bool ExtendXdmf();
 
   MPI_Comm comm_ = MPI_COMM_NULL;
-  PetscMPIInt rank_ = 0;
+  PetscMPIInt rank_ = 0, size_ = 1;
   OutputOptions options_;
   hid_t file_ = -1;
-  NaturalOrder natural_;
-  Vec positions_ = nullptr, velocities_ = nullptr;  // rank 0: 3 V natural; others: empty
+  NaturalSlab natural_;
+  Vec positions_ = nullptr, velocities_ = nullptr;  // natural slabs (3 values per vertex)
   int32_t num_vertices_ = 0;
   int64_t num_tets_ = 0;
   std::vector<double> times_;
