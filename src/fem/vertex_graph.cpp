@@ -41,7 +41,8 @@ std::vector<uint64_t> EdgesOfTetShare(const Scene &scene,
   int64_t free_tets = 0;
   for (const Body &body : scene.bodies)
     if (!body.fixed) free_tets += body.mesh.num_tets();
-  const int64_t begin = free_tets * rank / size, end = free_tets * (rank + 1) / size;
+  const int64_t begin = EvenShareBegin(free_tets, size, rank);
+  const int64_t end = EvenShareBegin(free_tets, size, rank + 1);
   std::vector<uint64_t> edges;
   edges.reserve(12 * (end - begin));
   int64_t first = 0;  // index of the body's tet 0 among the free tets

@@ -13,15 +13,10 @@
 
 #include <vector>
 
+#include "common/even_share.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
-
-// First index of part `part` when `count` items are split evenly into `parts` parts:
-// floor(count part / parts), so part sizes differ by at most one.
-inline PetscInt EvenShareBegin(PetscInt count, PetscMPIInt parts, PetscMPIInt part) {
-  return static_cast<PetscInt>(static_cast<int64_t>(count) * part / parts);
-}
 
 struct VertexGraphRows {
   PetscInt num_vertices = 0;         // n, over all ranks

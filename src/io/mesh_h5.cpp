@@ -10,8 +10,10 @@
 #include <vector>
 
 #include "common/errors.hpp"
+#include "common/even_share.hpp"
 #include "fem/element.hpp"
 #include "io/hdf5_io.hpp"
+#include "io/parallel_hdf5.hpp"
 
 namespace softbody {
 
@@ -53,40 +55,20 @@ class Handle {
   herr_t (*close_)(hid_t);
 };
 
-// Opens `path` read-only: with MPI-IO on `comm` (collective; every later
-// metadata read on the file must then be made by all its ranks alike), or
-// serially when comm is MPI_COMM_NULL.
+// Opens `path` read-only: with MPI-IO on `comm` (collective), or serially when
+// comm has one rank (parallel_hdf5.hpp).
 hid_t OpenMeshFile(const std::string &path, MPI_Comm comm) {
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // failures are reported by the callers
-  if (comm == MPI_COMM_NULL) return H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-  const Handle access(H5Pcreate(H5P_FILE_ACCESS), H5Pclose);
-  if (!access.ok() || H5Pset_fapl_mpio(access, comm, MPI_INFO_NULL) < 0) return -1;
-  // Metadata (attributes, dataset headers) read once and broadcast, not by every
-  // rank: the ranks make the same metadata calls in the same order.
-  if (H5Pset_all_coll_metadata_ops(access, true) < 0) return -1;
-  return H5Fopen(path.c_str(), H5F_ACC_RDONLY, access);
+  return OpenParallelFile(comm, path, false);
 }
 
-// Reads rows [first, first + count) of a [rows][columns] dataset into `values`
-// as `memory_type`; with `collective`, every rank of the file's communicator
-// calls it (count may be 0 on some).
-bool ReadRows(hid_t dataset, hid_t memory_type, hsize_t first, hsize_t count, hsize_t columns,
-              bool collective, void *values) {
-  const Handle file_space(H5Dget_space(dataset), H5Sclose);
-  const hsize_t memory_dims[2] = {std::max<hsize_t>(count, 1), columns};
-  const Handle memory_space(H5Screate_simple(2, memory_dims, nullptr), H5Sclose);
-  const Handle transfer(H5Pcreate(H5P_DATASET_XFER), H5Pclose);
-  if (!file_space.ok() || !memory_space.ok() || !transfer.ok()) return false;
-  if (collective && H5Pset_dxpl_mpio(transfer, H5FD_MPIO_COLLECTIVE) < 0) return false;
-  const hsize_t start[2] = {first, 0}, block[2] = {count, columns};
-  if (count == 0) {  // a rank with no rows still takes part in the collective read
-    if (H5Sselect_none(file_space) < 0 || H5Sselect_none(memory_space) < 0) return false;
-  } else if (H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start, nullptr, block, nullptr) < 0) {
-    return false;
-  }
-  double unused[kTetColumns];
-  return H5Dread(dataset, memory_type, memory_space, file_space, transfer,
-                 count == 0 ? static_cast<void *>(unused) : values) >= 0;
+// Reads rows [first, first + count) of a [rows][columns] dataset into `values` as
+// `memory_type`; collective when the file was opened on several ranks (count may
+// be 0 on some).
+bool ReadRows(hid_t dataset, hid_t memory_type, int64_t first, int64_t count, void *values) {
+  return ReadRows(dataset, memory_type,
+                  RowSlab{static_cast<hsize_t>(first), static_cast<hsize_t>(first + count)},
+                  values);
 }
 
 // Creates and writes a [rows][columns] dataset of `file_type` from `values` (of
@@ -238,12 +220,6 @@ PetscErrorCode AgreeOnError(MPI_Comm comm, std::string *error) {
     PetscCheck((error).empty(), comm, PETSC_ERR_USER_INPUT, "%s", Where(path, 0, error).c_str()); \
   } while (0)
 
-// First row of rank r's block of n rows among P ranks: floor(n r / P), without
-// forming n r (which could overflow).
-int64_t BlockStart(int64_t n, int rank, int size) {
-  return (n / size) * rank + (n % size) * rank / size;
-}
-
 // ------------------------------------------------------------------ writing
 
 void CheckMeshForWriting(const std::string &path, const TetMesh &mesh) {
@@ -254,11 +230,11 @@ void CheckMeshForWriting(const std::string &path, const TetMesh &mesh) {
   if (!error.empty()) throw InputError(Where(path, 0, "cannot write: " + error));
 }
 
-// Rows per chunk of a dataset of `row_bytes` per row: kMeshChunkBytes worth,
-// capped by `cap` when > 0.
-hsize_t ChunkRows(size_t row_bytes, size_t cap) {
-  const size_t rows = std::max<size_t>(kMeshChunkBytes / row_bytes, 1);
-  return cap > 0 ? std::min(rows, cap) : rows;
+// Rows per chunk of a dataset of `rows` rows of `row_bytes`: ChunkRows's (at most
+// kMaxChunkBytes), capped by `cap` when > 0.
+hsize_t MeshChunkRows(hsize_t rows, hsize_t row_bytes, hsize_t cap) {
+  const hsize_t chunk = ChunkRows(rows, row_bytes);
+  return cap > 0 ? std::min(chunk, cap) : chunk;
 }
 
 bool WriteMeshFile(const std::string &path, const TetMesh &mesh, const std::string &source,
@@ -268,10 +244,12 @@ bool WriteMeshFile(const std::string &path, const TetMesh &mesh, const std::stri
   if (file < 0) return false;
   const bool ok =
       WriteRows(file, "vertices", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, mesh.vertices.rows(),
-                kVertexColumns, ChunkRows(kVertexColumns * sizeof(double), chunk_rows),
+                kVertexColumns,
+                MeshChunkRows(mesh.vertices.rows(), kVertexColumns * sizeof(double), chunk_rows),
                 mesh.vertices.data()) &&
       WriteRows(file, "tets", H5T_STD_I64LE, H5T_NATIVE_INT32, mesh.tets.rows(), kTetColumns,
-                ChunkRows(kTetColumns * sizeof(int64_t), chunk_rows), mesh.tets.data()) &&
+                MeshChunkRows(mesh.tets.rows(), kTetColumns * sizeof(int64_t), chunk_rows),
+                mesh.tets.data()) &&
       SetAttribute(file, "format", std::string(kMeshFormatName)) &&
       SetAttribute(file, "version", kMeshFormatVersion) && SetAttribute(file, "source", source);
   return H5Fclose(file) >= 0 && ok;
@@ -306,7 +284,7 @@ void ReadTets(const std::string &path, const MeshFile &file, TetMesh *mesh) {
   for (int64_t first = 0; first < file.num_tets; first += kSerialReadRows) {
     const int64_t rows = std::min<int64_t>(kSerialReadRows, file.num_tets - first);
     block.resize(rows, kTetColumns);
-    if (!ReadRows(file.tets, H5T_NATIVE_INT64, first, rows, kTetColumns, false, block.data()))
+    if (!ReadRows(file.tets, H5T_NATIVE_INT64, first, rows, block.data()))
       throw InputError(Where(path, 0, "cannot read /tets"));
     const std::string error = CheckIndices(block, first, file.num_vertices);
     if (!error.empty()) throw InputError(Where(path, 0, error));
@@ -318,7 +296,7 @@ void ReadTets(const std::string &path, const MeshFile &file, TetMesh *mesh) {
 
 TetMesh ReadMeshH5(const std::string &path) {
   if (!fs::exists(path)) throw InputError(Where(path, 0, "no such file"));
-  const Handle file(OpenMeshFile(path, MPI_COMM_NULL), H5Fclose);
+  const Handle file(OpenMeshFile(path, PETSC_COMM_SELF), H5Fclose);
   if (!file.ok()) throw InputError(Where(path, 0, "not an HDF5 file (or unreadable)"));
   MeshFile mesh_file;
   const std::string error = CheckMeshFile(file, &mesh_file);
@@ -330,8 +308,8 @@ TetMesh ReadMeshH5(const std::string &path) {
                                " tets: more than the replicated mesh holds (2^31 - 1 each)"));
   TetMesh mesh;
   mesh.vertices.resize(mesh_file.num_vertices, kVertexColumns);
-  if (!ReadRows(mesh_file.vertices, H5T_NATIVE_DOUBLE, 0, mesh_file.num_vertices, kVertexColumns,
-                false, mesh.vertices.data()))
+  if (!ReadRows(mesh_file.vertices, H5T_NATIVE_DOUBLE, 0, mesh_file.num_vertices,
+                mesh.vertices.data()))
     throw InputError(Where(path, 0, "cannot read /vertices"));
   ReadTets(path, mesh_file, &mesh);
   const std::string degenerate = FirstDegenerateTet(mesh);
@@ -348,17 +326,18 @@ namespace {
 std::string ReadSlabs(const MeshFile &file, int rank, int size, MeshSlabs *slabs) {
   slabs->num_vertices = file.num_vertices;
   slabs->num_tets = file.num_tets;
-  slabs->first_vertex = BlockStart(file.num_vertices, rank, size);
-  slabs->first_tet = BlockStart(file.num_tets, rank, size);
-  const int64_t vertex_rows = BlockStart(file.num_vertices, rank + 1, size) - slabs->first_vertex;
-  const int64_t tet_rows = BlockStart(file.num_tets, rank + 1, size) - slabs->first_tet;
+  slabs->first_vertex = EvenShareBegin(file.num_vertices, size, rank);
+  slabs->first_tet = EvenShareBegin(file.num_tets, size, rank);
+  const int64_t vertex_rows =
+      EvenShareBegin(file.num_vertices, size, rank + 1) - slabs->first_vertex;
+  const int64_t tet_rows = EvenShareBegin(file.num_tets, size, rank + 1) - slabs->first_tet;
   slabs->vertices.resize(vertex_rows, kVertexColumns);
   slabs->tets.resize(tet_rows, kTetColumns);
   // Both reads are collective: every rank makes both calls, whatever the first gave.
   const bool vertices_read = ReadRows(file.vertices, H5T_NATIVE_DOUBLE, slabs->first_vertex,
-                                      vertex_rows, kVertexColumns, true, slabs->vertices.data());
-  const bool tets_read = ReadRows(file.tets, H5T_NATIVE_INT64, slabs->first_tet, tet_rows,
-                                  kTetColumns, true, slabs->tets.data());
+                                      vertex_rows, slabs->vertices.data());
+  const bool tets_read =
+      ReadRows(file.tets, H5T_NATIVE_INT64, slabs->first_tet, tet_rows, slabs->tets.data());
   if (!vertices_read) return "cannot read /vertices";
   if (!tets_read) return "cannot read /tets";
   return CheckIndices(slabs->tets, slabs->first_tet, file.num_vertices);

@@ -22,6 +22,7 @@
 #include <string>
 
 #include "fem/mesh.hpp"
+#include "io/parallel_hdf5.hpp"
 
 namespace softbody {
 
@@ -32,7 +33,7 @@ constexpr int64_t kMeshFormatVersion = 1;            // the root attribute `vers
 // 32 768 tet rows, so a rank's slab of a large mesh is a few dozen large
 // contiguous reads, the chunk index stays small (1e9 tets: ~1e5 chunks), and the
 // chunk fits HDF5's default 1 MiB chunk cache, far below its 4 GiB chunk limit.
-constexpr size_t kMeshChunkBytes = size_t(1) << 20;
+constexpr size_t kMeshChunkBytes = kMaxChunkBytes;  // parallel_hdf5.hpp
 
 // Not collective (one process writes). Writes `mesh` to `path` in the format
 // above, recording `source` as the file it came from. The file is written under a

@@ -1,14 +1,14 @@
 #include "io/parallel_hdf5.hpp"
 
+#include "common/even_share.hpp"
+
 #include <algorithm>
 
 namespace softbody {
 
 RowSlab EvenSlab(hsize_t rows, int rank, int size) {
   const auto share = [&](int r) {
-    // rows * r / size without overflow for any rows < 2^63 and size < 2^31.
-    const hsize_t whole = rows / size, rest = rows % size;
-    return whole * r + rest * r / size;
+    return static_cast<hsize_t>(EvenShareBegin(static_cast<int64_t>(rows), size, r));
   };
   return {share(rank), share(rank + 1)};
 }
