@@ -15,28 +15,38 @@ each in the modes -scale_modes (linear, corotational) and with -scale_contact
        on the ground, the upper one falls onto it (two free bodies that can
        meet: the contact path that gathers the free state on every rank).
 
-Every point is run twice, -steps 1 and -steps 1 + S (S = -scale_steps), with
+Every point is run twice, -steps 1 and -steps 1 + S (S = -scale_steps); the long
+run minus the short one, over S, is the traffic of a step, the short run is the
+set-up's (with the first step). Measured from outside the program:
   - /usr/bin/time -f %M around every rank: each rank's peak resident set (MB);
-  - Open MPI's monitoring components (pml_monitoring_enable 2, per-rank output
-    files): the bytes and messages each rank sends to the others, point to point
-    (softbody's and PETSc's own messages, "E" lines) and inside collectives
-    ("I" lines); the long run minus the short one, over S, is the traffic of a
-    step, the short run is the set-up's (with the first step);
-  - -log_view: the time of each softbody log stage (src/app/log_stages.hpp) in
-    the long run.
+  - PETSc's -log_view summary: the point-to-point messages and bytes PETSc sends
+    (its halo exchanges and scatters), per rank as the largest, smallest and mean,
+    the time of each softbody log stage (src/app/log_stages.hpp);
+  - Open MPI's monitoring components (pml_monitoring_enable 2, one file per rank):
+    the bytes and messages each rank sends inside collectives (reductions,
+    broadcasts, the gathers of contact), and, for the record, point-to-point
+    messages outside persistent requests. (Open MPI 4.1's monitoring does not
+    count messages on persistent requests, which PETSc's halo exchanges use; hence
+    PETSc's own count for those. softbody itself makes no point-to-point calls.)
+  - softbody's run summary: the time loop per step.
 Ranks are oversubscribed on a machine with fewer cores: memory and message
 volume are what the program does; times are only rough.
 
 Writes into -scale_dir DIR (default build/scale/): scale.csv (one row per point),
 scale-ranks.csv (one row per rank of each point), scale.md (tables, the fitted
-model and its prediction at 1e8 tets on 1000 ranks), scale.png, meshes/ (reused
-when present) and runs/ (logs and the raw per-rank files).
+model and its prediction at 1e8 tets on 1000 ranks), scale.png, command.txt,
+meshes/ (reused when present) and runs/ (logs and the raw per-rank files).
+-scale_report rewrites scale.md and scale.png from the CSV files without running.
+docs/scaling.md explains every column.
 
-Safety: a run whose predicted total memory (from the runs measured before it,
-per-rank memory taken proportional to the global tet count) exceeds
--scale_max_memory_gb is skipped, and a run whose ranks together grow past it is
-stopped; both are recorded. The solver options file -scale_solver_options
-(default: softbody's own defaults) goes to every run and is recorded.
+Safety: a run whose predicted total memory (from the points measured before it
+with the same mode and contact: the fitted memory model once there are three,
+else per-rank memory proportional to the global tet count; 20 % margin) exceeds
+-scale_max_memory_gb or the machine's available memory is skipped, and a run
+whose ranks together grow past -scale_max_memory_gb, or that leaves the machine
+less than 1 GB, is stopped; both are recorded. The solver options file
+-scale_solver_options (default: softbody's own defaults) goes to every run and
+is recorded in scale.csv.
 
 Usage (from the project root; ./run scale passes -softbody build/softbody):
   ./run scale -scale_solver_options config/cg-gamg.opts
@@ -47,7 +57,6 @@ Needs Debian's /usr/bin/python3 with python3-numpy and python3-matplotlib,
 /usr/bin/time and Open MPI (its pml/coll monitoring components).
 """
 import argparse
-import ast
 import csv
 import math
 import os
@@ -63,7 +72,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import box_mesh  # noqa: E402
-from softbody_tools import (CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+from softbody_tools import (ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
                             mpi_environment, one_line_error, parse_with_passthrough)
 
 SERIES = ("strong", "weak")
@@ -104,7 +113,7 @@ COLUMNS = ["series", "mode", "contact", "ranks", "tets", "vertices", "tets_per_r
            "step_bytes_max", "step_bytes_mean", "step_bytes_min", "step_msgs_mean",
            "step_p2p_bytes_max", "step_p2p_bytes_mean", "step_p2p_bytes_min",
            "step_coll_bytes_max", "step_coll_bytes_mean", "step_coll_bytes_min", "step_mpi_p2p_bytes_mean",
-           "status", "message"]
+           "load_avg", "status", "message"]
 RANK_COLUMNS = ["series", "mode", "contact", "ranks", "tets", "rank", "mem_mb", "setup_coll_bytes",
                 "step_coll_bytes", "step_coll_msgs", "step_mpi_p2p_bytes", "step_mpi_p2p_msgs"]
 # softbody's log stages (src/app/log_stages.hpp) -> columns: each stage's time in the
@@ -164,6 +173,8 @@ def parse_arguments(argv):
     add_option(parser, "scale_solver_options", "-solver_options", dest="solver_options", metavar="FILE",
                default="default", help="options file for every run, e.g. config/cg-gamg.opts "
                                        "(default: 'default', softbody's compiled-in solvers)")
+    add_option(parser, "scale_report", "-report", dest="report_only", action="store_true",
+               help="run nothing: rewrite scale.md and scale.png from the folder's scale.csv and scale-ranks.csv")
     add_option(parser, "scale_max_memory_gb", "-max_memory_gb", dest="max_memory_gb", metavar="GB", type=float,
                default=18.0, help="skip a run predicted to need more in total, stop one that grows past it "
                                   "(default 18)")
@@ -401,8 +412,7 @@ def predicted_rank_mb(rows, mode, contact, tets, ranks):
     held the whole scene), else a conservative guess."""
     measured = [r for r in rows if r["status"] == "ok" and r["mode"] == mode and r["contact"] == contact]
     if len(measured) >= 3:
-        a, b, c = fit_memory(measured)
-        return a + b * tets + c * tets / ranks
+        return memory_model(fit_memory(measured), tets, ranks)
     if measured:
         return max(r["mem_max_mb"] / r["tets"] for r in measured) * tets
     return GUESS_BASE_MB + GUESS_MB_PER_TET * tets
@@ -490,18 +500,28 @@ def fit_memory(rows):
     return coefficients
 
 
-def fit_bytes(rows):
+def fit_bytes(rows, gathered):
     """Least-squares fit of the bytes a rank sends per step (mean over ranks),
     bytes = d (N / P)^(2/3) + e N (P - 1) / P: d the halo of a part of N / P tets
-    (its surface), e what is gathered from every rank to every rank (an allgather
-    sends (P - 1) / P of the whole). Clipped at 0. Rows at P > 1 only."""
+    (its surface), e, with `gathered` only (contact: softbody gathers the free state
+    on every rank; without contact nothing is gathered), what goes from every rank
+    to every rank (an allgather sends (P - 1) / P of the whole). Clipped at 0.
+    Rows at P > 1 only; None with fewer than two."""
     rows = [r for r in rows if r["ranks"] > 1]
     if len(rows) < 2:
         return None
     N = np.array([r["tets"] for r in rows], float)
     P = np.array([r["ranks"] for r in rows], float)
-    A = np.column_stack([(N / P) ** (2 / 3), N * (P - 1) / P])
+    A = np.column_stack([(N / P) ** (2 / 3), N * (P - 1) / P if gathered else np.zeros_like(N)])
     return _nonnegative_lstsq(A, np.array([r["step_bytes_mean"] for r in rows], float))
+
+
+def bytes_model(coefficients, tets, ranks):
+    return coefficients[0] * (tets / ranks) ** (2 / 3) + coefficients[1] * tets * (ranks - 1) / ranks
+
+
+def memory_model(coefficients, tets, ranks):
+    return coefficients[0] + coefficients[1] * tets + coefficients[2] * tets / ranks
 
 
 def _nonnegative_lstsq(A, b):
@@ -522,24 +542,28 @@ def _nonnegative_lstsq(A, b):
 
 
 def model_lines(rows):
-    """Markdown lines: per mode and contact, the fitted coefficients and the prediction
-    at TARGET_TETS tets on TARGET_RANKS ranks."""
-    lines = ["| mode | contact | memory a (MB) | b (kB/tet, whole mesh) | c (kB/tet, own part) | "
-             f"memory per rank at {TARGET_TETS:.0e} tets, {TARGET_RANKS} ranks | bytes d (B per tet^(2/3)) | "
-             "e (B/tet, gathered) | bytes per rank per step there |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    """Markdown lines: per mode and contact, the fitted coefficients, the largest
+    relative deviation of each fit from the points it was fitted to, and the
+    prediction at TARGET_TETS tets on TARGET_RANKS ranks."""
+    lines = ["| mode | contact | a (MB) | b (kB/tet, whole mesh) | c (kB/tet, own part) | memory fit off by | "
+             f"memory per rank at {TARGET_TETS:.0e} tets, {TARGET_RANKS} ranks | d (B/tet^(2/3), halo) | "
+             "e (B/tet, gathered) | bytes fit off by | bytes per rank per step there |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for mode in MODES:
         for contact in CONTACT:
             chosen = [r for r in rows if r["status"] == "ok" and r["mode"] == mode and r["contact"] == contact]
-            memory, sent = fit_memory(chosen), fit_bytes(chosen)
+            memory, sent = fit_memory(chosen), fit_bytes(chosen, contact == "on")
             if memory is None or sent is None:
                 continue
-            n, p = TARGET_TETS, TARGET_RANKS
-            mem = memory[0] + memory[1] * n + memory[2] * n / p
-            step = sent[0] * (n / p) ** (2 / 3) + sent[1] * n * (p - 1) / p
+            memory_error = max(abs(memory_model(memory, r["tets"], r["ranks"]) / r["mem_max_mb"] - 1)
+                               for r in chosen)
+            bytes_error = max(abs(bytes_model(sent, r["tets"], r["ranks"]) / r["step_bytes_mean"] - 1)
+                              for r in chosen if r["ranks"] > 1)
+            mem = memory_model(memory, TARGET_TETS, TARGET_RANKS)
+            step = bytes_model(sent, TARGET_TETS, TARGET_RANKS)
             lines.append(f"| {mode} | {contact} | {memory[0]:.0f} | {1024 * memory[1]:.3g} | "
-                         f"{1024 * memory[2]:.3g} | {_size_mb(mem)} | {sent[0]:.3g} | {sent[1]:.3g} | "
-                         f"{_size_bytes(step)} |")
+                         f"{1024 * memory[2]:.3g} | {100 * memory_error:.0f} % | {_size_mb(mem)} | {sent[0]:.3g} | "
+                         f"{sent[1]:.3g} | {100 * bytes_error:.0f} % | {_size_bytes(step)} |")
     return lines
 
 
@@ -600,13 +624,15 @@ def table_lines(rows, series):
 
 
 def write_markdown(args, rows, started):
-    load = os.getloadavg()
+    loads = [r["load_avg"] for r in rows if isinstance(r.get("load_avg"), float)]
+    when = (f"; started {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(started))}, "
+            f"{(time.time() - started) / 60:.1f} min" if started else "")
     lines = ["# softbody scaling on this machine", "",
-             f"Command: `./run scale {' '.join(args.argv)}`", "",
+             f"Command: `./run scale {shlex.join(args.argv)}`", "",
              f"Machine: {platform.node()}, {os.cpu_count()} cores, "
-             f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 2**30:.0f} GB; load average "
-             f"{load[0]:.2f} at the end; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime(started))}, "
-             f"{(time.time() - started) / 60:.1f} min. Ranks beyond the cores are oversubscribed: memory and "
+             f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 2**30:.0f} GB"
+             + (f"; 1-minute load average {min(loads):.1f} to {max(loads):.1f} after the points" if loads else "")
+             + f"{when}. Ranks beyond the cores are oversubscribed: memory and "
              "message volume are what the program does, times only rough.", "",
              f"Solver options: `{rows[0]['solver_options'] if rows else args.solver_options}`; modes "
              f"{', '.join(args.modes)}; contact {', '.join(args.contact)}; dt = {DT} s; per-step figures over "
@@ -628,6 +654,7 @@ def write_plot(args, rows):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
     series = [s for s in SERIES if s in args.series]
     figure, axes = plt.subplots(2, len(series), figsize=(6 * len(series), 8), squeeze=False)
     for column, name in enumerate(series):
@@ -641,14 +668,19 @@ def write_plot(args, rows):
                 style = dict(marker="o" if mode == "linear" else "s", linestyle="-" if contact == "off" else "--",
                              label=f"{mode}, contact {contact}")
                 axes[0, column].plot(ranks, [r["mem_max_mb"] for r in points], **style)
-                axes[1, column].plot(ranks, [max(r["step_bytes_mean"], 1) for r in points], **style)
+                sending = [r for r in points if r["ranks"] > 1]  # one rank sends nothing
+                axes[1, column].plot([r["ranks"] for r in sending], [r["step_bytes_mean"] for r in sending], **style)
         axes[0, column].set_title(f"{name} scaling" + (f", {args.tets:.3g} tets" if name == "strong" else
                                                        f", {args.tets_per_rank:.3g} tets per rank"))
         axes[0, column].set_ylabel("largest rank's peak memory (MB)")
-        axes[1, column].set_ylabel("bytes sent per rank per step (mean)")
+        axes[0, column].set_ylim(bottom=0)
+        axes[1, column].set_ylabel("bytes sent per rank per step (mean over ranks)")
         axes[1, column].set_yscale("log")
         for axis in axes[:, column]:
             axis.set_xscale("log", base=2)
+            axis.set_xticks(sorted(args.ranks))
+            axis.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+            axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             axis.set_xlabel("ranks")
             axis.grid(True, which="both", alpha=0.3)
             if axis.get_legend_handles_labels()[0]:
@@ -665,16 +697,54 @@ def write_outputs(args, rows, rank_rows, started):
     write_plot(args, rows)
 
 
+INTEGER_COLUMNS = ("ranks", "tets", "vertices", "tets_per_rank", "steps", "rank")
+
+
+def read_rows(path):
+    """The rows of a scale.csv or scale-ranks.csv written before, numbers as numbers."""
+    rows = []
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            for key, value in row.items():
+                if key in INTEGER_COLUMNS and value:
+                    row[key] = int(value)
+                elif value and key not in ("series", "mode", "contact", "solver_options", "status", "message"):
+                    row[key] = float(value)
+            rows.append(row)
+    return rows
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     args = parse_arguments(argv)
     args.argv = argv
+    command_file = os.path.join(args.study_dir, "command.txt")
+    if args.report_only:
+        rows = read_rows(os.path.join(args.study_dir, "scale.csv"))
+        rank_rows = read_rows(os.path.join(args.study_dir, "scale-ranks.csv"))
+        for key, column, order in (("ranks", "ranks", None), ("series", "series", SERIES), ("modes", "mode", MODES),
+                                   ("contact", "contact", CONTACT)):
+            values = {r[column] for r in rows}
+            setattr(args, key, sorted(values) if order is None else [v for v in order if v in values])
+        args.steps = rows[0]["steps"] if rows else args.steps
+        strong = [r["tets"] for r in rows if r["series"] == "strong"]
+        args.tets = strong[0] if strong else args.tets
+        weak = [r["tets_per_rank"] for r in rows if r["series"] == "weak"]
+        args.tets_per_rank = round(sum(weak) / len(weak), -2) if weak else args.tets_per_rank
+        if os.path.isfile(command_file):
+            args.argv = shlex.split(open(command_file).read())
+        write_outputs(args, rows, rank_rows, None)
+        print(f"scale: rewrote {os.path.join(args.study_dir, 'scale.md')} and scale.png from scale.csv")
+        return 0
     os.makedirs(os.path.join(args.study_dir, "runs"), exist_ok=True)
+    with open(command_file, "w") as f:
+        f.write(shlex.join(argv) + "\n")
     started, rows, rank_rows = time.time(), [], []
     # Rank counts outermost: a run cut short has every series and variant up to the same P.
     points = [(s, m, c, p) for p in sorted(args.ranks) for s in args.series for m in args.modes for c in args.contact]
     for series, mode, contact, ranks in points:
         row = run_point(args, rows, rank_rows, series, mode, contact, ranks)
+        row["load_avg"] = os.getloadavg()[0]
         rows.append(row)
         print(f"scale: {series} {mode} contact {contact} {ranks} rank(s) {row['tets']} tets: "
               + (f"peak {row['mem_max_mb']:.0f} MB per rank, {_size_bytes(row['step_bytes_mean'])} "

@@ -123,7 +123,7 @@ def main():
 
     folder = os.path.join(args.work, "scale")
     command = [sys.executable, os.path.join(TOOLS, "scale.py"), "-softbody", args.softbody, "-mpiexec", args.mpiexec,
-               "-scale_quick", "-scale_solver_options", os.path.join(scale.CONFIG_DIR, "cg-gamg.opts"),
+               "-scale_quick", "-scale_solver_options", os.path.join(TOOLS, "..", "config", "cg-gamg.opts"),
                "-scale_dir", folder]
     started = time.time()
     result = subprocess.run(command, capture_output=True, text=True, timeout=540)
