@@ -567,6 +567,47 @@ def model_lines(rows):
     return lines
 
 
+# The scale-out targets read off these series: the strong series' summed peak memory
+# at its largest P at most this times that at 2 ranks, and no rank above this times
+# the mean; the weak series' largest rank within this of P = 1, and the bytes a rank
+# sends per step flat (largest over smallest at P > 1) within this.
+STRONG_SUM_GROWTH = 1.5
+RANK_IMBALANCE = 1.3
+WEAK_MEMORY_GROWTH = 1.3
+WEAK_BYTES_SPREAD = 1.5
+
+
+def target_lines(rows):
+    """Markdown lines: per mode and contact, the targets with the measured figure and a verdict."""
+    lines = ["| series | mode | contact | target | measured | verdict |", "|---|---|---|---|---|---|"]
+
+    def add(series, mode, contact, target, value, limit):
+        verdict = "met" if value <= limit else "not met"
+        lines.append(f"| {series} | {mode} | {contact} | {target} | {value:.2f} | {verdict} |")
+    for mode in MODES:
+        for contact in CONTACT:
+            for series in SERIES:
+                ok = {r["ranks"]: r for r in rows if r["status"] == "ok" and r["series"] == series
+                      and r["mode"] == mode and r["contact"] == contact}
+                if len(ok) < 2:
+                    continue
+                largest = max(ok)
+                if series == "strong" and 2 in ok and largest > 2:
+                    add(series, mode, contact, f"sum of peaks at P = {largest} / at P = 2 <= {STRONG_SUM_GROWTH}",
+                        ok[largest]["mem_sum_mb"] / ok[2]["mem_sum_mb"], STRONG_SUM_GROWTH)
+                    add(series, mode, contact, f"largest rank / mean at P = {largest} <= {RANK_IMBALANCE}",
+                        ok[largest]["mem_imbalance"], RANK_IMBALANCE)
+                if series == "weak" and 1 in ok:
+                    add(series, mode, contact, f"largest rank at P = {largest} / at P = 1 <= {WEAK_MEMORY_GROWTH}",
+                        ok[largest]["mem_max_mb"] / ok[1]["mem_max_mb"], WEAK_MEMORY_GROWTH)
+                    sending = [r["step_bytes_mean"] for p, r in ok.items() if p > 1]
+                    if len(sending) >= 2 and min(sending) > 0:
+                        add(series, mode, contact, f"bytes per rank per step, largest / smallest over P > 1 <= "
+                                                   f"{WEAK_BYTES_SPREAD}", max(sending) / min(sending),
+                            WEAK_BYTES_SPREAD)
+    return lines
+
+
 def _size_mb(mb):
     return f"{mb / 1024:.3g} GB" if mb >= 1024 else f"{mb:.0f} MB"
 
@@ -641,6 +682,7 @@ def write_markdown(args, rows, started):
                           ("weak", f"Weak scaling: about {args.tets_per_rank:.3g} tets per rank")):
         if series in args.series:
             lines += [f"## {title}", ""] + table_lines(rows, series) + [""]
+    lines += ["## Targets", ""] + target_lines(rows) + [""]
     lines += ["## Model", "",
               "Fitted per mode and contact over every measured point: a rank's peak memory "
               "mem = a + b N + c N/P (MB) and the bytes a rank sends per step "
