@@ -711,14 +711,19 @@ def write_plot(args, rows):
                              label=f"{mode}, contact {contact}")
                 axes[0, column].plot(ranks, [r["mem_max_mb"] for r in points], **style)
                 sending = [r for r in points if r["ranks"] > 1]  # one rank sends nothing
-                axes[1, column].plot([r["ranks"] for r in sending], [r["step_bytes_mean"] for r in sending], **style)
+                if sending:
+                    axes[1, column].plot([r["ranks"] for r in sending], [r["step_bytes_mean"] for r in sending],
+                                         **style)
         axes[0, column].set_title(f"{name} scaling" + (f", {args.tets:.3g} tets" if name == "strong" else
                                                        f", {args.tets_per_rank:.3g} tets per rank"))
         axes[0, column].set_ylabel("largest rank's peak memory (MB)")
         axes[0, column].set_ylim(bottom=0)
         axes[1, column].set_ylabel("bytes sent per rank per step (mean over ranks)")
-        axes[1, column].set_yscale("log")
+        if axes[1, column].has_data():
+            axes[1, column].set_yscale("log")
         for axis in axes[:, column]:
+            if not axis.has_data():
+                continue
             axis.set_xscale("log", base=2)
             axis.set_xticks(sorted(args.ranks))
             axis.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
