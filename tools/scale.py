@@ -106,6 +106,9 @@ MIN_AVAILABLE_MB = 1024
 # The model's target: 1e8 tets on 1000 ranks.
 TARGET_TETS = 1e8
 TARGET_RANKS = 1000
+# Faces of a compact part inside a 3D partition (a cube's six), each with a halo like
+# the weak series' parts' faces; edge and corner neighbours add little.
+COMPACT_PART_FACES = 6
 
 COLUMNS = ["series", "mode", "contact", "ranks", "tets", "vertices", "tets_per_rank", "solver_options", "steps",
            "mem_max_mb", "mem_mean_mb", "mem_min_mb", "mem_rank0_mb", "mem_sum_mb", "mem_imbalance",
@@ -500,24 +503,40 @@ def fit_memory(rows):
     return coefficients
 
 
-def fit_bytes(rows, gathered):
-    """Least-squares fit of the bytes a rank sends per step (mean over ranks),
-    bytes = d (N / P)^(2/3) + e N (P - 1) / P: d the halo of a part of N / P tets
-    (its surface), e, with `gathered` only (contact: softbody gathers the free state
-    on every rank; without contact nothing is gathered), what goes from every rank
-    to every rank (an allgather sends (P - 1) / P of the whole). Clipped at 0.
-    Rows at P > 1 only; None with fewer than two."""
-    rows = [r for r in rows if r["ranks"] > 1]
-    if len(rows) < 2:
+def fit_halo(rows):
+    """Bytes a rank sends per step across one face of its part, and the tets of that
+    part, from the weak series (point-to-point only): at its largest P >= 3 the
+    rank that sends most is an interior part with two faces; at P = 2 each part has
+    one. None without a weak point at P > 1."""
+    weak = {r["ranks"]: r for r in rows if r["series"] == "weak" and r["ranks"] > 1}
+    if not weak:
         return None
-    N = np.array([r["tets"] for r in rows], float)
-    P = np.array([r["ranks"] for r in rows], float)
-    A = np.column_stack([(N / P) ** (2 / 3), N * (P - 1) / P if gathered else np.zeros_like(N)])
-    return _nonnegative_lstsq(A, np.array([r["step_bytes_mean"] for r in rows], float))
+    largest = max(weak)
+    faces = 2 if largest >= 3 else 1
+    return weak[largest]["step_p2p_bytes_max"] / faces, weak[largest]["tets"] / largest
 
 
-def bytes_model(coefficients, tets, ranks):
-    return coefficients[0] * (tets / ranks) ** (2 / 3) + coefficients[1] * tets * (ranks - 1) / ranks
+def fit_gathered(rows):
+    """Least-squares e in: the bytes a rank sends inside collectives per step (mean over
+    ranks) = e N (P - 1) / P, what an allgather of the whole state costs a rank (it sends
+    (P - 1) / P of the whole); clipped at 0. Also the largest relative deviation over
+    the points. None without a point at P > 1."""
+    rows = [r for r in rows if r["ranks"] > 1]
+    if not rows:
+        return None
+    x = np.array([r["tets"] * (r["ranks"] - 1) / r["ranks"] for r in rows], float)
+    y = np.array([r["step_coll_bytes_mean"] for r in rows], float)
+    e = max(0.0, float(x @ y / (x @ x)))
+    return e, float(np.max(np.abs(e * x - y) / np.maximum(y, 1.0)))
+
+
+def bytes_model(halo, e, tets, ranks):
+    """Bytes a rank sends per step with `tets` tets on `ranks` ranks: COMPACT_PART_FACES
+    faces of the measured per-face halo, scaled by the part's surface ((N/P)^(2/3)), plus
+    the gathered e N (P - 1) / P."""
+    per_face, part_tets = halo
+    return (COMPACT_PART_FACES * per_face * (tets / ranks / part_tets) ** (2 / 3)
+            + e * tets * (ranks - 1) / ranks)
 
 
 def memory_model(coefficients, tets, ranks):
@@ -542,28 +561,31 @@ def _nonnegative_lstsq(A, b):
 
 
 def model_lines(rows):
-    """Markdown lines: per mode and contact, the fitted coefficients, the largest
-    relative deviation of each fit from the points it was fitted to, and the
-    prediction at TARGET_TETS tets on TARGET_RANKS ranks."""
+    """Markdown lines: per mode and contact, the fitted figures, the largest relative
+    deviation of each fit from the points it was fitted to, and the prediction at
+    TARGET_TETS tets on TARGET_RANKS ranks."""
     lines = ["| mode | contact | a (MB) | b (kB/tet, whole mesh) | c (kB/tet, own part) | memory fit off by | "
-             f"memory per rank at {TARGET_TETS:.0e} tets, {TARGET_RANKS} ranks | d (B/tet^(2/3), halo) | "
-             "e (B/tet, gathered) | bytes fit off by | bytes per rank per step there |",
+             f"memory per rank at {TARGET_TETS:.0e} tets, {TARGET_RANKS} ranks (with b = 0) | halo per face and step "
+             "(part of N/P tets) | e (B/tet, gathered) | e fit off by | bytes per rank per step there |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for mode in MODES:
         for contact in CONTACT:
             chosen = [r for r in rows if r["status"] == "ok" and r["mode"] == mode and r["contact"] == contact]
-            memory, sent = fit_memory(chosen), fit_bytes(chosen, contact == "on")
-            if memory is None or sent is None:
+            # A part's halo does not depend on contact, and with contact the weak series'
+            # two stacked bodies fall whole to one rank each at small P: halo without it.
+            no_contact = [r for r in rows if r["status"] == "ok" and r["mode"] == mode and r["contact"] == "off"]
+            memory, halo, gathered = fit_memory(chosen), fit_halo(no_contact), fit_gathered(chosen)
+            if memory is None or halo is None or gathered is None:
                 continue
             memory_error = max(abs(memory_model(memory, r["tets"], r["ranks"]) / r["mem_max_mb"] - 1)
                                for r in chosen)
-            bytes_error = max(abs(bytes_model(sent, r["tets"], r["ranks"]) / r["step_bytes_mean"] - 1)
-                              for r in chosen if r["ranks"] > 1)
             mem = memory_model(memory, TARGET_TETS, TARGET_RANKS)
-            step = bytes_model(sent, TARGET_TETS, TARGET_RANKS)
+            step = bytes_model(halo, gathered[0], TARGET_TETS, TARGET_RANKS)
+            own = memory_model((memory[0], 0.0, memory[2]), TARGET_TETS, TARGET_RANKS)
             lines.append(f"| {mode} | {contact} | {memory[0]:.0f} | {1024 * memory[1]:.3g} | "
-                         f"{1024 * memory[2]:.3g} | {100 * memory_error:.0f} % | {_size_mb(mem)} | {sent[0]:.3g} | "
-                         f"{sent[1]:.3g} | {100 * bytes_error:.0f} % | {_size_bytes(step)} |")
+                         f"{1024 * memory[2]:.3g} | {100 * memory_error:.0f} % | {_size_mb(mem)} ({_size_mb(own)}) | "
+                         f"{_size_bytes(halo[0])} ({halo[1]:.3g}) | {gathered[0]:.3g} | {100 * gathered[1]:.0f} % | "
+                         f"{_size_bytes(step)} |")
     return lines
 
 
@@ -684,10 +706,12 @@ def write_markdown(args, rows, started):
             lines += [f"## {title}", ""] + table_lines(rows, series) + [""]
     lines += ["## Targets", ""] + target_lines(rows) + [""]
     lines += ["## Model", "",
-              "Fitted per mode and contact over every measured point: a rank's peak memory "
-              "mem = a + b N + c N/P (MB) and the bytes a rank sends per step "
-              "d (N/P)^(2/3) + e N (P-1)/P, with N tets on P ranks (tools/scale.py, fit_memory and fit_bytes); "
-              f"extrapolated to N = {TARGET_TETS:.0e}, P = {TARGET_RANKS}.", ""] + model_lines(rows) + [""]
+              "Per mode and contact, with N tets on P ranks (tools/scale.py: fit_memory, fit_halo, fit_gathered): "
+              "a rank's peak memory mem = a + b N + c N/P (MB), fitted over every measured point; the bytes a "
+              f"rank sends per step = {COMPACT_PART_FACES} faces x the halo per face measured in the weak series "
+              "without contact (its largest P: an interior part has two faces), scaled by (N/P)^(2/3), "
+              "+ e N (P-1)/P, e fitted to the collectives' bytes; (b = 0): what a rank would hold if nothing "
+              f"were replicated; extrapolated to N = {TARGET_TETS:.0e}, P = {TARGET_RANKS}.", ""] + model_lines(rows) + [""]
     with open(os.path.join(args.study_dir, "scale.md"), "w") as f:
         f.write("\n".join(lines))
 
