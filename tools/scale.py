@@ -491,16 +491,17 @@ def run_point(args, rows, rank_rows, series, mode, contact, ranks):
 # ----------------------------------------------------------------------------- model
 
 def fit_memory(rows):
-    """Least-squares fit of a rank's peak memory, mem = a + b N + c N / P (MB; N tets):
+    """Least-squares fit (relative) of a rank's peak memory, mem = a + b N + c N / P (MB; N tets):
     a the program and libraries, b what every rank holds of the whole scene, c its
     share. Coefficients clipped at 0. None with fewer than three points."""
     if len(rows) < 3:
         return None
     N = np.array([r["tets"] for r in rows], float)
     P = np.array([r["ranks"] for r in rows], float)
-    A = np.column_stack([np.ones_like(N), N, N / P])
-    coefficients = _nonnegative_lstsq(A, np.array([r["mem_max_mb"] for r in rows], float))
-    return coefficients
+    measured = np.array([r["mem_max_mb"] for r in rows], float)
+    # Relative residuals: the small points weigh as much as the big ones.
+    A = np.column_stack([np.ones_like(N), N, N / P]) / measured[:, None]
+    return _nonnegative_lstsq(A, np.ones_like(measured))
 
 
 def fit_halo(rows):
