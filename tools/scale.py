@@ -455,6 +455,14 @@ def run_point(args, rows, rank_rows, series, mode, contact, ranks):
             return row
         results[label] = (read_petsc_summary(output, ranks), read_monitoring(f"{stem}-{label}.mon", ranks),
                           read_peak_memory(f"{stem}-{label}.rss", ranks), output)
+    fill_measurements(args, row, results, rank_rows)
+    return row
+
+
+def fill_measurements(args, row, results, rank_rows):
+    """Fills row (and appends to rank_rows) from the short and long runs' results:
+    (PETSc summary, Open MPI monitoring, peak memory per rank, output) each."""
+    ranks = row["ranks"]
     long_log, short_log = results["long"][0], results["short"][0]
     long_sent, short_sent = results["long"][1], results["short"][1]
     memory = results["long"][2]
@@ -467,8 +475,8 @@ def run_point(args, rows, rank_rows, series, mode, contact, ranks):
         return max(0.0, (long_value - short_value) / args.steps)
     per_rank = []
     for rank in range(ranks):
-        per_rank.append({"series": series, "mode": mode, "contact": contact, "ranks": ranks, "tets": tets,
-                         "rank": rank, "mem_mb": memory[rank], "setup_coll_bytes": short_sent[rank]["coll_bytes"],
+        per_rank.append({**{key: row[key] for key in ("series", "mode", "contact", "ranks", "tets")}, "rank": rank,
+                         "mem_mb": memory[rank], "setup_coll_bytes": short_sent[rank]["coll_bytes"],
                          **{"step_" + key: step(long_sent[rank][key], short_sent[rank][key])
                             for key in ("coll_bytes", "coll_msgs", "mpi_p2p_bytes", "mpi_p2p_msgs")}})
     rank_rows.extend(per_rank)
@@ -485,7 +493,6 @@ def run_point(args, rows, rank_rows, series, mode, contact, ranks):
                setup_bytes_mean=short_log["p2p_bytes_mean"] + np.mean([r["setup_coll_bytes"] for r in per_rank]))
     for key in ("max", "min", "mean"):
         row[f"step_bytes_{key}"] = row[f"step_p2p_bytes_{key}"] + row[f"step_coll_bytes_{key}"]
-    return row
 
 
 # ----------------------------------------------------------------------------- model
@@ -712,7 +719,8 @@ def write_markdown(args, rows, started):
               f"rank sends per step = {COMPACT_PART_FACES} faces x the halo per face measured in the weak series "
               "without contact (its largest P: an interior part has two faces), scaled by (N/P)^(2/3), "
               "+ e N (P-1)/P, e fitted to the collectives' bytes; (b = 0): what a rank would hold if nothing "
-              f"were replicated; extrapolated to N = {TARGET_TETS:.0e}, P = {TARGET_RANKS}.", ""] + model_lines(rows) + [""]
+              f"were replicated; extrapolated to N = {TARGET_TETS:.0e}, P = {TARGET_RANKS}.", ""]
+    lines += model_lines(rows) + [""]
     with open(os.path.join(args.study_dir, "scale.md"), "w") as f:
         f.write("\n".join(lines))
 
