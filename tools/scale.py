@@ -154,7 +154,8 @@ def parse_arguments(argv):
     parser = OneLineErrors(
         prog="scale.py", allow_abbrev=False,
         description="softbody scaling on this machine: per-rank peak memory, set-up by stage, bytes and "
-                    "messages per step and rank, strong and weak series; writes scale.csv, scale.md, scale.png.",
+                    "messages per step and rank, strong and weak series; writes scale.csv, scale-ranks.csv, scale.md, "
+                    "scale.png.",
         epilog="Options after `--` go to every softbody run. Lists take commas or spaces.")
     add_option(parser, "scale_series", "-series", dest="series", metavar="NAME", nargs="+", type=comma_list(str),
                default=[list(SERIES)], help="series to run: strong, weak (default both)")
