@@ -324,6 +324,10 @@ def read_petsc_summary(text, ranks):
             largest, ratio, total = float(line.group(1)), float(line.group(2)), float(line.group(4))
             summary[key + "_max"], summary[key + "_mean"] = largest, total / ranks
             summary[key + "_min"] = largest / ratio if ratio > 0 else 0.0
+    if summary["p2p_msgs_max"] == 0:
+        # PETSc adds the length of a persistent send it starts with no message in it
+        # (a one-rank run shows bytes and 0 messages): no message, no bytes.
+        summary.update(p2p_bytes_max=0.0, p2p_bytes_min=0.0, p2p_bytes_mean=0.0)
     block = text.split("Summary of Stages:", 1)
     for line in block[1].splitlines()[2:] if len(block) == 2 else []:
         match = re.match(r"\s*\d+:\s+(.+?):\s+" + number, line)
