@@ -44,7 +44,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import box_mesh  # noqa: E402
-from softbody_tools import (CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+from softbody_tools import (ToolParser, CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
                             mpi_environment, one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
@@ -77,7 +77,7 @@ def _count(text):
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(
+    parser = ToolParser(
         prog="bench.py", allow_abbrev=False,
         description="softbody performance ladder: beams of about N tets, both modes, direct and iterative "
                     "presets, 1 and 2 ranks; writes bench.csv and bench.md.",

@@ -34,7 +34,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from softbody_tools import add_option  # noqa: E402
+from softbody_tools import ToolParser, add_option  # noqa: E402
 
 # The six Kuhn tets of the unit cube: (0,0,0) -> +e_a -> +e_b -> +e_c = (1,1,1)
 # for every permutation (a, b, c) of the axes; odd permutations are negatively
@@ -155,7 +155,7 @@ def write_medit(path, vertices, tets, faces, refs):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(
+    parser = ToolParser(
         allow_abbrev=False,
         description="Structured tetrahedral mesh of the box [0,Lx]x[0,Ly]x[0,Lz] "
                     "(6 Kuhn tets per hexahedral cell), written as MEDIT .mesh.")

@@ -72,7 +72,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import box_mesh  # noqa: E402
-from softbody_tools import (ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+from softbody_tools import (ToolParser, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
                             mpi_environment, one_line_error, parse_with_passthrough)
 
 SERIES = ("strong", "weak")
@@ -142,7 +142,7 @@ def _choices(parser, option, values, allowed):
             parser.error(f"{option}: unknown value {value!r} (choose from {', '.join(allowed)})")
 
 
-class OneLineErrors(argparse.ArgumentParser):
+class OneLineErrors(ToolParser):
     """An option error is one line, "scale.py: error: ...", and exit status 2."""
 
     def error(self, message):

@@ -30,6 +30,16 @@ CONFIG_DIR = os.path.join(ROOT, "config")
 
 # ----------------------------------------------------------------------------- options
 
+class ToolParser(argparse.ArgumentParser):
+    """The tools' argparse: -help (PETSc's spelling), --help and -h print the help.
+
+    argparse's own -h would read "-help" as -h with the argument "elp" and fail."""
+
+    def __init__(self, **kwargs):
+        super().__init__(add_help=False, **kwargs)
+        self.add_argument("-help", "--help", "-h", action="help", help="show this help and exit")
+
+
 def option_spellings(name, *aliases):
     """The spellings of option `name` (letters, digits, underscores): PETSc's
     -name first, then GNU's --name-with-dashes, then the aliases (older spellings

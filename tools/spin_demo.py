@@ -22,11 +22,11 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import render  # noqa: E402
-from softbody_tools import add_option, mpi_environment, read_medit, softbody_command  # noqa: E402
+from softbody_tools import ToolParser, add_option, mpi_environment, read_medit, softbody_command  # noqa: E402
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+    parser = ToolParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
                                      allow_abbrev=False)
     add_option(parser, "softbody", default="build/softbody", help="the softbody executable")
     add_option(parser, "mpiexec", default="mpirun", help="MPI launcher (default mpirun)")

@@ -77,7 +77,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import box_mesh  # noqa: E402
-from softbody_tools import add_option, error_lines, lumped_masses, mpi_environment, read_medit  # noqa: E402
+from softbody_tools import ToolParser, add_option, error_lines, lumped_masses, mpi_environment, read_medit  # noqa: E402
 
 MODES = ("linear", "corotational")
 PRESET = {"linear": "CHOLMOD Cholesky (config/direct.opts)", "corotational": "CG + warp (config/cg-warp.opts)"}
@@ -566,7 +566,7 @@ def parse_modes(text):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+    parser = ToolParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
                                      allow_abbrev=False)
     add_option(parser, "softbody", default="build/softbody", help="the softbody executable (default build/softbody)")
     add_option(parser, "mpiexec", default="mpirun", help="MPI launcher (default mpirun)")

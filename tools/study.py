@@ -54,7 +54,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from softbody_tools import (CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
+from softbody_tools import (ToolParser, CONFIG_DIR, ROOT, add_option, add_run_options, comma_list, flatten,  # noqa: E402
                             mpi_environment, one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
@@ -70,7 +70,7 @@ SOLVER_LABELS = {"direct": "direct (CHOLMOD Cholesky)", "cg-gamg": "CG + GAMG", 
 # ----------------------------------------------------------------------------- arguments
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(
+    parser = ToolParser(
         prog="study.py", allow_abbrev=False,
         description="Work-precision study of softbody: runs SCENE to a fixed end time over time "
                     "steps, modes, solvers, tolerances and rank counts, measures each run's error "
