@@ -17,6 +17,7 @@
 #include <string>
 
 #include "common/errors.hpp"
+#include "io/mesh_h5.hpp"
 
 namespace softbody::fuzz {
 
@@ -44,9 +45,12 @@ class InputFolder {
   InputFolder(const InputFolder &) = delete;
   InputFolder &operator=(const InputFolder &) = delete;
 
+  // <folder>/name.
+  std::string Path(const std::string &name) const { return (path_ / name).string(); }
+
   // Writes `size` bytes to <folder>/name and returns its path.
   std::string Write(const std::string &name, const uint8_t *data, size_t size) const {
-    const std::string path = (path_ / name).string();
+    const std::string path = Path(name);
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     out.write(reinterpret_cast<const char *>(data), static_cast<std::streamsize>(size));
     out.close();
@@ -92,6 +96,13 @@ inline void WriteMeshes(const InputFolder &folder) {
   folder.Write("tet.off",
                "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n"
                "3 0 3 2\n3 1 2 3\n");
+  // The softbody HDF5 mesh file, read without MPI (the fuzzers do not initialise it).
+  TetMesh tet;
+  tet.vertices.resize(4, 3);
+  tet.vertices << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+  tet.tets.resize(1, 4);
+  tet.tets << 0, 1, 2, 3;
+  WriteMeshH5(folder.Path("tet.h5"), tet, "fuzz");
 }
 
 // Runs `parse`; an InputError is a clean rejection of bad input.
