@@ -118,7 +118,7 @@ PetscErrorCode Simulation::SetUp() {
   PetscFunctionBeginUser;
   PetscCall(CheckFiles());
   PetscCall(ReadScene());
-  PetscCall(BuildDofLayout(comm_, scene_, options_.partition, &layout_));
+  PetscCall(DistributeMesh());
   PetscCall(CreateInitialState());
   PetscCall(OpenOutput());
   PetscCall(SetUpSolvers());
@@ -156,13 +156,26 @@ PetscErrorCode Simulation::ReadScene() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// This rank's shares of the meshes, the numbering of the free vertices and the
+// tets this rank assembles (mesh_share.hpp, partition.hpp, migration.hpp).
+PetscErrorCode Simulation::DistributeMesh() {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank, size;
+  PetscCallMPI(MPI_Comm_rank(comm_, &rank));
+  PetscCallMPI(MPI_Comm_size(comm_, &size));
+  share_ = ShareScene(scene_, rank, size);
+  PetscCall(BuildDofLayout(comm_, options_.partition, &share_, &layout_));
+  PetscCall(MigrateTets(comm_, share_, layout_, &tets_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // This rank's elements, the lumped mass and the initial state; a restart
 // replaces the state by its checkpoint's (checked against the scene) and keeps
 // the original initial positions to prime the solver.
 PetscErrorCode Simulation::CreateInitialState() {
   PetscFunctionBeginUser;
-  elements_ = CollectLocalElements(scene_, layout_);
-  PetscCall(CreateState(comm_, scene_, layout_, elements_, &state_));
+  elements_ = CollectLocalElements(scene_, layout_, tets_);
+  PetscCall(CreateState(comm_, share_, layout_, elements_, &state_));
   if (restart()) {
     PetscCall(VecDuplicate(state_.positions, &initial_positions_));
     PetscCall(VecCopy(state_.positions, initial_positions_));
@@ -196,7 +209,7 @@ PetscErrorCode Simulation::SetUpSolvers() {
   dt_first_ = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start_.time);
   if (has_unknowns()) {
-    PetscCall(integrator_.Setup(comm_, scene_, layout_, elements_, state_.rest_positions,
+    PetscCall(integrator_.Setup(comm_, scene_, layout_, tets_, elements_, state_.rest_positions,
                                 state_.lumped_mass, integration));
     PetscCall(integrator_.SetBodies(OwnedVertexBodies(scene_, layout_),
                                     static_cast<int>(scene_.bodies.size())));

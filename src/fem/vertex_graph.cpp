@@ -33,32 +33,14 @@ void SortUnique(std::vector<uint64_t> *edges) {
   edges->erase(std::unique(edges->begin(), edges->end()), edges->end());
 }
 
-// The edges of this rank's even share of the free bodies' tets (free bodies in
-// scene order, their tets in file order), each in both directions, without repeats.
-std::vector<uint64_t> EdgesOfTetShare(const Scene &scene,
-                                      const std::vector<PetscInt> &free_of_natural,
-                                      PetscMPIInt rank, PetscMPIInt size) {
-  int64_t free_tets = 0;
-  for (const Body &body : scene.bodies)
-    if (!body.fixed) free_tets += body.mesh.num_tets();
-  const int64_t begin = EvenShareBegin(free_tets, size, rank);
-  const int64_t end = EvenShareBegin(free_tets, size, rank + 1);
+// The edges of `tets` (free indices), each in both directions, without repeats.
+std::vector<uint64_t> EdgesOfTets(const std::vector<std::array<PetscInt, 4>> &tets) {
   std::vector<uint64_t> edges;
-  edges.reserve(12 * (end - begin));
-  int64_t first = 0;  // index of the body's tet 0 among the free tets
-  for (const Body &body : scene.bodies) {
-    if (body.fixed) continue;
-    const int64_t last = first + body.mesh.num_tets();
-    for (int64_t t = std::max(begin, first); t < std::min(end, last); ++t) {
-      PetscInt v[4];
-      for (int a = 0; a < 4; ++a)
-        v[a] = free_of_natural[body.first_vertex + body.mesh.tets(t - first, a)];
-      for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b)
-          if (a != b) edges.push_back(PackEdge(v[a], v[b]));
-    }
-    first = last;
-  }
+  edges.reserve(12 * tets.size());
+  for (const std::array<PetscInt, 4> &v : tets)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        if (a != b) edges.push_back(PackEdge(v[a], v[b]));
   SortUnique(&edges);
   return edges;
 }
@@ -100,9 +82,8 @@ PetscErrorCode SendEdgesToRows(MPI_Comm comm, PetscInt n, PetscMPIInt size,
 
 }  // namespace
 
-PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const Scene &scene,
-                                    const std::vector<PetscInt> &free_of_natural, PetscInt num_free,
-                                    VertexGraphRows *graph) {
+PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const std::vector<std::array<PetscInt, 4>> &tets,
+                                    PetscInt num_free, VertexGraphRows *graph) {
   PetscFunctionBeginUser;
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
@@ -112,8 +93,7 @@ PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const Scene &scene,
   graph->row_begin = EvenShareBegin(n, size, rank);
   const PetscInt rows = EvenShareBegin(n, size, rank + 1) - graph->row_begin;
   std::vector<uint64_t> edges;
-  PetscCall(
-      SendEdgesToRows(comm, n, size, EdgesOfTetShare(scene, free_of_natural, rank, size), &edges));
+  PetscCall(SendEdgesToRows(comm, n, size, EdgesOfTets(tets), &edges));
   graph->offsets.assign(rows + 1, 0);
   graph->neighbours.resize(edges.size());
   for (size_t e = 0; e < edges.size(); ++e) {

@@ -1,0 +1,126 @@
+#include "fem/migration.hpp"
+
+#include <algorithm>
+#include <climits>
+
+namespace softbody {
+
+namespace {
+
+// One tet on its way to a rank that owns one of its vertices.
+struct TetRecord {
+  int64_t index;  // among the free tets
+  int32_t body;
+  int32_t unused;  // keeps the record free of padding
+  PetscInt vertices[4];
+  double rest[12];
+};
+
+// Collective. The PETSc vertices and rest positions of the share's tets.
+PetscErrorCode FetchTetVertices(MPI_Comm comm, const MeshShare &share,
+                                std::vector<std::array<PetscInt, 4>> *petsc,
+                                std::vector<std::array<double, 12>> *rest) {
+  PetscFunctionBeginUser;
+  std::vector<PetscInt> naturals;
+  naturals.reserve(4 * share.tets.size());
+  for (const auto &tet : share.tets) naturals.insert(naturals.end(), tet.begin(), tet.end());
+  PetscSF sf;
+  PetscCall(CreateSlabSF(comm, share, naturals, &sf));
+  petsc->resize(share.tets.size());
+  rest->resize(share.tets.size());
+  PetscCall(FetchFromSlabs(sf, MPIU_INT, 1, share.petsc_vertex.data(), petsc->data()));
+  PetscCall(FetchFromSlabs(sf, MPI_DOUBLE, 3, share.rest.data(), rest->data()));
+  PetscCall(PetscSFDestroy(&sf));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The distinct ranks owning the vertices of a tet, increasing.
+std::vector<PetscMPIInt> Owners(const DofLayout &layout, const std::array<PetscInt, 4> &vertices) {
+  std::vector<PetscMPIInt> owners;
+  for (PetscInt v : vertices) {
+    const auto after = std::upper_bound(layout.vertex_start.begin(), layout.vertex_start.end(), v);
+    owners.push_back(static_cast<PetscMPIInt>(after - layout.vertex_start.begin()) - 1);
+  }
+  std::sort(owners.begin(), owners.end());
+  owners.erase(std::unique(owners.begin(), owners.end()), owners.end());
+  return owners;
+}
+
+// The share's tets as records, grouped by destination rank (counts[q] for rank q).
+std::vector<TetRecord> PackByOwner(const MeshShare &share, const DofLayout &layout,
+                                   const std::vector<std::array<PetscInt, 4>> &petsc,
+                                   const std::vector<std::array<double, 12>> &rest,
+                                   std::vector<int> *counts) {
+  std::vector<std::vector<TetRecord>> by_rank(layout.size);
+  for (size_t t = 0; t < share.tets.size(); ++t) {
+    TetRecord record{share.first_tet + static_cast<int64_t>(t), share.tet_body[t], 0, {}, {}};
+    std::copy(petsc[t].begin(), petsc[t].end(), record.vertices);
+    std::copy(rest[t].begin(), rest[t].end(), record.rest);
+    for (PetscMPIInt q : Owners(layout, petsc[t])) by_rank[q].push_back(record);
+  }
+  std::vector<TetRecord> records;
+  counts->assign(layout.size, 0);
+  for (PetscMPIInt q = 0; q < layout.size; ++q) {
+    (*counts)[q] = static_cast<int>(by_rank[q].size());
+    records.insert(records.end(), by_rank[q].begin(), by_rank[q].end());
+    by_rank[q] = std::vector<TetRecord>();
+  }
+  return records;
+}
+
+// Collective. Every rank's records for this rank (MPI_Alltoallv: each rank knows
+// what it sends where, the receivers learn their counts in one MPI_Alltoall).
+PetscErrorCode Exchange(MPI_Comm comm, const std::vector<TetRecord> &send,
+                        const std::vector<int> &send_counts, std::vector<TetRecord> *received) {
+  PetscFunctionBeginUser;
+  const size_t size = send_counts.size();
+  std::vector<int> receive_counts(size), send_offsets(size, 0), receive_offsets(size, 0);
+  PetscCallMPI(
+      MPI_Alltoall(send_counts.data(), 1, MPI_INT, receive_counts.data(), 1, MPI_INT, comm));
+  int64_t sent = 0, total = 0;
+  for (size_t q = 0; q < size; ++q) {
+    send_offsets[q] = static_cast<int>(sent);
+    receive_offsets[q] = static_cast<int>(total);
+    sent += send_counts[q];
+    total += receive_counts[q];
+    PetscCheck(sent <= INT_MAX && total <= INT_MAX, comm, PETSC_ERR_SUP,
+               "more tets for one rank than MPI can exchange at once: run on more ranks");
+  }
+  received->resize(total);
+  MPI_Datatype record;
+  PetscCallMPI(MPI_Type_contiguous(sizeof(TetRecord), MPI_BYTE, &record));
+  PetscCallMPI(MPI_Type_commit(&record));
+  PetscCallMPI(MPI_Alltoallv(send.data(), send_counts.data(), send_offsets.data(), record,
+                             received->data(), receive_counts.data(), receive_offsets.data(),
+                             record, comm));
+  PetscCallMPI(MPI_Type_free(&record));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
+PetscErrorCode MigrateTets(MPI_Comm comm, const MeshShare &share, const DofLayout &layout,
+                           LocalTets *tets) {
+  PetscFunctionBeginUser;
+  std::vector<TetRecord> received;
+  {
+    std::vector<std::array<PetscInt, 4>> petsc;
+    std::vector<std::array<double, 12>> rest;
+    PetscCall(FetchTetVertices(comm, share, &petsc, &rest));
+    std::vector<int> counts;
+    const std::vector<TetRecord> send = PackByOwner(share, layout, petsc, rest, &counts);
+    PetscCall(Exchange(comm, send, counts, &received));
+  }
+  std::sort(received.begin(), received.end(),
+            [](const TetRecord &a, const TetRecord &b) { return a.index < b.index; });
+  *tets = LocalTets();
+  for (const TetRecord &r : received) {
+    tets->index.push_back(r.index);
+    tets->body.push_back(r.body);
+    tets->vertices.push_back({r.vertices[0], r.vertices[1], r.vertices[2], r.vertices[3]});
+    tets->rest.push_back(Eigen::Map<const Eigen::Matrix<double, 4, 3, Eigen::RowMajor>>(r.rest));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
