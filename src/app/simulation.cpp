@@ -176,6 +176,7 @@ PetscErrorCode Simulation::CreateInitialState() {
   PetscFunctionBeginUser;
   elements_ = CollectLocalElements(scene_, layout_, tets_);
   PetscCall(CreateState(comm_, share_, layout_, elements_, &state_));
+  share_ = MeshShare();  // set-up only, and no longer needed
   if (restart()) {
     PetscCall(VecDuplicate(state_.positions, &initial_positions_));
     PetscCall(VecCopy(state_.positions, initial_positions_));
@@ -209,8 +210,8 @@ PetscErrorCode Simulation::SetUpSolvers() {
   dt_first_ = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start_.time);
   if (has_unknowns()) {
-    PetscCall(integrator_.Setup(comm_, scene_, layout_, tets_, elements_, state_.rest_positions,
-                                state_.lumped_mass, integration));
+    PetscCall(integrator_.Setup(comm_, scene_, layout_, std::move(tets_), elements_,
+                                state_.rest_positions, state_.lumped_mass, integration));
     PetscCall(integrator_.SetBodies(OwnedVertexBodies(scene_, layout_),
                                     static_cast<int>(scene_.bodies.size())));
   }

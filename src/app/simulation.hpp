@@ -87,9 +87,9 @@ class Simulation {
   RunOptions options_;
   Scene scene_;
   std::vector<Deformation> deformations_;
-  MeshShare share_;  // this rank's shares of the meshes (set-up only)
+  MeshShare share_;  // this rank's shares of the meshes (set-up only: freed after CreateState)
   DofLayout layout_;
-  LocalTets tets_;  // the free tets with an owned vertex (set-up only)
+  LocalTets tets_;  // the free tets with an owned vertex (set-up only: the integrator takes them)
   LocalElements elements_;
   State state_;
   LoopState start_;                  // where the loop starts: step 0, or a checkpoint's

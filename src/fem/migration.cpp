@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <climits>
+#include <utility>
 
 namespace softbody {
 
@@ -34,37 +35,44 @@ PetscErrorCode FetchTetVertices(MPI_Comm comm, const MeshShare &share,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The distinct ranks owning the vertices of a tet, increasing.
-std::vector<PetscMPIInt> Owners(const DofLayout &layout, const std::array<PetscInt, 4> &vertices) {
-  std::vector<PetscMPIInt> owners;
+// The distinct ranks owning the vertices of a tet, increasing: rank[0 .. count).
+struct TetOwners {
+  PetscMPIInt rank[4];
+  int count = 0;
+  const PetscMPIInt *begin() const { return rank; }
+  const PetscMPIInt *end() const { return rank + count; }
+};
+
+TetOwners Owners(const DofLayout &layout, const std::array<PetscInt, 4> &vertices) {
+  TetOwners owners;
   for (PetscInt v : vertices) {
     const auto after = std::upper_bound(layout.vertex_start.begin(), layout.vertex_start.end(), v);
-    owners.push_back(static_cast<PetscMPIInt>(after - layout.vertex_start.begin()) - 1);
+    owners.rank[owners.count++] = static_cast<PetscMPIInt>(after - layout.vertex_start.begin()) - 1;
   }
-  std::sort(owners.begin(), owners.end());
-  owners.erase(std::unique(owners.begin(), owners.end()), owners.end());
+  std::sort(owners.rank, owners.rank + 4);
+  owners.count = static_cast<int>(std::unique(owners.rank, owners.rank + 4) - owners.rank);
   return owners;
 }
 
-// The share's tets as records, grouped by destination rank (counts[q] for rank q).
+// The share's tets as records, grouped by destination rank (counts[q] for rank
+// q): counted first, then written in place, so the records are held once.
 std::vector<TetRecord> PackByOwner(const MeshShare &share, const DofLayout &layout,
                                    const std::vector<std::array<PetscInt, 4>> &petsc,
                                    const std::vector<std::array<double, 12>> &rest,
                                    std::vector<int> *counts) {
-  std::vector<std::vector<TetRecord>> by_rank(layout.size);
-  for (size_t t = 0; t < share.tets.size(); ++t) {
-    TetRecord record{share.first_tet + static_cast<int64_t>(t), share.tet_body[t], 0, {}, {}};
-    std::copy(petsc[t].begin(), petsc[t].end(), record.vertices);
-    std::copy(rest[t].begin(), rest[t].end(), record.rest);
-    for (PetscMPIInt q : Owners(layout, petsc[t])) by_rank[q].push_back(record);
-  }
-  std::vector<TetRecord> records;
   counts->assign(layout.size, 0);
-  for (PetscMPIInt q = 0; q < layout.size; ++q) {
-    (*counts)[q] = static_cast<int>(by_rank[q].size());
-    records.insert(records.end(), by_rank[q].begin(), by_rank[q].end());
-    by_rank[q] = std::vector<TetRecord>();
-  }
+  for (const auto &vertices : petsc)
+    for (PetscMPIInt q : Owners(layout, vertices)) ++(*counts)[q];
+  std::vector<size_t> next(layout.size + 1, 0);
+  for (PetscMPIInt q = 0; q < layout.size; ++q) next[q + 1] = next[q] + (*counts)[q];
+  std::vector<TetRecord> records(next[layout.size]);
+  for (size_t t = 0; t < share.tets.size(); ++t)
+    for (PetscMPIInt q : Owners(layout, petsc[t])) {
+      TetRecord &record = records[next[q]++];
+      record = TetRecord{share.first_tet + static_cast<int64_t>(t), share.tet_body[t], 0, {}, {}};
+      std::copy(petsc[t].begin(), petsc[t].end(), record.vertices);
+      std::copy(rest[t].begin(), rest[t].end(), record.rest);
+    }
   return records;
 }
 
@@ -102,18 +110,23 @@ PetscErrorCode Exchange(MPI_Comm comm, const std::vector<TetRecord> &send,
 PetscErrorCode MigrateTets(MPI_Comm comm, const MeshShare &share, const DofLayout &layout,
                            LocalTets *tets) {
   PetscFunctionBeginUser;
-  std::vector<TetRecord> received;
+  std::vector<TetRecord> send, received;
+  std::vector<int> counts;
   {
     std::vector<std::array<PetscInt, 4>> petsc;
     std::vector<std::array<double, 12>> rest;
     PetscCall(FetchTetVertices(comm, share, &petsc, &rest));
-    std::vector<int> counts;
-    const std::vector<TetRecord> send = PackByOwner(share, layout, petsc, rest, &counts);
-    PetscCall(Exchange(comm, send, counts, &received));
+    send = PackByOwner(share, layout, petsc, rest, &counts);
   }
+  PetscCall(Exchange(comm, send, counts, &received));
+  send = std::vector<TetRecord>();
   std::sort(received.begin(), received.end(),
             [](const TetRecord &a, const TetRecord &b) { return a.index < b.index; });
   *tets = LocalTets();
+  tets->index.reserve(received.size());
+  tets->body.reserve(received.size());
+  tets->vertices.reserve(received.size());
+  tets->rest.reserve(received.size());
   for (const TetRecord &r : received) {
     tets->index.push_back(r.index);
     tets->body.push_back(r.body);

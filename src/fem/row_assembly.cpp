@@ -118,7 +118,7 @@ PetscErrorCode RowAssembler::GatherHalo(Vec x) {
 }
 
 PetscErrorCode RowAssembler::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                                   const LocalTets &tets, double shear_scale, Vec rest_positions) {
+                                   LocalTets tets, double shear_scale, Vec rest_positions) {
   PetscFunctionBeginUser;
   comm_ = comm;
   shear_scale_ = shear_scale;

@@ -41,11 +41,12 @@ class RowAssembler {
   ~RowAssembler();
 
   // Collective. The elements of `tets` (MigrateTets: the free tets that touch a
-  // vertex this rank owns) with their bodies' materials, their rest data and the
-  // gather plan for their vertices. rest_positions is a PETSc-ordered DOF vector
+  // vertex this rank owns; taken by value, so a caller that moves them in frees
+  // them here) with their bodies' materials, their rest data and the gather plan
+  // for their vertices. rest_positions is a PETSc-ordered DOF vector
   // (block size 3).
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                       const LocalTets &tets, double shear_scale, Vec rest_positions);
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, LocalTets tets,
+                       double shear_scale, Vec rest_positions);
 
   // How PETSc multiplies with the matrix: its default "inode" kernel, or the
   // plain CSR kernel, faster on these rows but summing in another order.

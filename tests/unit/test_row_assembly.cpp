@@ -105,7 +105,8 @@ struct Fixture {
     MigrateTets(PETSC_COMM_WORLD, share, layout, &tets);
     elements = CollectLocalElements(scene, layout, tets);
     CreateState(PETSC_COMM_WORLD, share, layout, elements, &state);
-    assembler.Setup(PETSC_COMM_WORLD, scene, layout, tets, shear_scale, state.rest_positions);
+    assembler.Setup(PETSC_COMM_WORLD, scene, layout, std::move(tets), shear_scale,
+                    state.rest_positions);
     assembler.CreateMatrix(&A);
   }
   ~Fixture() { MatDestroy(&A); }
