@@ -121,6 +121,7 @@ PetscErrorCode Simulation::SetUp() {
   PetscCall(DistributeMesh());
   PetscCall(CreateInitialState());
   PetscCall(OpenOutput());
+  share_ = MeshShare();  // set-up only: the state and the result file hold what they need
   PetscCall(SetUpSolvers());
   PetscCall(StartTimeLoop());
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -176,7 +177,6 @@ PetscErrorCode Simulation::CreateInitialState() {
   PetscFunctionBeginUser;
   elements_ = CollectLocalElements(scene_, layout_, tets_);
   PetscCall(CreateState(comm_, share_, layout_, elements_, &state_));
-  share_ = MeshShare();  // set-up only, and no longer needed
   if (restart()) {
     PetscCall(VecDuplicate(state_.positions, &initial_positions_));
     PetscCall(VecCopy(state_.positions, initial_positions_));
@@ -194,7 +194,7 @@ PetscErrorCode Simulation::OpenOutput() {
   if (options_.output.path.empty()) PetscFunctionReturn(PETSC_SUCCESS);
   writer_ = &file_;
   const Continuation continuation{options_.checkpoints.restart_path, start_.frames};
-  PetscCall(writer_->Open(comm_, options_.output, scene_, layout_, state_.positions,
+  PetscCall(writer_->Open(comm_, options_.output, scene_, layout_, share_, state_.positions,
                           restart() ? &continuation : nullptr));
   const Eigen::Vector3d &gravity = options_.integration.gravity;
   const double ground_y = options_.contact.ground_y;

@@ -87,7 +87,7 @@ class Simulation {
   RunOptions options_;
   Scene scene_;
   std::vector<Deformation> deformations_;
-  MeshShare share_;  // this rank's shares of the meshes (set-up only: freed after CreateState)
+  MeshShare share_;  // this rank's shares of the meshes (set-up only: freed after OpenOutput)
   DofLayout layout_;
   LocalTets tets_;  // the free tets with an owned vertex (set-up only: the integrator takes them)
   LocalElements elements_;

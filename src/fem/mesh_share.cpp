@@ -21,14 +21,13 @@ void CopyVertexSlab(const Scene &scene, PetscInt begin, PetscInt end, MeshShare 
   }
 }
 
-// The free tets [begin, end) (free bodies in scene order, tets in file order).
+// The tets [begin, end) (bodies in scene order, tets in file order).
 void CopyTetShare(const Scene &scene, int64_t begin, int64_t end, MeshShare *share) {
   share->tets.reserve(end - begin);
   share->tet_body.reserve(end - begin);
-  int64_t first = 0;  // index of the body's tet 0 among the free tets
+  int64_t first = 0;  // index of the body's tet 0
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
-    if (body.fixed) continue;
     const int64_t last = first + body.mesh.num_tets();
     for (int64_t t = std::max(begin, first); t < std::min(end, last); ++t) {
       std::array<PetscInt, 4> natural;
@@ -48,10 +47,10 @@ MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size) {
   share.first_vertex = EvenShareBegin(share.num_vertices, size, rank);
   CopyVertexSlab(scene, share.first_vertex, EvenShareBegin(share.num_vertices, size, rank + 1),
                  &share);
-  for (const Body &body : scene.bodies)
-    if (!body.fixed) share.num_free_tets += body.mesh.num_tets();
-  share.first_tet = EvenShareBegin(share.num_free_tets, size, rank);
-  CopyTetShare(scene, share.first_tet, EvenShareBegin(share.num_free_tets, size, rank + 1), &share);
+  share.num_all_tets = scene.num_tets();
+  share.first_tet = EvenShareBegin(share.num_all_tets, size, rank);
+  CopyTetShare(scene, share.first_tet, EvenShareBegin(share.num_all_tets, size, rank + 1), &share);
+  for (const Body &body : scene.bodies) share.body_fixed.push_back(body.fixed);
   return share;
 }
 

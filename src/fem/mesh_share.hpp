@@ -4,8 +4,9 @@
 // - a slab of the natural vertices (all bodies, natural order): their placed rest
 //   positions and initial velocities, and, once the layout is built
 //   (partition.hpp), their free index and PETSc vertex;
-// - a share of the free tets (the tets of the bodies that are not fixed, bodies
-//   in scene order, tets in file order): their natural vertices and body.
+// - a share of the tets (all bodies, in scene order, tets in file order): their
+//   natural vertices and body; the tets of the bodies that are not fixed are the
+//   free tets, which carry the unknowns.
 // The set-up reaches the vertices its tets or its owned vertices name through a
 // PetscSF whose roots are the vertex slabs (CreateSlabSF), so no rank needs
 // another's share whole. Memory: O(N / P + T / P) per rank.
@@ -29,17 +30,20 @@ struct MeshShare {
   std::vector<PetscInt> free_index;    // per slab vertex, -1 when not free (partition.hpp)
   std::vector<PetscInt> petsc_vertex;  // per slab vertex, -1 when not free (partition.hpp)
 
-  int64_t num_free_tets = 0;  // over all ranks
-  int64_t first_tet = 0;      // this rank's share: [first_tet, first_tet + num_tets())
+  int64_t num_all_tets = 0;  // over all ranks and bodies
+  int64_t first_tet = 0;     // this rank's share: [first_tet, first_tet + num_tets())
   std::vector<std::array<PetscInt, 4>> tets;  // natural vertices
   std::vector<int32_t> tet_body;              // scene body of each tet
+  std::vector<char> body_fixed;               // per scene body: fixed (or at rest)
 
   PetscInt slab_size() const { return static_cast<PetscInt>(rest.rows()); }
   PetscInt num_tets() const { return static_cast<PetscInt>(tets.size()); }
+  bool TetIsFree(size_t t) const { return !body_fixed[tet_body[t]]; }
 };
 
 // Not collective. This rank's shares (of `size` ranks), taken from a scene every
-// rank holds; free_index and petsc_vertex are left empty.
+// rank holds (bodies' fixed flags as they are now); free_index and petsc_vertex
+// are left empty.
 MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size);
 
 // Collective. A star forest with one root per vertex of this rank's slab and one

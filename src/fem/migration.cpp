@@ -1,8 +1,9 @@
 #include "fem/migration.hpp"
 
 #include <algorithm>
-#include <climits>
 #include <utility>
+
+#include "common/exchange.hpp"
 
 namespace softbody {
 
@@ -10,7 +11,7 @@ namespace {
 
 // One tet on its way to a rank that owns one of its vertices.
 struct TetRecord {
-  int64_t index;  // among the free tets
+  int64_t index;  // among all tets
   int32_t body;
   int32_t unused;  // keeps the record free of padding
   PetscInt vertices[4];
@@ -54,55 +55,29 @@ TetOwners Owners(const DofLayout &layout, const std::array<PetscInt, 4> &vertice
   return owners;
 }
 
-// The share's tets as records, grouped by destination rank (counts[q] for rank
-// q): counted first, then written in place, so the records are held once.
+// The share's free tets as records, grouped by destination rank (counts[q] for
+// rank q): counted first, then written in place, so the records are held once.
 std::vector<TetRecord> PackByOwner(const MeshShare &share, const DofLayout &layout,
                                    const std::vector<std::array<PetscInt, 4>> &petsc,
                                    const std::vector<std::array<double, 12>> &rest,
                                    std::vector<int> *counts) {
   counts->assign(layout.size, 0);
-  for (const auto &vertices : petsc)
-    for (PetscMPIInt q : Owners(layout, vertices)) ++(*counts)[q];
+  for (size_t t = 0; t < share.tets.size(); ++t)
+    if (share.TetIsFree(t))
+      for (PetscMPIInt q : Owners(layout, petsc[t])) ++(*counts)[q];
   std::vector<size_t> next(layout.size + 1, 0);
   for (PetscMPIInt q = 0; q < layout.size; ++q) next[q + 1] = next[q] + (*counts)[q];
   std::vector<TetRecord> records(next[layout.size]);
-  for (size_t t = 0; t < share.tets.size(); ++t)
+  for (size_t t = 0; t < share.tets.size(); ++t) {
+    if (!share.TetIsFree(t)) continue;
     for (PetscMPIInt q : Owners(layout, petsc[t])) {
       TetRecord &record = records[next[q]++];
       record = TetRecord{share.first_tet + static_cast<int64_t>(t), share.tet_body[t], 0, {}, {}};
       std::copy(petsc[t].begin(), petsc[t].end(), record.vertices);
       std::copy(rest[t].begin(), rest[t].end(), record.rest);
     }
-  return records;
-}
-
-// Collective. Every rank's records for this rank (MPI_Alltoallv: each rank knows
-// what it sends where, the receivers learn their counts in one MPI_Alltoall).
-PetscErrorCode Exchange(MPI_Comm comm, const std::vector<TetRecord> &send,
-                        const std::vector<int> &send_counts, std::vector<TetRecord> *received) {
-  PetscFunctionBeginUser;
-  const size_t size = send_counts.size();
-  std::vector<int> receive_counts(size), send_offsets(size, 0), receive_offsets(size, 0);
-  PetscCallMPI(
-      MPI_Alltoall(send_counts.data(), 1, MPI_INT, receive_counts.data(), 1, MPI_INT, comm));
-  int64_t sent = 0, total = 0;
-  for (size_t q = 0; q < size; ++q) {
-    send_offsets[q] = static_cast<int>(sent);
-    receive_offsets[q] = static_cast<int>(total);
-    sent += send_counts[q];
-    total += receive_counts[q];
-    PetscCheck(sent <= INT_MAX && total <= INT_MAX, comm, PETSC_ERR_SUP,
-               "more tets for one rank than MPI can exchange at once: run on more ranks");
   }
-  received->resize(total);
-  MPI_Datatype record;
-  PetscCallMPI(MPI_Type_contiguous(sizeof(TetRecord), MPI_BYTE, &record));
-  PetscCallMPI(MPI_Type_commit(&record));
-  PetscCallMPI(MPI_Alltoallv(send.data(), send_counts.data(), send_offsets.data(), record,
-                             received->data(), receive_counts.data(), receive_offsets.data(),
-                             record, comm));
-  PetscCallMPI(MPI_Type_free(&record));
-  PetscFunctionReturn(PETSC_SUCCESS);
+  return records;
 }
 
 }  // namespace
@@ -118,7 +93,7 @@ PetscErrorCode MigrateTets(MPI_Comm comm, const MeshShare &share, const DofLayou
     PetscCall(FetchTetVertices(comm, share, &petsc, &rest));
     send = PackByOwner(share, layout, petsc, rest, &counts);
   }
-  PetscCall(Exchange(comm, send, counts, &received));
+  PetscCall(ExchangeRecords(comm, send, counts, &received));
   send = std::vector<TetRecord>();
   std::sort(received.begin(), received.end(),
             [](const TetRecord &a, const TetRecord &b) { return a.index < b.index; });

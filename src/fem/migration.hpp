@@ -4,8 +4,8 @@
 // one vertex it owns. Each rank sends each tet of its MeshShare to the owners of
 // its vertices (one to four ranks), with the tet's PETSc vertices and rest
 // positions fetched from the vertex slabs (mesh_share.hpp); no rank reads the
-// scene's meshes. The received tets are sorted by their index among the free
-// tets (free bodies in scene order, tets in file order), so every sum over them
+// scene's meshes. The received tets are sorted by their index among all tets
+// (bodies in scene order, tets in file order), so every sum over them
 // is formed in one order, whatever the number of ranks or the way the tets came.
 #pragma once
 
@@ -22,7 +22,7 @@
 namespace softbody {
 
 struct LocalTets {
-  std::vector<int64_t> index;                     // among the free tets, increasing
+  std::vector<int64_t> index;                     // among all tets, increasing
   std::vector<int32_t> body;                      // scene body
   std::vector<std::array<PetscInt, 4>> vertices;  // PETSc vertices
   std::vector<TetPositions> rest;                 // rest positions (m), row a: vertex a

@@ -71,22 +71,25 @@ const char *PartitionerName(Partitioner partitioner) {
 
 namespace {
 
-// The natural vertices of the share's tets, four per tet.
-std::vector<PetscInt> TetVertices(const MeshShare &share) {
+// The natural vertices of the share's free tets, four per tet.
+std::vector<PetscInt> FreeTetVertices(const MeshShare &share) {
   std::vector<PetscInt> naturals;
-  naturals.reserve(4 * share.tets.size());
-  for (const auto &tet : share.tets) naturals.insert(naturals.end(), tet.begin(), tet.end());
+  for (size_t t = 0; t < share.tets.size(); ++t)
+    if (share.TetIsFree(t))
+      naturals.insert(naturals.end(), share.tets[t].begin(), share.tets[t].end());
   return naturals;
 }
 
 // Collective. share->free_index: a vertex is free when a free tet names it (a
 // reduction from the tets' vertices to their slabs, through tet_sf: CreateSlabSF
-// of TetVertices), numbered in natural order (an exclusive scan over the slabs).
-// Returns the number of free vertices.
+// of FreeTetVertices), numbered in natural order (an exclusive scan over the
+// slabs). Returns the number of free vertices.
 PetscErrorCode NumberFreeVertices(MPI_Comm comm, PetscSF tet_sf, MeshShare *share,
                                   PetscInt *num_free) {
   PetscFunctionBeginUser;
-  const std::vector<PetscInt> named(4 * share->tets.size(), 1);
+  PetscInt leaves;
+  PetscCall(PetscSFGetGraph(tet_sf, nullptr, &leaves, nullptr, nullptr));
+  const std::vector<PetscInt> named(leaves, 1);
   share->free_index.assign(share->slab_size(), 0);
   PetscCall(PetscSFReduceBegin(tet_sf, MPIU_INT, named.data(), share->free_index.data(), MPI_MAX));
   PetscCall(PetscSFReduceEnd(tet_sf, MPIU_INT, named.data(), share->free_index.data(), MPI_MAX));
@@ -101,11 +104,13 @@ PetscErrorCode NumberFreeVertices(MPI_Comm comm, PetscSF tet_sf, MeshShare *shar
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Collective. The free indices of the share's tets' vertices (from the slabs).
+// Collective. The free indices of the vertices of the share's free tets (from the slabs).
 PetscErrorCode FreeTets(PetscSF tet_sf, const MeshShare &share,
                         std::vector<std::array<PetscInt, 4>> *tets) {
   PetscFunctionBeginUser;
-  tets->resize(share.tets.size());
+  PetscInt leaves;
+  PetscCall(PetscSFGetGraph(tet_sf, nullptr, &leaves, nullptr, nullptr));
+  tets->resize(leaves / 4);
   PetscCall(FetchFromSlabs(tet_sf, MPIU_INT, 1, share.free_index.data(), tets->data()));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -226,7 +231,7 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, Me
   PetscCallMPI(MPI_Comm_rank(comm, &layout->rank));
   PetscCallMPI(MPI_Comm_size(comm, &layout->size));
   PetscSF tet_sf;
-  PetscCall(CreateSlabSF(comm, *share, TetVertices(*share), &tet_sf));
+  PetscCall(CreateSlabSF(comm, *share, FreeTetVertices(*share), &tet_sf));
   PetscInt num_free;
   PetscCall(NumberFreeVertices(comm, tet_sf, share, &num_free));
   VertexGraphRows graph;

@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <cstdlib>
 
+#include "common/exchange.hpp"
+
 namespace softbody {
 
 namespace {
@@ -50,32 +52,17 @@ std::vector<uint64_t> EdgesOfTets(const std::vector<std::array<PetscInt, 4>> &te
 PetscErrorCode SendEdgesToRows(MPI_Comm comm, PetscInt n, PetscMPIInt size,
                                const std::vector<uint64_t> &edges, std::vector<uint64_t> *mine) {
   PetscFunctionBeginUser;
-  std::vector<int> send_counts(size, 0), receive_counts(size), send_offsets(size + 1, 0),
-      receive_offsets(size + 1, 0);
+  std::vector<int> send_counts(size, 0);
   size_t e = 0;
   for (PetscMPIInt q = 0; q < size; ++q) {
     const size_t run_begin = e;
     while (e < edges.size() && EdgeRow(edges[e]) < EvenShareBegin(n, size, q + 1)) ++e;
-    PetscCheck(e - run_begin <= INT_MAX, comm, PETSC_ERR_SUP,
+    PetscCheck(e - run_begin <= INT_MAX, PETSC_COMM_SELF, PETSC_ERR_SUP,
                "the vertex graph has more edges for one rank than MPI can send at once: "
                "run on more ranks");
     send_counts[q] = static_cast<int>(e - run_begin);
-    send_offsets[q + 1] = static_cast<int>(e);
   }
-  PetscCallMPI(
-      MPI_Alltoall(send_counts.data(), 1, MPI_INT, receive_counts.data(), 1, MPI_INT, comm));
-  int64_t total = 0;
-  for (PetscMPIInt q = 0; q < size; ++q) {
-    total += receive_counts[q];
-    PetscCheck(total <= INT_MAX, comm, PETSC_ERR_SUP,
-               "the vertex graph has more edges for one rank than MPI can receive at once: "
-               "run on more ranks");
-    receive_offsets[q + 1] = static_cast<int>(total);
-  }
-  mine->resize(total);
-  PetscCallMPI(MPI_Alltoallv(edges.data(), send_counts.data(), send_offsets.data(), MPI_UINT64_T,
-                             mine->data(), receive_counts.data(), receive_offsets.data(),
-                             MPI_UINT64_T, comm));
+  PetscCall(ExchangeRecords(comm, edges, send_counts, mine));
   SortUnique(mine);
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -7,6 +7,7 @@
 #include <string_view>
 
 #include "common/options.hpp"
+#include "fem/share_boundary.hpp"
 #include "io/hdf5_io.hpp"
 #include "io/parallel_hdf5.hpp"
 
@@ -242,19 +243,25 @@ bool WriteSlabDataset(hid_t location, const char *name, hid_t type, hsize_t rows
   return ok;
 }
 
-// Not collective. The boundary triangles (3 natural vertices per row, each
-// body's as BoundaryTriangles orders them) of bodies [bodies.begin, bodies.end).
-// Each body's boundary needs its whole mesh: the bodies are split between the
-// ranks, not the triangles.
-std::vector<int32_t> BodiesBoundaryTriangles(const Scene &scene, RowSlab bodies) {
-  std::vector<int32_t> triangles;
-  for (hsize_t b = bodies.begin; b < bodies.end; ++b) {
-    const Body &body = scene.bodies[b];
-    const auto boundary = BoundaryTriangles(body.mesh);
-    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-      for (int a = 0; a < 3; ++a) triangles.push_back(body.first_vertex + boundary(f, a));
-  }
-  return triangles;
+// Collective. This rank's rows of /mesh/boundary_triangles (3 natural vertices
+// per row, each body's rows as BoundaryTriangles orders them; ShareBoundaryTriangles).
+PetscErrorCode BoundaryRows(MPI_Comm comm, const MeshShare &share, std::vector<int32_t> *rows) {
+  PetscFunctionBeginUser;
+  std::vector<std::array<PetscInt, 3>> triangles;
+  PetscCall(ShareBoundaryTriangles(comm, share, &triangles));
+  rows->clear();
+  rows->reserve(3 * triangles.size());
+  for (const auto &triangle : triangles)
+    rows->insert(rows->end(), triangle.begin(), triangle.end());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The share's tets as rows of 4 natural vertices.
+std::vector<int32_t> ShareTetRows(const MeshShare &share) {
+  std::vector<int32_t> rows;
+  rows.reserve(4 * share.tets.size());
+  for (const auto &tet : share.tets) rows.insert(rows.end(), tet.begin(), tet.end());
+  return rows;
 }
 
 // Collective. Rows [begin, end) of /mesh/boundary_triangles that `local` rows
@@ -276,15 +283,20 @@ PetscErrorCode RowsInRankOrder(MPI_Comm comm, hsize_t local, RowSlab *rows, hsiz
 }  // namespace
 
 // Collective. The static mesh datasets under /mesh, every rank its slabs.
-PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, bool *written) {
+PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, const MeshShare &share, bool *written) {
   PetscFunctionBeginUser;
-  const hid_t group = H5Gcreate2(file_, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   const RowSlab vertices = natural_.vertices();
   const RowSlab tets = EvenSlab(static_cast<hsize_t>(num_tets_), rank_, size_);
+  PetscCheck(tets.begin == static_cast<hsize_t>(share.first_tet) &&
+                 tets.count() == static_cast<hsize_t>(share.num_tets()) &&
+                 vertices.begin == static_cast<hsize_t>(share.first_vertex) &&
+                 vertices.count() == static_cast<hsize_t>(share.slab_size()),
+             PETSC_COMM_SELF, PETSC_ERR_PLIB, "the mesh share is not this rank's file slab");
   const hsize_t V = static_cast<hsize_t>(num_vertices_), T = static_cast<hsize_t>(num_tets_);
   const hsize_t bodies = scene.bodies.size();
-  const std::vector<int32_t> triangles =
-      BodiesBoundaryTriangles(scene, EvenSlab(bodies, rank_, size_));
+  std::vector<int32_t> triangles;
+  PetscCall(BoundaryRows(comm_, share, &triangles));
+  const hid_t group = H5Gcreate2(file_, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   hsize_t B = 0;
   RowSlab triangle_rows;
   PetscCall(RowsInRankOrder(comm_, triangles.size() / 3, &triangle_rows, &B));
@@ -299,13 +311,13 @@ PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, bool *written) {
   }
   bool ok = group >= 0;
   ok = ok &&
-       WriteSlabDataset(group, "tets", H5T_NATIVE_INT32, T, 4, tets, SlabTets(scene, tets).data());
+       WriteSlabDataset(group, "tets", H5T_NATIVE_INT32, T, 4, tets, ShareTetRows(share).data());
   ok = ok && WriteSlabDataset(group, "boundary_triangles", H5T_NATIVE_INT32, B, 3, triangle_rows,
                               triangles.data());
   ok = ok && WriteSlabDataset(group, "vertex_body", H5T_NATIVE_INT32, V, 0, vertices,
                               SlabVertexBodies(scene, vertices).data());
   ok = ok && WriteSlabDataset(group, "rest_positions", H5T_NATIVE_DOUBLE, V, 3, vertices,
-                              SlabRestPositions(scene, vertices).data());
+                              share.rest.data());
   ok = ok && WriteSlabDataset(group, "body_fixed", H5T_NATIVE_INT32, bodies, 0, body_rows,
                               body_fixed.data());
   ok = ok && WriteSlabDataset(group, "body_material", H5T_NATIVE_DOUBLE, bodies, 3, body_rows,
@@ -324,7 +336,7 @@ ResultWriter::~ResultWriter() {
 }
 
 // Collective. A new file with the mesh and the empty series.
-PetscErrorCode ResultWriter::CreateFile(const Scene &scene, bool *created) {
+PetscErrorCode ResultWriter::CreateFile(const Scene &scene, const MeshShare &share, bool *created) {
   PetscFunctionBeginUser;
   file_ = CreateParallelFile(comm_, options_.path);
   *created = file_ >= 0;
@@ -341,7 +353,7 @@ PetscErrorCode ResultWriter::CreateFile(const Scene &scene, bool *created) {
     if (set >= 0) H5Dclose(set);
   }
   bool mesh = false;
-  PetscCall(WriteMesh(scene, &mesh));
+  PetscCall(WriteMesh(scene, share, &mesh));
   *created = ok && mesh && MarkComplete(file_, 0);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -423,7 +435,7 @@ bool ResultWriter::CopyFrames(const Continuation &continuation) {
 }
 
 PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
-                                  const DofLayout &layout, Vec like,
+                                  const DofLayout &layout, const MeshShare &share, Vec like,
                                   const Continuation *continuation) {
   PetscFunctionBeginUser;
   comm_ = comm;
@@ -451,7 +463,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
     what = "cannot continue HDF5 file";
     ok = ContinueInPlace(*continuation);
   } else {
-    PetscCall(CreateFile(scene, &ok));
+    PetscCall(CreateFile(scene, share, &ok));
     if (ok && continuation) {
       what = "cannot copy the first frames of '" + continuation->source + "' into";
       ok = CopyFrames(*continuation);

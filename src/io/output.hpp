@@ -39,6 +39,7 @@
 #include <vector>
 
 #include "fem/assembly.hpp"
+#include "fem/mesh_share.hpp"
 #include "fem/partition.hpp"
 #include "io/parallel_hdf5.hpp"
 #include "io/scene.hpp"
@@ -124,7 +125,7 @@ class ResultWriter {
   // the file starts with the continued file's first frames instead: the same file, cut back to them
   // (source == path), or a new file with a copy of them. `like` is a PETSc-ordered DOF vector.
   PetscErrorCode Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
-                      const DofLayout &layout, Vec like,
+                      const DofLayout &layout, const MeshShare &share, Vec like,
                       const Continuation *continuation = nullptr);
   // Collective. Root attributes describing the world the bodies move in, for
   // readers such as tools/render.py: "gravity" (3 doubles, m/s^2) and, when
@@ -151,8 +152,8 @@ class ResultWriter {
   MPI_Comm comm() const { return comm_; }
 
  private:
-  PetscErrorCode CreateFile(const Scene &scene, bool *created);
-  PetscErrorCode WriteMesh(const Scene &scene, bool *written);
+  PetscErrorCode CreateFile(const Scene &scene, const MeshShare &share, bool *created);
+  PetscErrorCode WriteMesh(const Scene &scene, const MeshShare &share, bool *written);
   bool ContinueInPlace(const Continuation &continuation);
   bool CopyFrames(const Continuation &continuation);
   PetscErrorCode OpenXdmf();

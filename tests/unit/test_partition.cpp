@@ -14,7 +14,7 @@
 // - BuildDofLayout numbers the free vertices (those of free tets: a stray vertex is not)
 //   as a serial count here does, part by part, natural order inside a part;
 //   natural_of_owned and the slabs' lookups agree with the global arrays.
-// - MigrateTets brings every free tet with an owned vertex, and only those, in free-tet
+// - MigrateTets brings every free tet with an owned vertex, and only those, in tet
 //   order, with its PETSc vertices and rest positions (checked against the scene).
 #include <gtest/gtest.h>
 #include <petscsys.h>
@@ -115,14 +115,17 @@ long CutEdges(const std::vector<std::set<PetscInt>> &adjacency, const std::vecto
   return cut / 2;
 }
 
-// This rank's even share of the free tets, as free indices.
+// The free tets of this rank's even share of the tets, as free indices.
 std::vector<std::array<PetscInt, 4>> FreeTetShare(const Scene &scene,
                                                   const std::vector<PetscInt> &free_of_natural) {
   const MeshShare share = ShareScene(scene, Rank(), Size());
   std::vector<std::array<PetscInt, 4>> tets;
-  for (const auto &natural : share.tets)
-    tets.push_back({free_of_natural[natural[0]], free_of_natural[natural[1]],
-                    free_of_natural[natural[2]], free_of_natural[natural[3]]});
+  for (size_t t = 0; t < share.tets.size(); ++t)
+    if (share.TetIsFree(t)) {
+      const auto &natural = share.tets[t];
+      tets.push_back({free_of_natural[natural[0]], free_of_natural[natural[1]],
+                      free_of_natural[natural[2]], free_of_natural[natural[3]]});
+    }
   return tets;
 }
 
@@ -262,7 +265,7 @@ TEST(DofLayout, NumberedPartByPartInNaturalOrder) {
   }
 }
 
-// Every free tet with an owned vertex arrives once, in free-tet order, with its
+// Every free tet with an owned vertex arrives once, in tet order, with its
 // PETSc vertices and the scene's rest positions; no other tet arrives.
 TEST(MigrateTets, TheTetsOfTheOwnedVertices) {
   const Scene scene = ThreeBoxesWithStrayVertex();
@@ -275,7 +278,10 @@ TEST(MigrateTets, TheTetsOfTheOwnedVertices) {
   int64_t index = 0;
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
-    if (body.fixed) continue;
+    if (body.fixed) {
+      index += body.mesh.num_tets();
+      continue;
+    }
     for (int32_t t = 0; t < body.mesh.num_tets(); ++t, ++index) {
       std::array<PetscInt, 4> petsc;
       bool touches = false;
