@@ -138,33 +138,35 @@ PetscErrorCode Simulation::CheckFiles() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Every rank reads and validates the scene, its meshes and the -deform events.
-// Bodies that nothing can set in motion add no unknowns (partition.hpp); not on a
-// restart (its bodies move as the checkpoint says) or when -export_matrices asks
-// for the matrices of every free body.
+// Rank 0 reads and validates the scene and its meshes; every rank the -deform
+// events. The meshes then reach every rank whole only when contact may need them,
+// else each rank gets its shares (mesh_share.hpp). Bodies that nothing can set
+// in motion add no unknowns (partition.hpp); not on a restart (its bodies move as
+// the checkpoint says) or when -export_matrices asks for the matrices of every
+// free body.
 PetscErrorCode Simulation::ReadScene() {
   PetscFunctionBeginUser;
   PetscCall(LoadScene(comm_, options_.scene, &scene_));
   PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
+  const ContactOptions &contact = options_.contact;
+  const bool replicate =
+      options_.scene.replicate || ContactMayNeedWholeMeshes(contact, scene_.bodies.size());
+  PetscCall(DistributeScene(comm_, replicate, &scene_, &share_));
   if (!restart() && options_.output.matrix_dir.empty()) {
-    const ContactOptions &contact = options_.contact;
     MotionSources sources{options_.integration.gravity.squaredNorm() > 0, bool(contact.ground),
                           !contact.constraints_path.empty() || contact.edge_bounds,
                           std::vector<bool>(scene_.bodies.size(), false)};
     for (const Deformation &d : deformations_) sources.deformed[d.body] = true;
-    MarkBodiesAtRest(sources, &scene_);
+    int marked;
+    PetscCall(MarkBodiesAtRest(comm_, sources, &scene_, &share_, &marked));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// This rank's shares of the meshes, the numbering of the free vertices and the
-// tets this rank assembles (mesh_share.hpp, partition.hpp, migration.hpp).
+// The numbering of the free vertices and the tets this rank assembles
+// (partition.hpp, migration.hpp).
 PetscErrorCode Simulation::DistributeMesh() {
   PetscFunctionBeginUser;
-  PetscMPIInt rank, size;
-  PetscCallMPI(MPI_Comm_rank(comm_, &rank));
-  PetscCallMPI(MPI_Comm_size(comm_, &size));
-  share_ = ShareScene(scene_, rank, size);
   PetscCall(BuildDofLayout(comm_, options_.partition, &share_, &layout_));
   PetscCall(MigrateTets(comm_, share_, layout_, &tets_));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -180,7 +182,7 @@ PetscErrorCode Simulation::CreateInitialState() {
   if (restart()) {
     PetscCall(VecDuplicate(state_.positions, &initial_positions_));
     PetscCall(VecCopy(state_.positions, initial_positions_));
-    PetscCall(ReadCheckpoint(comm_, options_.checkpoints.restart_path, scene_, layout_,
+    PetscCall(ReadCheckpoint(comm_, options_.checkpoints.restart_path, scene_, share_, layout_,
                              deformations_.size(), options_.integration.steps, state_.positions,
                              state_.velocities, &start_));
   }

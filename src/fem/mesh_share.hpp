@@ -46,6 +46,13 @@ struct MeshShare {
 // are left empty.
 MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size);
 
+// Collective, after LoadScene (rank 0 holds the meshes). With `replicate`, every
+// rank receives the meshes and initial velocities (BroadcastMeshes) and takes its
+// shares from them; otherwise rank 0 sends every rank its shares (a PetscSF from
+// rank 0's arrays to the slabs) and drops its meshes, so that no rank holds a
+// mesh whole (scene->meshes_held false everywhere).
+PetscErrorCode DistributeScene(MPI_Comm comm, bool replicate, Scene *scene, MeshShare *share);
+
 // Collective. A star forest with one root per vertex of this rank's slab and one
 // leaf per entry of `naturals` (natural vertices, each in [0, num_vertices), any
 // order, repeats allowed), leaf i attached to the root of naturals[i]. Bcast

@@ -4,44 +4,79 @@
 #include <petscsf.h>
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 
 namespace softbody {
 
-int MarkBodiesAtRest(const MotionSources &sources, Scene *scene) {
-  if (sources.gravity || sources.ground || sources.constraints) return 0;
-  const size_t n = scene->bodies.size();
-  std::vector<Eigen::Vector3d> lo(n), hi(n);
-  for (size_t b = 0; b < n; ++b) {
-    const Body &body = scene->bodies[b];
-    if (body.fixed) {
-      if (body.mesh.num_vertices() == 0) continue;
-    } else {
-      if (b < sources.deformed.size() && sources.deformed[b]) return 0;
-      for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
-        if (scene->initial_velocities.row(body.first_vertex + v).squaredNorm() != 0)
-          return 0;  // it moves
+namespace {
+
+// Per body, over all ranks' slabs: the bounding box of its rest positions and
+// whether any of its vertices has a non-zero initial velocity (reductions).
+struct BodyFacts {
+  std::vector<double> lo, hi;  // 3 per body; +inf / -inf for a body without vertices
+  std::vector<int> moving;     // per body, 0 or 1
+};
+
+PetscErrorCode GatherBodyFacts(MPI_Comm comm, const Scene &scene, const MeshShare &share,
+                               BodyFacts *facts) {
+  PetscFunctionBeginUser;
+  const size_t n = scene.bodies.size();
+  facts->lo.assign(3 * n, std::numeric_limits<double>::infinity());
+  facts->hi.assign(3 * n, -std::numeric_limits<double>::infinity());
+  facts->moving.assign(n, 0);
+  for (PetscInt i = 0; i < share.slab_size(); ++i) {
+    const int32_t b = BodyOfNatural(scene, share.first_vertex + i);
+    for (int c = 0; c < 3; ++c) {
+      facts->lo[3 * b + c] = std::min(facts->lo[3 * b + c], share.rest(i, c));
+      facts->hi[3 * b + c] = std::max(facts->hi[3 * b + c], share.rest(i, c));
     }
-    lo[b] = body.mesh.vertices.colwise().minCoeff().transpose();
-    hi[b] = body.mesh.vertices.colwise().maxCoeff().transpose();
+    if (share.velocities.row(i).squaredNorm() != 0) facts->moving[b] = 1;
   }
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, facts->lo.data(), 3 * n, MPI_DOUBLE, MPI_MIN, comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, facts->hi.data(), 3 * n, MPI_DOUBLE, MPI_MAX, comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, facts->moving.data(), n, MPI_INT, MPI_MAX, comm));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Whether the boxes of bodies a and b meet.
+bool BoxesMeet(const BodyFacts &facts, size_t a, size_t b) {
+  for (int c = 0; c < 3; ++c)
+    if (facts.lo[3 * a + c] > facts.hi[3 * b + c] || facts.lo[3 * b + c] > facts.hi[3 * a + c])
+      return false;
+  return true;
+}
+
+}  // namespace
+
+PetscErrorCode MarkBodiesAtRest(MPI_Comm comm, const MotionSources &sources, Scene *scene,
+                                MeshShare *share, int *marked) {
+  PetscFunctionBeginUser;
+  *marked = 0;
+  if (sources.gravity || sources.ground || sources.constraints) PetscFunctionReturn(PETSC_SUCCESS);
+  const size_t n = scene->bodies.size();
+  for (size_t b = 0; b < n; ++b)
+    if (!scene->bodies[b].fixed && b < sources.deformed.size() && sources.deformed[b])
+      PetscFunctionReturn(PETSC_SUCCESS);
+  BodyFacts facts;
+  PetscCall(GatherBodyFacts(comm, *scene, *share, &facts));
+  for (size_t b = 0; b < n; ++b)
+    if (!scene->bodies[b].fixed && facts.moving[b]) PetscFunctionReturn(PETSC_SUCCESS);  // it moves
   // Everything is still: a free body at rest unless its box meets another's.
   std::vector<bool> alone(n, true);
   for (size_t a = 0; a < n; ++a)
     for (size_t b = a + 1; b < n; ++b) {
-      if (scene->bodies[a].mesh.num_vertices() == 0 || scene->bodies[b].mesh.num_vertices() == 0)
-        continue;
-      if ((lo[a].array() <= hi[b].array()).all() && (lo[b].array() <= hi[a].array()).all())
-        alone[a] = alone[b] = false;
+      if (scene->bodies[a].num_vertices() == 0 || scene->bodies[b].num_vertices() == 0) continue;
+      if (BoxesMeet(facts, a, b)) alone[a] = alone[b] = false;
     }
-  int marked = 0;
   for (size_t b = 0; b < n; ++b) {
     Body &body = scene->bodies[b];
     if (body.fixed || !alone[b]) continue;
     body.fixed = body.at_rest = true;
-    ++marked;
+    share->body_fixed[b] = 1;
+    ++*marked;
   }
-  return marked;
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options) {

@@ -92,13 +92,15 @@ struct MotionSources {
   std::vector<bool> deformed;  // per body: named by a -deform
 };
 
-// Not collective. Bodies that nothing can set in motion become immobile like
-// fixed ones (body.fixed = body.at_rest = true), so they add no unknowns: a body
-// that is not fixed, all of whose initial velocities are zero, that no -deform
-// names, in a scene without gravity, ground or constraints in which every other
-// free body is just as still (a moving body could hit it), and whose bounding
-// box meets no other body's (contact would push overlapping bodies apart).
-// Returns how many bodies were marked.
-int MarkBodiesAtRest(const MotionSources &sources, Scene *scene);
+// Collective. Bodies that nothing can set in motion become immobile like fixed
+// ones (body.fixed = body.at_rest = true, and in share->body_fixed), so they add
+// no unknowns: a body that is not fixed, all of whose initial velocities are
+// zero, that no -deform names, in a scene without gravity, ground or constraints
+// in which every other free body is just as still (a moving body could hit it),
+// and whose bounding box meets no other body's (contact would push overlapping
+// bodies apart). Boxes and velocities come from the slabs (reductions). Sets
+// *marked to how many bodies were marked.
+PetscErrorCode MarkBodiesAtRest(MPI_Comm comm, const MotionSources &sources, Scene *scene,
+                                MeshShare *share, int *marked);
 
 }  // namespace softbody

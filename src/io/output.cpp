@@ -117,20 +117,10 @@ template <typename Visit>
 void ForEachBodyVertices(const Scene &scene, RowSlab slab, Visit visit) {
   ForEachBodyPart(
       scene, slab, [&](size_t b) { return hsize_t(scene.bodies[b].first_vertex); },
-      [&](size_t b) { return hsize_t(scene.bodies[b].mesh.num_vertices()); }, visit);
+      [&](size_t b) { return hsize_t(scene.bodies[b].num_vertices()); }, visit);
 }
 
 }  // namespace
-
-std::vector<double> SlabRestPositions(const Scene &scene, RowSlab vertices) {
-  std::vector<double> rest;
-  rest.reserve(3 * vertices.count());
-  ForEachBodyVertices(scene, vertices, [&](const Body &body, size_t, hsize_t from, hsize_t to) {
-    for (hsize_t v = from; v < to; ++v)
-      for (int c = 0; c < 3; ++c) rest.push_back(body.mesh.vertices(v, c));
-  });
-  return rest;
-}
 
 std::vector<int32_t> SlabVertexBodies(const Scene &scene, RowSlab vertices) {
   std::vector<int32_t> bodies;
@@ -141,20 +131,11 @@ std::vector<int32_t> SlabVertexBodies(const Scene &scene, RowSlab vertices) {
   return bodies;
 }
 
-std::vector<int32_t> SlabTets(const Scene &scene, RowSlab tets) {
-  std::vector<hsize_t> first_tet(scene.bodies.size() + 1, 0);
-  for (size_t b = 0; b < scene.bodies.size(); ++b)
-    first_tet[b + 1] = first_tet[b] + scene.bodies[b].mesh.num_tets();
-  std::vector<int32_t> corners;
-  corners.reserve(4 * tets.count());
-  ForEachBodyPart(
-      scene, tets, [&](size_t b) { return first_tet[b]; },
-      [&](size_t b) { return first_tet[b + 1] - first_tet[b]; },
-      [&](const Body &body, size_t, hsize_t from, hsize_t to) {
-        for (hsize_t t = from; t < to; ++t)
-          for (int a = 0; a < 4; ++a) corners.push_back(body.first_vertex + body.mesh.tets(t, a));
-      });
-  return corners;
+std::vector<int32_t> ShareTetRows(const MeshShare &share) {
+  std::vector<int32_t> rows;
+  rows.reserve(4 * share.tets.size());
+  for (const auto &tet : share.tets) rows.insert(rows.end(), tet.begin(), tet.end());
+  return rows;
 }
 
 NaturalSlab::~NaturalSlab() {
@@ -162,14 +143,18 @@ NaturalSlab::~NaturalSlab() {
   VecDestroy(&natural_template_);
 }
 
-PetscErrorCode NaturalSlab::Setup(const Scene &scene, const DofLayout &layout, Vec like) {
+PetscErrorCode NaturalSlab::Setup(const MeshShare &share, const DofLayout &layout, Vec like) {
   PetscFunctionBeginUser;
-  scene_ = &scene;
+  num_vertices_ = static_cast<int32_t>(share.num_vertices);
   MPI_Comm comm = PetscObjectComm((PetscObject)like);
-  slab_ = EvenSlab(static_cast<hsize_t>(scene.num_vertices()), layout.rank, layout.size);
+  slab_ = EvenSlab(static_cast<hsize_t>(num_vertices_), layout.rank, layout.size);
+  PetscCheck(slab_.begin == static_cast<hsize_t>(share.first_vertex) &&
+                 slab_.count() == static_cast<hsize_t>(share.slab_size()),
+             PETSC_COMM_SELF, PETSC_ERR_PLIB, "the mesh share is not this rank's file slab");
+  rest_.assign(share.rest.data(), share.rest.data() + share.rest.size());
   PetscCall(VecCreate(comm, &natural_template_));
   PetscCall(VecSetSizes(natural_template_, 3 * static_cast<PetscInt>(slab_.count()),
-                        3 * static_cast<PetscInt>(scene.num_vertices())));
+                        3 * static_cast<PetscInt>(num_vertices_)));
   PetscCall(VecSetBlockSize(natural_template_, 3));
   PetscCall(VecSetType(natural_template_, VECMPI));
   // Each rank sends its owned vertices (PETSc block local_begin + i) to their
@@ -192,10 +177,9 @@ PetscErrorCode NaturalSlab::CreateVector(bool rest, Vec *natural) const {
   PetscCall(VecDuplicate(natural_template_, natural));
   PetscCall(VecZeroEntries(*natural));
   if (rest && slab_.count() > 0) {
-    const std::vector<double> positions = SlabRestPositions(*scene_, slab_);
     PetscScalar *x;
     PetscCall(VecGetArray(*natural, &x));
-    std::copy(positions.begin(), positions.end(), x);
+    std::copy(rest_.begin(), rest_.end(), x);
     PetscCall(VecRestoreArray(*natural, &x));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -254,14 +238,6 @@ PetscErrorCode BoundaryRows(MPI_Comm comm, const MeshShare &share, std::vector<i
   for (const auto &triangle : triangles)
     rows->insert(rows->end(), triangle.begin(), triangle.end());
   PetscFunctionReturn(PETSC_SUCCESS);
-}
-
-// The share's tets as rows of 4 natural vertices.
-std::vector<int32_t> ShareTetRows(const MeshShare &share) {
-  std::vector<int32_t> rows;
-  rows.reserve(4 * share.tets.size());
-  for (const auto &tet : share.tets) rows.insert(rows.end(), tet.begin(), tet.end());
-  return rows;
 }
 
 // Collective. Rows [begin, end) of /mesh/boundary_triangles that `local` rows
@@ -444,7 +420,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
   PetscCallMPI(MPI_Comm_size(comm, &size_));
   num_vertices_ = scene.num_vertices();
   num_tets_ = scene.num_tets();
-  PetscCall(natural_.Setup(scene, layout, like));
+  PetscCall(natural_.Setup(share, layout, like));
   // Vertices without unknowns keep their rest position and zero velocity.
   PetscCall(natural_.CreateVector(true, &positions_));
   PetscCall(natural_.CreateVector(false, &velocities_));
