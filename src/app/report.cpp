@@ -55,7 +55,8 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
     max_dofs = std::max(max_dofs, dofs);
   }
   const size_t bodies = scene.bodies.size();
-  const char *held = layout.size == 1    ? ""
+  const char *held = scene.read_in_slabs ? "; mesh read in slabs by every rank"
+                     : layout.size == 1  ? ""
                      : scene.meshes_held ? "; meshes whole on every rank"
                                          : "; meshes read on rank 0, then held in slabs";
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",

@@ -140,18 +140,21 @@ PetscErrorCode Simulation::CheckFiles() {
 
 // Rank 0 reads and validates the scene and its meshes; every rank the -deform
 // events. The meshes then reach every rank whole only when contact may need them,
-// else each rank gets its shares (mesh_share.hpp). Bodies that nothing can set
+// else each rank gets its shares (mesh_share.hpp): a scene of one .h5 body is read
+// in slabs by every rank, never whole. Bodies that nothing can set
 // in motion add no unknowns (partition.hpp); not on a restart (its bodies move as
 // the checkpoint says) or when -export_matrices asks for the matrices of every
 // free body.
 PetscErrorCode Simulation::ReadScene() {
   PetscFunctionBeginUser;
-  PetscCall(LoadScene(comm_, options_.scene, &scene_));
-  PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
   const ContactOptions &contact = options_.contact;
-  const bool replicate =
-      options_.scene.replicate || ContactMayNeedWholeMeshes(contact, scene_.bodies.size());
-  PetscCall(DistributeScene(comm_, replicate, &scene_, &share_));
+  // Whether contact may need the meshes whole is known for sure only once the
+  // bodies are counted; .h5 meshes are left unread until then unless it will.
+  const bool may_replicate = options_.scene.replicate || ContactMayNeedWholeMeshes(contact, 1);
+  PetscCall(LoadScene(comm_, options_.scene, !may_replicate, &scene_));
+  PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
+  const bool replicate = may_replicate || ContactMayNeedWholeMeshes(contact, scene_.bodies.size());
+  PetscCall(DistributeScene(comm_, options_.scene.meshing, replicate, &scene_, &share_));
   if (!restart() && options_.output.matrix_dir.empty()) {
     MotionSources sources{options_.integration.gravity.squaredNorm() > 0, bool(contact.ground),
                           !contact.constraints_path.empty() || contact.edge_bounds,

@@ -14,6 +14,11 @@ static TetPositions TetCorners(const TetMesh &mesh, int32_t t) {
   return X;
 }
 
+bool IsDegenerateTet(const TetPositions &X) {
+  const double length = LongestEdge(X);
+  return !(std::abs(SignedVolume(X)) > kDegenerateVolume * length * length * length);
+}
+
 Eigen::Vector3d VolumeWeightedCentroid(const TetMesh &mesh) {
   Eigen::Vector3d weighted = Eigen::Vector3d::Zero();
   double total = 0;

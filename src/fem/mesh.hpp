@@ -5,6 +5,8 @@
 #include <cstdint>
 #include <string>
 
+#include "fem/element.hpp"
+
 namespace softbody {
 
 // #V x 3 vertex positions (m) and #T x 4 tets (0-based vertex indices).
@@ -20,6 +22,9 @@ struct TetMesh {
 // L its longest edge. A regular tet has |V| / L^3 = 0.118; a sliver of aspect ratio
 // 1e3 about 1e-4.
 constexpr double kDegenerateVolume = 1e-12;
+
+// The one degeneracy test of every reader: |V| <= kDegenerateVolume L^3.
+bool IsDegenerateTet(const TetPositions &X);
 
 // Sum over tets of |volume| x centroid, divided by the total volume (m).
 Eigen::Vector3d VolumeWeightedCentroid(const TetMesh &mesh);

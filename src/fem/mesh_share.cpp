@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <numeric>
 
+#include "common/errors.hpp"
 #include "common/even_share.hpp"
+#include "fem/mesh_file_share.hpp"
 
 namespace softbody {
 
@@ -56,29 +58,6 @@ MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size) {
 }
 
 namespace {
-
-// Collective. Rows [first, first + rows) of rank 0's `total` rows (`width`
-// entries of `type` each, in root_rows on rank 0; ignored elsewhere) into
-// `rows_here`.
-PetscErrorCode FetchRootRows(MPI_Comm comm, PetscInt total, PetscInt first, PetscInt rows,
-                             MPI_Datatype type, int width, const void *root_rows, void *rows_here) {
-  PetscFunctionBeginUser;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  PetscLayout root;
-  PetscCall(PetscLayoutCreate(comm, &root));
-  PetscCall(PetscLayoutSetLocalSize(root, rank == 0 ? total : 0));
-  PetscCall(PetscLayoutSetUp(root));
-  std::vector<PetscInt> wanted(rows);
-  std::iota(wanted.begin(), wanted.end(), first);
-  PetscSF sf;
-  PetscCall(PetscSFCreate(comm, &sf));
-  PetscCall(PetscSFSetGraphLayout(sf, root, rows, nullptr, PETSC_OWN_POINTER, wanted.data()));
-  PetscCall(PetscLayoutDestroy(&root));
-  PetscCall(FetchFromSlabs(sf, type, width, root_rows, rows_here));
-  PetscCall(PetscSFDestroy(&sf));
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
 
 // Rank 0: every body's placed vertices, natural order.
 std::vector<double> AllRestPositions(const Scene &scene) {
@@ -146,16 +125,72 @@ PetscErrorCode SendSharesFromRankZero(MPI_Comm comm, const Scene &scene, MeshSha
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Collective. Rank 0 reads and places the deferred meshes; its input error, if
+// any, on every rank.
+PetscErrorCode LoadDeferredMeshesOnRankZero(MPI_Comm comm, const MeshingOptions &meshing,
+                                            Scene *scene) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  int failed = 0;
+  std::string error;
+  if (rank == 0) {
+    try {
+      LoadDeferredMeshes(meshing, scene);
+    } catch (const InputError &input_error) {
+      error = input_error.what();
+      failed = 1;
+    }
+  }
+  PetscCallMPI(MPI_Bcast(&failed, 1, MPI_INT, 0, comm));
+  if (failed) {
+    int length = static_cast<int>(error.size());
+    PetscCallMPI(MPI_Bcast(&length, 1, MPI_INT, 0, comm));
+    error.resize(length);
+    PetscCallMPI(MPI_Bcast(error.data(), length, MPI_CHAR, 0, comm));
+  }
+  PetscCheck(!failed, comm, PETSC_ERR_USER_INPUT, "%s", error.c_str());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 }  // namespace
 
-PetscErrorCode DistributeScene(MPI_Comm comm, bool replicate, Scene *scene, MeshShare *share) {
+PetscErrorCode FetchRootRows(MPI_Comm comm, PetscInt total, PetscInt first, PetscInt rows,
+                             MPI_Datatype type, int width, const void *root_rows, void *rows_here) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  PetscLayout root;
+  PetscCall(PetscLayoutCreate(comm, &root));
+  PetscCall(PetscLayoutSetLocalSize(root, rank == 0 ? total : 0));
+  PetscCall(PetscLayoutSetUp(root));
+  std::vector<PetscInt> wanted(rows);
+  std::iota(wanted.begin(), wanted.end(), first);
+  PetscSF sf;
+  PetscCall(PetscSFCreate(comm, &sf));
+  PetscCall(PetscSFSetGraphLayout(sf, root, rows, nullptr, PETSC_OWN_POINTER, wanted.data()));
+  PetscCall(PetscLayoutDestroy(&root));
+  PetscCall(FetchFromSlabs(sf, type, width, root_rows, rows_here));
+  PetscCall(PetscSFDestroy(&sf));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, bool replicate,
+                               Scene *scene, MeshShare *share) {
   PetscFunctionBeginUser;
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   PetscCallMPI(MPI_Comm_size(comm, &size));
+  const bool deferred = std::any_of(scene->bodies.begin(), scene->bodies.end(),
+                                    [](const Body &body) { return body.mesh_deferred; });
   if (replicate) {
+    if (deferred) PetscCall(LoadDeferredMeshesOnRankZero(comm, meshing, scene));
     PetscCall(BroadcastMeshes(comm, scene));
     *share = ShareScene(*scene, rank, size);
+  } else if (deferred) {
+    PetscCall(ReadShareFromMeshFile(comm, *scene, share));
+    scene->DropMeshes();
+    scene->read_in_slabs = true;
   } else {
     *share = MeshShare();
     PetscCall(SendSharesFromRankZero(comm, *scene, share));

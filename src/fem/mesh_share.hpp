@@ -46,12 +46,16 @@ struct MeshShare {
 // are left empty.
 MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size);
 
-// Collective, after LoadScene (rank 0 holds the meshes). With `replicate`, every
-// rank receives the meshes and initial velocities (BroadcastMeshes) and takes its
-// shares from them; otherwise rank 0 sends every rank its shares (a PetscSF from
-// rank 0's arrays to the slabs) and drops its meshes, so that no rank holds a
-// mesh whole (scene->meshes_held false everywhere).
-PetscErrorCode DistributeScene(MPI_Comm comm, bool replicate, Scene *scene, MeshShare *share);
+// Collective, after LoadScene (rank 0 holds the meshes, but not the deferred .h5
+// ones). With `replicate`, rank 0 reads the deferred meshes (LoadDeferredMeshes),
+// every rank receives the meshes and initial velocities (BroadcastMeshes) and
+// takes its shares from them. Otherwise no rank keeps a mesh whole
+// (scene->meshes_held false everywhere): a deferred mesh (a scene of one .h5 body)
+// is read in slabs by every rank (ReadShareFromMeshFile), else rank 0 sends every
+// rank its shares (a PetscSF from rank 0's arrays to the slabs) and drops its
+// meshes.
+PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, bool replicate,
+                               Scene *scene, MeshShare *share);
 
 // Collective. A star forest with one root per vertex of this rank's slab and one
 // leaf per entry of `naturals` (natural vertices, each in [0, num_vertices), any
@@ -59,6 +63,12 @@ PetscErrorCode DistributeScene(MPI_Comm comm, bool replicate, Scene *scene, Mesh
 // sends slab values to the leaves; Reduce sends leaf values to the slab.
 PetscErrorCode CreateSlabSF(MPI_Comm comm, const MeshShare &share,
                             const std::vector<PetscInt> &naturals, PetscSF *sf);
+
+// Collective. Rows [first, first + rows) of rank 0's `total` rows (`width`
+// entries of `type` each, in root_rows on rank 0; ignored elsewhere) into
+// `rows_here`, through a PetscSF whose roots are all on rank 0.
+PetscErrorCode FetchRootRows(MPI_Comm comm, PetscInt total, PetscInt first, PetscInt rows,
+                             MPI_Datatype type, int width, const void *root_rows, void *rows_here);
 
 // Collective. values[i] = the slab's `per_vertex` entries (`width` of them per
 // vertex, each of `type`) of naturals[i], through CreateSlabSF's forest.

@@ -179,12 +179,6 @@ std::string CheckIndices(const Tets &tets, int64_t first_row, int64_t num_vertic
   return "";
 }
 
-// The one degeneracy test of every reader (as mesh_io.cpp's).
-bool IsDegenerateTet(const TetPositions &X) {
-  const double length = LongestEdge(X);
-  return !(std::abs(SignedVolume(X)) > kDegenerateVolume * length * length * length);
-}
-
 // Empty when no tet of `mesh` is degenerate, otherwise the first that is.
 std::string FirstDegenerateTet(const TetMesh &mesh) {
   for (int32_t t = 0; t < mesh.num_tets(); ++t) {
@@ -294,18 +288,36 @@ void ReadTets(const std::string &path, const MeshFile &file, TetMesh *mesh) {
 
 }  // namespace
 
-TetMesh ReadMeshH5(const std::string &path) {
+namespace {
+
+// Opens (into *file) and checks a softbody mesh file on this rank alone (throws
+// InputError).
+void OpenCheckedMeshFile(const std::string &path, Handle *file, MeshFile *mesh_file) {
   if (!fs::exists(path)) throw InputError(Where(path, 0, "no such file"));
-  const Handle file(OpenMeshFile(path, PETSC_COMM_SELF), H5Fclose);
-  if (!file.ok()) throw InputError(Where(path, 0, "not an HDF5 file (or unreadable)"));
-  MeshFile mesh_file;
-  const std::string error = CheckMeshFile(file, &mesh_file);
+  file->reset(OpenMeshFile(path, PETSC_COMM_SELF));
+  if (!file->ok()) throw InputError(Where(path, 0, "not an HDF5 file (or unreadable)"));
+  const std::string error = CheckMeshFile(*file, mesh_file);
   if (!error.empty()) throw InputError(Where(path, 0, error));
-  if (mesh_file.num_vertices > INT32_MAX || mesh_file.num_tets > INT32_MAX)
+  if (mesh_file->num_vertices > INT32_MAX || mesh_file->num_tets > INT32_MAX)
     throw InputError(Where(path, 0,
-                           std::to_string(mesh_file.num_vertices) + " vertices and " +
-                               std::to_string(mesh_file.num_tets) +
-                               " tets: more than the replicated mesh holds (2^31 - 1 each)"));
+                           std::to_string(mesh_file->num_vertices) + " vertices and " +
+                               std::to_string(mesh_file->num_tets) +
+                               " tets: more than a scene holds (2^31 - 1 each)"));
+}
+
+}  // namespace
+
+MeshCounts ReadMeshH5Counts(const std::string &path) {
+  Handle file(-1, H5Fclose);
+  MeshFile mesh_file;
+  OpenCheckedMeshFile(path, &file, &mesh_file);
+  return {mesh_file.num_vertices, mesh_file.num_tets};
+}
+
+TetMesh ReadMeshH5(const std::string &path) {
+  Handle file(-1, H5Fclose);
+  MeshFile mesh_file;
+  OpenCheckedMeshFile(path, &file, &mesh_file);
   TetMesh mesh;
   mesh.vertices.resize(mesh_file.num_vertices, kVertexColumns);
   if (!ReadRows(mesh_file.vertices, H5T_NATIVE_DOUBLE, 0, mesh_file.num_vertices,

@@ -46,6 +46,15 @@ constexpr size_t kMeshChunkBytes = kMaxChunkBytes;  // parallel_hdf5.hpp
 void WriteMeshH5(const std::string &path, const TetMesh &mesh, const std::string &source,
                  size_t chunk_rows = 0);
 
+struct MeshCounts {
+  int64_t vertices = 0, tets = 0;
+};
+
+// Not collective. The vertex and tet counts of a softbody mesh file, checked as
+// ReadMeshH5 checks the file's format and counts (the rows are not read).
+// Throws InputError "path: ...".
+MeshCounts ReadMeshH5Counts(const std::string &path);
+
 // Not collective. Reads a whole softbody mesh file (the replicated path: every
 // rank that calls it holds the whole mesh). Checks what ReadMeshSlabs checks, plus
 // that no tet is degenerate and that the counts fit TetMesh's 32-bit indices.

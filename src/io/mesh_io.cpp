@@ -98,8 +98,7 @@ bool IsDegenerate(const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor
                   const int32_t *corners) {
   TetPositions X;
   for (int a = 0; a < 4; ++a) X.row(a) = vertices.row(corners[a]);
-  const double length = LongestEdge(X);
-  return !(std::abs(SignedVolume(X)) > kDegenerateVolume * length * length * length);
+  return IsDegenerateTet(X);
 }
 
 void CheckTet(const TetMesh &mesh, int32_t t, TextReader &in) {

@@ -10,6 +10,7 @@
 #include "common/options.hpp"
 #include "common/text_reader.hpp"
 #include "fem/element.hpp"
+#include "io/mesh_h5.hpp"
 #include "io/mesh_io.hpp"
 
 namespace softbody {
@@ -36,16 +37,21 @@ void Scene::DropMeshes() {
 
 void PlaceMesh(const Eigen::Vector3d &position, const Eigen::Vector4d &quaternion_wxyz,
                TetMesh *mesh) {
-  const Eigen::Vector3d centroid = VolumeWeightedCentroid(*mesh);
+  PlaceVertices(VolumeWeightedCentroid(*mesh), position, quaternion_wxyz, &mesh->vertices);
+}
+
+void PlaceVertices(const Eigen::Vector3d &centroid, const Eigen::Vector3d &position,
+                   const Eigen::Vector4d &quaternion_wxyz,
+                   Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> *vertices) {
   // Scaled by its largest component first: normalising (1e200, 1e200, 0, 0) or
   // (1e-160, 1e-160, 0, 0) directly overflows or underflows the squared norm.
   const Eigen::Vector4d wxyz =
       (quaternion_wxyz / quaternion_wxyz.cwiseAbs().maxCoeff()).normalized();
   const Eigen::Quaterniond q(wxyz[0], wxyz[1], wxyz[2], wxyz[3]);
   const Eigen::Matrix3d rotation = q.toRotationMatrix();
-  for (int32_t v = 0; v < mesh->num_vertices(); ++v) {
-    const Eigen::Vector3d rest = mesh->vertices.row(v).transpose() - centroid;
-    mesh->vertices.row(v) = (rotation * rest + position).transpose();
+  for (Eigen::Index v = 0; v < vertices->rows(); ++v) {
+    const Eigen::Vector3d rest = vertices->row(v).transpose() - centroid;
+    vertices->row(v) = (rotation * rest + position).transpose();
   }
 }
 
@@ -53,8 +59,47 @@ namespace {
 
 constexpr int kBodyFields = 12;
 
+// Reads body->mesh_path, places it and checks the placed tets; throws InputError
+// (without a location: the caller adds it).
+void LoadPlacedMesh(const MeshingOptions &meshing, Body *body) {
+  try {
+    body->mesh = ReadTetMesh(body->mesh_path, meshing);
+  } catch (const InputError &error) {
+    throw InputError(std::string("mesh: ") + error.what());
+  }
+  body->mesh_deferred = false;
+  PlaceMesh(body->position, body->quaternion, &body->mesh);
+  // Far from the origin (or with huge coordinates) a mesh loses its shape to
+  // rounding, or its centroid overflows.
+  if (!body->mesh.vertices.allFinite())
+    throw InputError("mesh " + body->mesh_path +
+                     ": placing it overflows (position or coordinates too large)");
+  for (int32_t t = 0; t < body->mesh.num_tets(); ++t) {
+    TetPositions X;
+    for (int a = 0; a < 4; ++a) X.row(a) = body->mesh.vertices.row(body->mesh.tets(t, a));
+    if (IsDegenerateTet(X))
+      throw InputError("mesh " + body->mesh_path + ": tetrahedron " + std::to_string(t + 1) +
+                       " is degenerate once placed (position too far from the origin for the "
+                       "mesh's size)");
+  }
+}
+
+// Only the counts of a softbody .h5 mesh (read later, in slabs).
+void DeferMesh(Body *body) {
+  MeshCounts counts;
+  try {
+    counts = ReadMeshH5Counts(body->mesh_path);
+  } catch (const InputError &error) {
+    throw InputError(std::string("mesh: ") + error.what());
+  }
+  body->count_vertices = static_cast<int32_t>(counts.vertices);
+  body->count_tets = counts.tets;
+  body->mesh_deferred = true;
+}
+
 Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
-                  const std::filesystem::path &folder, const MeshingOptions &meshing) {
+                  const std::filesystem::path &folder, const MeshingOptions &meshing,
+                  bool defer_h5) {
   if (fields.size() != kBodyFields)
     in.Fail(
         "expected 12 fields 'file density young poisson is_fixed px py pz qw qx qy qz', found " +
@@ -73,29 +118,17 @@ Body ReadBodyLine(TextReader &in, const std::vector<std::string_view> &fields,
   if (fixed != 0 && fixed != 1)
     in.Fail("is_fixed must be 0 or 1 (got " + std::string(fields[4]) + ")");
   body.fixed = fixed == 1;
-  Eigen::Vector3d position;
-  Eigen::Vector4d quaternion;
-  for (int c = 0; c < 3; ++c) position[c] = in.ParseReal(fields[5 + c], "position");
-  for (int c = 0; c < 4; ++c) quaternion[c] = in.ParseReal(fields[8 + c], "quaternion");
-  if (!(quaternion.cwiseAbs().maxCoeff() > 0)) in.Fail("quaternion must be non-zero");
+  for (int c = 0; c < 3; ++c) body.position[c] = in.ParseReal(fields[5 + c], "position");
+  for (int c = 0; c < 4; ++c) body.quaternion[c] = in.ParseReal(fields[8 + c], "quaternion");
+  if (!(body.quaternion.cwiseAbs().maxCoeff() > 0)) in.Fail("quaternion must be non-zero");
   try {
-    body.mesh = ReadTetMesh(body.mesh_path, meshing);
+    if (defer_h5 && IsMeshH5Path(body.mesh_path)) {
+      DeferMesh(&body);
+    } else {
+      LoadPlacedMesh(meshing, &body);
+    }
   } catch (const InputError &error) {  // say which scene line named the mesh
-    in.Fail(std::string("mesh: ") + error.what());
-  }
-  PlaceMesh(position, quaternion, &body.mesh);
-  // Far from the origin (or with huge coordinates) a mesh loses its shape to
-  // rounding, or its centroid overflows.
-  if (!body.mesh.vertices.allFinite())
-    in.Fail("mesh " + body.mesh_path +
-            ": placing it overflows (position or coordinates too large)");
-  for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
-    TetPositions X;
-    for (int a = 0; a < 4; ++a) X.row(a) = body.mesh.vertices.row(body.mesh.tets(t, a));
-    const double length = LongestEdge(X);
-    if (!(std::abs(SignedVolume(X)) > kDegenerateVolume * length * length * length))
-      in.Fail("mesh " + body.mesh_path + ": tetrahedron " + std::to_string(t + 1) +
-              " is degenerate once placed (position too far from the origin for the mesh's size)");
+    in.Fail(error.what());
   }
   return body;
 }
@@ -121,9 +154,9 @@ void ReadVelocitySection(TextReader &in, const std::vector<std::string_view> &co
               std::to_string(num_meshes - 1));
     const Body &body = scene->bodies[b];
     const long v = in.ParseInteger(fields[1], "vertex index");
-    if (v < 0 || v >= body.mesh.num_vertices())
+    if (v < 0 || v >= body.num_vertices())
       in.Fail("vertex index " + std::to_string(v) + " out of range 0.." +
-              std::to_string(body.mesh.num_vertices() - 1) + " of mesh " + std::to_string(b));
+              std::to_string(body.num_vertices() - 1) + " of mesh " + std::to_string(b));
     for (int c = 0; c < 3; ++c)
       scene->initial_velocities(body.first_vertex + v, c) = in.ParseReal(fields[2 + c], "velocity");
     ++scene->num_velocity_entries;
@@ -132,12 +165,31 @@ void ReadVelocitySection(TextReader &in, const std::vector<std::string_view> &co
   if (in.NextLine(&fields)) in.Fail("unexpected content after the velocity section");
   for (const Body &body : scene->bodies)
     if (body.fixed)
-      scene->initial_velocities.middleRows(body.first_vertex, body.mesh.num_vertices()).setZero();
+      scene->initial_velocities.middleRows(body.first_vertex, body.num_vertices()).setZero();
 }
 
 }  // namespace
 
-Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
+bool IsMeshH5Path(const std::string &path) {
+  const std::string suffix = ".h5";  // as ReadTetMesh tells the formats apart
+  return path.size() >= suffix.size() &&
+         path.compare(path.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+void LoadDeferredMeshes(const MeshingOptions &meshing, Scene *scene) {
+  for (Body &body : scene->bodies) {
+    if (!body.mesh_deferred) continue;
+    try {
+      LoadPlacedMesh(meshing, &body);
+    } catch (const InputError &error) {
+      throw InputError(Where(scene->path, 0, error.what()));
+    }
+    body.count_vertices = -1;
+    body.count_tets = -1;
+  }
+}
+
+Scene ReadScene(const std::string &path, const MeshingOptions &meshing, bool defer_h5_meshes) {
   TextReader in(path);
   const std::filesystem::path folder = std::filesystem::path(path).parent_path();
   Scene scene;
@@ -153,9 +205,9 @@ Scene ReadScene(const std::string &path, const MeshingOptions &meshing) {
   for (long b = 0; b < num_meshes; ++b) {
     if (!in.NextLine(&fields))
       in.Fail("expected " + std::to_string(num_meshes) + " mesh lines, found " + std::to_string(b));
-    scene.bodies.push_back(ReadBodyLine(in, fields, folder, meshing));
+    scene.bodies.push_back(ReadBodyLine(in, fields, folder, meshing, defer_h5_meshes));
     scene.bodies.back().first_vertex = first_vertex;
-    first_vertex += scene.bodies.back().mesh.num_vertices();
+    first_vertex += scene.bodies.back().num_vertices();
   }
   scene.initial_velocities.setZero(first_vertex, 3);
 
@@ -239,12 +291,15 @@ PetscErrorCode BroadcastBodyHeader(MPI_Comm comm, Body *body) {
   PetscFunctionBeginUser;
   PetscCall(BroadcastString(comm, &body->mesh_path));
   PetscCall(BroadcastArray(comm, &body->material, 1));
-  int64_t sizes[5] = {body->fixed, body->at_rest, body->first_vertex, body->num_vertices(),
-                      body->num_tets()};
-  PetscCallMPI(MPI_Bcast(sizes, 5, MPI_INT64_T, 0, comm));
+  PetscCall(BroadcastArray(comm, body->position.data(), 3));
+  PetscCall(BroadcastArray(comm, body->quaternion.data(), 4));
+  int64_t sizes[6] = {body->fixed,          body->at_rest,    body->first_vertex,
+                      body->num_vertices(), body->num_tets(), body->mesh_deferred};
+  PetscCallMPI(MPI_Bcast(sizes, 6, MPI_INT64_T, 0, comm));
   body->fixed = sizes[0];
   body->at_rest = sizes[1];
   body->first_vertex = static_cast<int32_t>(sizes[2]);
+  body->mesh_deferred = sizes[5];
   if (body->mesh.num_vertices() != sizes[3] || body->mesh.num_tets() != sizes[4]) {
     body->count_vertices = static_cast<int32_t>(sizes[3]);  // the mesh stays on rank 0
     body->count_tets = sizes[4];
@@ -288,7 +343,8 @@ PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scene) {
+PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, bool defer_h5_meshes,
+                         Scene *scene) {
   PetscFunctionBeginUser;
   PetscCheck(!options.path.empty(), comm, PETSC_ERR_USER_INPUT,
              "option -scene: required (path to a scene file; see -help)");
@@ -298,7 +354,7 @@ PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scen
   std::string error;
   if (rank == 0) {
     try {
-      *scene = ReadScene(options.path, options.meshing);
+      *scene = ReadScene(options.path, options.meshing, defer_h5_meshes);
     } catch (const InputError &input_error) {
       error = input_error.what();
     } catch (const std::bad_alloc &) {

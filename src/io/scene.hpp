@@ -40,6 +40,12 @@ struct Body {
   // The mesh's counts where the mesh is not held (-1: it is).
   int32_t count_vertices = -1;
   int64_t count_tets = -1;
+  // The placement as the scene gives it (m; w, x, y, z; see PlaceMesh).
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  Eigen::Vector4d quaternion = Eigen::Vector4d(1, 0, 0, 0);
+  // A softbody .h5 mesh not read yet (ReadScene with defer_h5_meshes): only its
+  // counts are known; it is read in slabs (DistributeScene) or by LoadDeferredMeshes.
+  bool mesh_deferred = false;
 
   int32_t num_vertices() const {
     return count_vertices >= 0 ? count_vertices : mesh.num_vertices();
@@ -58,6 +64,9 @@ struct Scene {
   // Whether this rank holds the bodies' meshes and the initial velocities
   // (DistributeScene); the counts are known either way.
   bool meshes_held = true;
+  // Whether every rank read its slabs of the mesh file (a deferred .h5 mesh)
+  // instead of receiving them from rank 0.
+  bool read_in_slabs = false;
 
   int32_t num_vertices() const;
   int64_t num_tets() const;
@@ -65,14 +74,27 @@ struct Scene {
   void DropMeshes();
 };
 
-// Reads and validates a scene and its meshes (OFF surfaces meshed with `meshing`).
-// Not collective; throws InputError.
-Scene ReadScene(const std::string &path, const MeshingOptions &meshing = MeshingOptions());
+// Reads and validates a scene and its meshes (OFF surfaces meshed with `meshing`);
+// with defer_h5_meshes, softbody .h5 meshes are only opened for their counts
+// (Body::mesh_deferred). Not collective; throws InputError.
+Scene ReadScene(const std::string &path, const MeshingOptions &meshing = MeshingOptions(),
+                bool defer_h5_meshes = false);
+
+// Not collective. Reads and places the deferred meshes (throws InputError "scene: ...").
+void LoadDeferredMeshes(const MeshingOptions &meshing, Scene *scene);
+
+// Not collective. Whether `path` names a softbody .h5 mesh file (by its extension).
+bool IsMeshH5Path(const std::string &path);
 
 // Moves the volume-weighted centroid to the origin, rotates by the quaternion
 // (w, x, y, z; normalised here, must be non-zero), then translates by position.
 void PlaceMesh(const Eigen::Vector3d &position, const Eigen::Vector4d &quaternion_wxyz,
                TetMesh *mesh);
+// The same placement of rows of a mesh's vertices, given the mesh's
+// volume-weighted centroid (VolumeWeightedCentroid): rotation (rest - centroid) + position.
+void PlaceVertices(const Eigen::Vector3d &centroid, const Eigen::Vector3d &position,
+                   const Eigen::Vector4d &quaternion_wxyz,
+                   Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> *vertices);
 
 }  // namespace softbody
 
@@ -95,11 +117,13 @@ PetscErrorCode ProcessMeshingOptions(MPI_Comm comm, MeshingOptions *meshing);
 // meshing options (ProcessMeshingOptions).
 PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options);
 
-// Collective: rank 0 reads the scene and its meshes (TetGen runs once, there) and
-// broadcasts the bodies' materials, flags and counts; the meshes stay on rank 0
+// Collective: rank 0 reads the scene and its meshes (TetGen runs once, there;
+// .h5 meshes only for their counts with defer_h5_meshes) and broadcasts the
+// bodies' materials, flags, placements and counts; the meshes stay on rank 0
 // until DistributeScene. Input errors become one PETSC_ERR_USER_INPUT error on
 // every rank.
-PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scene);
+PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, bool defer_h5_meshes,
+                         Scene *scene);
 
 // Collective. Rank 0's meshes and initial velocities on every rank (after LoadScene).
 PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene);

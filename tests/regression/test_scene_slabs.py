@@ -11,9 +11,16 @@ Scene (written into the work dir): one 3 x 1 x 1 m block (tools/box_mesh.py,
   without -scene_replicate; the run summary says which way the meshes were held;
 - restart in slabs: 3 ranks, 10 steps with a checkpoint, continued to 20 steps on 3
   ranks, equals the uninterrupted 3-rank run bit for bit;
-- a scene of two bodies (contact between them may need the meshes) holds them whole.
+- a scene of two bodies (contact between them may need the meshes) holds them whole;
+- the block converted to a softbody .h5 mesh (softbody-convert) and placed off the
+  origin (turned and moved): every rank reads its slabs of the file, and the result
+  file equals the one from the text mesh bit for bit at 1, 3 and 4 ranks (the
+  placement's centroid is summed in file order across the ranks);
+- placed too far from the origin, the .h5 block fails on every rank with the one-line
+  error of the text reader (tetrahedron 1 degenerate once placed), exit code 1.
 """
 import os
+import subprocess
 import sys
 
 import numpy as np
@@ -28,6 +35,10 @@ TWO_BODIES = ONE_BODY + [("block.mesh", 100.0, 5e4, 0.3, False, (0, 3, 0), (1, 0
 # Block vertex (i, j, k), 0 <= i <= 12, 0 <= j, k <= 4, has index i + 13 (j + 5 k).
 VELOCITIES = [(0, 0, (0, 10, 0)), (0, 168, (0, 0, 10)), (0, 58, (-5, 0, 10))]
 SLABS = "meshes read on rank 0, then held in slabs"
+READ_IN_SLABS = "mesh read in slabs by every rank"
+# The block placed off the origin: position and quaternion (w, x, y, z).
+PLACED = ((0.3, -1.7, 2.9), (0.9, 0.2, -0.4, 0.1))
+FAR = ((3e17, -1.7, 2.9), (0.9, 0.2, -0.4, 0.1))
 WHOLE = "meshes whole on every rank"
 
 
@@ -79,7 +90,34 @@ def main():
 
     _, two_out = simulate("two-bodies", 2, ["-scene", two, "-steps", 2])
     checks.check(WHOLE in scene_line(two_out), f"two bodies: {scene_line(two_out)!r}")
+    check_mesh_file(args, checks, simulate)
     checks.exit()
+
+
+def placed_scene(args, name, mesh, placement):
+    body = (mesh, 100.0, 5e4, 0.3, False) + placement
+    return harness.write_scene(os.path.join(args.work, name), [body], VELOCITIES)
+
+
+def check_mesh_file(args, checks, simulate):
+    convert = os.path.join(os.path.dirname(os.path.abspath(args.softbody)), "softbody-convert")
+    subprocess.run([args.mpiexec, "-n", "1", convert, os.path.join(args.work, "block.mesh"),
+                    os.path.join(args.work, "block.h5")], check=True, capture_output=True,
+                   env=harness.mpi_environment())
+    text = placed_scene(args, "placed.txt", "block.mesh", PLACED)
+    h5 = placed_scene(args, "placed-h5.txt", "block.h5", PLACED)
+    for ranks in (1, 3, 4):
+        from_text, _ = simulate(f"placed-text-{ranks}", ranks, ["-scene", text, "-steps", 10])
+        from_h5, h5_out = simulate(f"placed-h5-{ranks}", ranks, ["-scene", h5, "-steps", 10])
+        checks.check(READ_IN_SLABS in scene_line(h5_out), f".h5, {ranks} ranks: {scene_line(h5_out)!r}")
+        differ = datasets_equal(from_text, from_h5)
+        checks.check(not differ, f".h5 read in slabs on {ranks} ranks equals the text mesh's run "
+                                 f"(differing datasets: {differ})")
+    far = placed_scene(args, "far-h5.txt", "block.h5", FAR)
+    result = harness.run(args, 3, ["-scene", far, "-steps", 1], check=False)
+    errors = [l for l in (result.stdout + result.stderr).splitlines() if "error:" in l]
+    checks.check(result.returncode == 1 and len(errors) == 1 and "tetrahedron 1 is degenerate once placed" in errors[0],
+                 f".h5 placed too far: exit {result.returncode}, error lines {errors}")
 
 
 if __name__ == "__main__":

@@ -197,7 +197,7 @@ TEST_F(MeshH5Test, SerialReaderRefusesCountsBeyond32Bits) {
   const std::string path = (folder_ / "huge.h5").string();
   WriteRawMesh(path, huge);
   EXPECT_CONTAINS(InputErrorOf([&] { ReadMeshH5(path); }),
-                  path + ": 4 vertices and 2147483648 tets: more than the replicated mesh holds");
+                  path + ": 4 vertices and 2147483648 tets: more than a scene holds");
 }
 
 // ------------------------------------------------------ collective tests
