@@ -1,4 +1,5 @@
-// Records sent to the ranks that need them: one personalised all-to-all.
+// Records sent to the ranks that need them: one personalised all-to-all, or
+// every rank's to every rank.
 //
 // Written here rather than with PetscSF because the receivers do not know in
 // advance what they will get (a star forest needs its roots known): each rank
@@ -45,6 +46,29 @@ PetscErrorCode ExchangeRecords(MPI_Comm comm, const std::vector<Record> &send,
   PetscCallMPI(MPI_Alltoallv(send.data(), send_counts.data(), send_offsets.data(), record,
                              received->data(), receive_counts.data(), receive_offsets.data(),
                              record, comm));
+  PetscCallMPI(MPI_Type_free(&record));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. *all = every rank's `mine`, ranks in order (MPI_Allgatherv; the
+// counts first). Records are sent as bytes.
+template <class Record>
+PetscErrorCode AllGatherRecords(MPI_Comm comm, const std::vector<Record> &mine,
+                                std::vector<Record> *all) {
+  static_assert(std::is_trivially_copyable<Record>::value, "records travel as bytes");
+  PetscFunctionBeginUser;
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  std::vector<int> counts(size), offsets(size + 1, 0);
+  const int count = static_cast<int>(mine.size());
+  PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm));
+  for (PetscMPIInt q = 0; q < size; ++q) offsets[q + 1] = offsets[q] + counts[q];
+  all->resize(offsets[size]);
+  MPI_Datatype record;
+  PetscCallMPI(MPI_Type_contiguous(sizeof(Record), MPI_BYTE, &record));
+  PetscCallMPI(MPI_Type_commit(&record));
+  PetscCallMPI(MPI_Allgatherv(mine.data(), count, record, all->data(), counts.data(),
+                              offsets.data(), record, comm));
   PetscCallMPI(MPI_Type_free(&record));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -7,6 +7,8 @@
 #include <limits>
 #include <numeric>
 
+#include "common/exchange.hpp"
+
 namespace softbody {
 
 namespace {
@@ -223,22 +225,6 @@ PetscErrorCode SpreadNumbering(MPI_Comm comm, IS numbers, MeshShare *share, DofL
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Collective. Appends to *all every rank's `mine`, in rank order.
-PetscErrorCode AllGather(MPI_Comm comm, const std::vector<PetscInt> &mine,
-                         std::vector<PetscInt> *all) {
-  PetscFunctionBeginUser;
-  PetscMPIInt size;
-  PetscCallMPI(MPI_Comm_size(comm, &size));
-  std::vector<int> counts(size), offsets(size + 1, 0);
-  const int count = static_cast<int>(mine.size());
-  PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm));
-  for (PetscMPIInt q = 0; q < size; ++q) offsets[q + 1] = offsets[q] + counts[q];
-  all->resize(offsets[size]);
-  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, all->data(), counts.data(),
-                              offsets.data(), MPIU_INT, comm));
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 // Collective. The replicated numbering arrays (free_of_natural, natural_of_free,
 // petsc_of_free, O(N) on every rank) gathered from the slabs: contact and output
 // still read them (docs/design/scale-out.md).
@@ -250,8 +236,8 @@ PetscErrorCode ReplicateNumbering(MPI_Comm comm, const MeshShare &share, DofLayo
       naturals.push_back(share.first_vertex + i);
       petsc.push_back(share.petsc_vertex[i]);
     }
-  PetscCall(AllGather(comm, naturals, &layout->natural_of_free));
-  PetscCall(AllGather(comm, petsc, &layout->petsc_of_free));
+  PetscCall(AllGatherRecords(comm, naturals, &layout->natural_of_free));
+  PetscCall(AllGatherRecords(comm, petsc, &layout->petsc_of_free));
   layout->free_of_natural.assign(share.num_vertices, -1);
   for (PetscInt f = 0; f < layout->num_free(); ++f)
     layout->free_of_natural[layout->natural_of_free[f]] = f;

@@ -54,31 +54,6 @@ Scene ThreeBoxes() {
   return scene;
 }
 
-PetscMPIInt Rank() {
-  PetscMPIInt rank;
-  MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
-  return rank;
-}
-
-PetscMPIInt Size() {
-  PetscMPIInt size;
-  MPI_Comm_size(PETSC_COMM_WORLD, &size);
-  return size;
-}
-
-// Every rank's values, in rank order, on every rank.
-template <class T>
-std::vector<T> AllGather(const std::vector<T> &mine) {
-  const int count = static_cast<int>(mine.size() * sizeof(T));
-  std::vector<int> counts(Size()), offsets(Size() + 1, 0);
-  MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, PETSC_COMM_WORLD);
-  for (int q = 0; q < Size(); ++q) offsets[q + 1] = offsets[q] + counts[q];
-  std::vector<T> all(offsets[Size()] / sizeof(T));
-  MPI_Allgatherv(mine.data(), count, MPI_BYTE, all.data(), counts.data(), offsets.data(), MPI_BYTE,
-                 PETSC_COMM_WORLD);
-  return all;
-}
-
 TEST(ShareScene, SlabsAndSharesPutTogetherAreTheScene) {
   const Scene scene = ThreeBoxes();
   const MeshShare share = ShareScene(scene, Rank(), Size());

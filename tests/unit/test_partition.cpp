@@ -82,32 +82,6 @@ std::vector<std::set<PetscInt>> SerialAdjacency(const Scene &scene,
   return adjacency;
 }
 
-// Every rank's values, in rank order, on every rank.
-std::vector<PetscInt> AllGather(const std::vector<PetscInt> &mine) {
-  PetscMPIInt size;
-  MPI_Comm_size(PETSC_COMM_WORLD, &size);
-  const int count = static_cast<int>(mine.size());
-  std::vector<int> counts(size), offsets(size + 1, 0);
-  MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, PETSC_COMM_WORLD);
-  for (int q = 0; q < size; ++q) offsets[q + 1] = offsets[q] + counts[q];
-  std::vector<PetscInt> all(offsets[size]);
-  MPI_Allgatherv(mine.data(), count, MPIU_INT, all.data(), counts.data(), offsets.data(), MPIU_INT,
-                 PETSC_COMM_WORLD);
-  return all;
-}
-
-PetscMPIInt Size() {
-  PetscMPIInt size;
-  MPI_Comm_size(PETSC_COMM_WORLD, &size);
-  return size;
-}
-
-PetscMPIInt Rank() {
-  PetscMPIInt rank;
-  MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
-  return rank;
-}
-
 long CutEdges(const std::vector<std::set<PetscInt>> &adjacency, const std::vector<PetscInt> &part) {
   long cut = 0;
   for (size_t v = 0; v < adjacency.size(); ++v)

@@ -13,6 +13,7 @@
 #include <limits>
 #include <vector>
 
+#include "common/exchange.hpp"
 #include "common/large_array.hpp"
 
 // LAPACK / BLAS (Fortran interface): the separator's dense Schur complement.
@@ -587,15 +588,7 @@ PetscErrorCode OwnedSeparatorDofs(Mat A, PetscInt begin, PetscInt end,
 // The whole separator on every rank: the ranks' separator DOFs in rank order.
 PetscErrorCode GatherSeparator(MPI_Comm comm, const std::vector<PetscInt> &mine, Split *p) {
   PetscFunctionBeginUser;
-  PetscMPIInt size;
-  PetscCallMPI(MPI_Comm_size(comm, &size));
-  std::vector<int> counts(size), offsets(size + 1, 0);
-  const int count = static_cast<int>(mine.size());
-  PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm));
-  for (int r = 0; r < size; ++r) offsets[r + 1] = offsets[r] + counts[r];
-  p->separator_dofs.resize(offsets[size]);
-  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, p->separator_dofs.data(), counts.data(),
-                              offsets.data(), MPIU_INT, comm));
+  PetscCall(AllGatherRecords(comm, mine, &p->separator_dofs));
   p->separator = static_cast<PetscInt>(p->separator_dofs.size());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
