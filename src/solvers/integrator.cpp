@@ -82,6 +82,8 @@ PetscErrorCode CheckIntegratorOptions(MPI_Comm comm, const IntegratorOptions &o)
              "option -newton_rtol: must be > 0 (got %g)", (double)o.newton_rtol);
   PetscCheck(o.newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
              "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o.newton_max_it);
+  PetscCheck(o.rho_inf >= 0 && o.rho_inf <= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -alpha_rho_inf: must be in [0, 1] (got %g)", (double)o.rho_inf);
   PetscCheck(o.shear_scale > 0, comm, PETSC_ERR_USER_INPUT,
              "option -shear_scale: must be > 0 (got %g)", (double)o.shear_scale);
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -117,6 +119,8 @@ PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, Integrator
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionBeginUser;
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kChoice, "-mode", kElasticityModes},
+                                     {OptionSyntax::kChoice, "-integrator", kTimeSchemes},
+                                     {OptionSyntax::kReal, "-alpha_rho_inf"},
                                      {OptionSyntax::kReal, "-dt"},
                                      {OptionSyntax::kRealList, "-gravity"},
                                      {OptionSyntax::kInteger, "-steps"},
@@ -131,12 +135,24 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
   PetscInt gravity_count = 3;
   PetscBool gravity_set = PETSC_FALSE;
-  PetscOptionsBegin(comm, nullptr, "Time integration (backward Euler)", nullptr);
+  PetscOptionsBegin(comm, nullptr, "Time integration", nullptr);
   PetscCall(PetscOptionsEnum("-mode",
                              "Elasticity: linear (K factorised once) or corotational (per-tet "
                              "rotations, K rebuilt and solved every step)",
                              nullptr, kElasticityModes, (PetscEnum)o->mode, (PetscEnum *)&o->mode,
                              nullptr));
+  PetscCall(PetscOptionsEnum("-integrator",
+                             "Time integration scheme: be (backward Euler, first order), bdf2, "
+                             "newmark (beta 1/4, gamma 1/2: energy-conserving), alpha "
+                             "(generalized-alpha); all but be are second order "
+                             "(docs/integrators.md)",
+                             nullptr, kTimeSchemes, (PetscEnum)o->scheme, (PetscEnum *)&o->scheme,
+                             nullptr));
+  PetscCall(
+      PetscOptionsReal("-alpha_rho_inf",
+                       "-integrator alpha: spectral radius at dt*omega -> infinity, in [0, 1] "
+                       "(1: no numerical dissipation, 0: the most)",
+                       nullptr, o->rho_inf, &o->rho_inf, nullptr));
   PetscCall(PetscOptionsReal("-dt", "Time step (s)", nullptr, o->dt, &o->dt, nullptr));
   PetscCall(
       PetscOptionsString("-dt_schedule",
@@ -176,6 +192,14 @@ PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time) {
 }
 
 ImplicitEuler::~ImplicitEuler() {
+  VecDestroy(&step_x_);
+  VecDestroy(&step_v_);
+  VecDestroy(&previous_x_);
+  VecDestroy(&previous_v_);
+  VecDestroy(&acceleration_);
+  VecDestroy(&end_acceleration_);
+  VecDestroy(&combined_position_);
+  VecDestroy(&combined_velocity_);
   VecDestroy(&gravity_force_);
   VecDestroy(&x_start_);
   VecDestroy(&v_start_);
@@ -346,7 +370,7 @@ PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force,
     const int b = owned_body_[i];
     Eigen::Vector3d p = Eigen::Vector3d(m[3 * i] * v[3 * i], m[3 * i + 1] * v[3 * i + 1],
                                         m[3 * i + 2] * v[3 * i + 2]);
-    if (f) p += dt_ * Eigen::Vector3d(&f[3 * i]);
+    if (f) p += step_.force_step * Eigen::Vector3d(&f[3 * i]);
     (*momenta)[2 * b] += p;
     (*momenta)[2 * b + 1] += (Eigen::Vector3d(&X[3 * i]) - rigid_[b].centre).cross(p);
   }
@@ -363,23 +387,42 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscFunctionBeginUser;
   if (dt_ > 0) ++stats_.time_step_changes;
   dt_ = dt;
+  PetscCall(PrepareStep());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::PrepareStep() {
+  PetscFunctionBeginUser;
+  step_ = SchemeStep(options_.scheme, dt_, previous_dt_, options_.rho_inf);
+  if (step_.force_step != system_force_step_ || step_.position_step != system_position_step_)
+    PetscCall(FillSystem(step_.force_step, step_.position_step));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// A = (1 + a h_f) M + (b h_f + h_f h_x) K: linear mode fills and factorises it;
+// corotational mode refills it at the next element pass (and the warp
+// preconditioner's linear system now).
+PetscErrorCode ImplicitEuler::FillSystem(PetscReal hf, PetscReal hx) {
+  PetscFunctionBeginUser;
+  system_force_step_ = hf;
+  system_position_step_ = hx;
+  const PetscReal a = options_.alpha, b = options_.beta;
   if (options_.mode == MODE_COROTATIONAL) {
     elastic_state_current_ = false;  // A depends on dt: refilled at the next step
     if (A_linear_) {
       StageScope stage(Stages().assembly);
-      PetscCall(assembler_.Fill(A_linear_, RowAssembler::FillTerms()
-                                               .Stiffness(options_.beta * dt + dt * dt)
-                                               .Mass(mass_, 1.0 + options_.alpha * dt)));
+      PetscCall(assembler_.Fill(
+          A_linear_,
+          RowAssembler::FillTerms().Stiffness(b * hf + hf * hx).Mass(mass_, 1.0 + a * hf)));
     }
     PetscFunctionReturn(PETSC_SUCCESS);
   }
-  const PetscReal a = options_.alpha, b = options_.beta;
   PetscLogDouble start, end;
   {
     StageScope stage(Stages().assembly);
     PetscCall(PetscTime(&start));
     PetscCall(assembler_.Fill(
-        A_, RowAssembler::FillTerms().Stiffness(b * dt + dt * dt).Mass(mass_, 1.0 + a * dt)));
+        A_, RowAssembler::FillTerms().Stiffness(b * hf + hf * hx).Mass(mass_, 1.0 + a * hf)));
     PetscCall(PetscTime(&end));
     stats_.assemble_seconds = end - start;
     ++stats_.assemblies;
@@ -390,6 +433,137 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscCall(KSPSetUp(ksp_));
   PetscCall(PetscTime(&end));
   stats_.factor_seconds = end - start;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+namespace {
+
+// c is the single vector `which` with coefficient 1.
+bool IsUnit(const Combination &c, StepVector which) {
+  for (int i = 0; i < kStepVectors; ++i)
+    if (c[i] != (i == which ? 1.0 : 0.0)) return false;
+  return true;
+}
+
+}  // namespace
+
+PetscErrorCode ImplicitEuler::CreateHistoryVectors() {
+  PetscFunctionBeginUser;
+  if (step_x_) PetscFunctionReturn(PETSC_SUCCESS);
+  for (Vec *vector : {&step_x_, &step_v_, &previous_x_, &previous_v_, &acceleration_,
+                      &end_acceleration_, &combined_position_, &combined_velocity_}) {
+    PetscCall(VecDuplicate(rest_, vector));
+    PetscCall(VecZeroEntries(*vector));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Combine(const Combination &c, Vec x, Vec v, Vec result) {
+  PetscFunctionBeginUser;
+  const Vec vectors[kStepVectors] = {step_x_,       previous_x_, step_v_, previous_v_,
+                                     acceleration_, v,           x};
+  PetscCall(VecZeroEntries(result));
+  for (int i = 0; i < kStepVectors; ++i)
+    if (c[i] != 0) PetscCall(VecAXPY(result, c[i], vectors[i]));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::InitialAcceleration(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  // a = (f_ext - f_el(x) - b K v) / M - a v
+  const PetscReal b = options_.beta;
+  Vec stiffness_damping = combined_velocity_;  // b K v
+  if (options_.mode == MODE_LINEAR) {
+    PetscCall(VecWAXPY(displacement_, -1.0, rest_, x));
+    PetscCall(VecAXPY(displacement_, b, v));
+    PetscCall(MatMult(K_, displacement_, acceleration_));  // f_el + b K v
+    PetscCall(VecZeroEntries(stiffness_damping));
+  } else {
+    PetscCall(UpdateElasticState(x));  // f_el(x) and A = (1 + a h_f) M + (b h_f + h_f h_x) K(R)
+    PetscCall(VecCopy(elastic_force_, acceleration_));
+    const PetscReal hf = system_force_step_, hx = system_position_step_;
+    // K(R) v from A v - (1 + a h_f) M v.
+    PetscCall(VecZeroEntries(stiffness_damping));
+    if (b > 0) {
+      PetscCall(MatMult(A_, v, stiffness_damping));
+      PetscCall(VecPointwiseMult(combined_position_, mass_, v));
+      PetscCall(VecAXPY(stiffness_damping, -(1.0 + options_.alpha * hf), combined_position_));
+      PetscCall(VecScale(stiffness_damping, b / (b * hf + hf * hx)));
+    }
+  }
+  PetscCall(VecAXPY(acceleration_, 1.0, stiffness_damping));
+  PetscCall(VecScale(acceleration_, -1.0));
+  if (gravity_force_) PetscCall(VecAXPY(acceleration_, 1.0, gravity_force_));
+  PetscCall(VecPointwiseDivide(acceleration_, acceleration_, mass_));
+  PetscCall(VecAXPY(acceleration_, -options_.alpha, v));
+  acceleration_valid_ = true;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::BeginSchemeStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  if (options_.scheme == SCHEME_BE) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCall(CreateHistoryVectors());
+  PetscCall(VecCopy(x, step_x_));
+  PetscCall(VecCopy(v, step_v_));
+  if (step_.uses_acceleration && !acceleration_valid_) PetscCall(InitialAcceleration(x, v));
+  if (!IsUnit(step_.base_position, kXn)) {
+    PetscCall(Combine(step_.base_position, x, v, combined_position_));
+    PetscCall(VecCopy(combined_position_, x));
+    elastic_state_current_ = false;
+  }
+  if (!IsUnit(step_.base_velocity, kVn)) {
+    PetscCall(Combine(step_.base_velocity, x, v, combined_velocity_));
+    PetscCall(VecCopy(combined_velocity_, v));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::FinishSchemeStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  if (options_.scheme == SCHEME_BE) PetscFunctionReturn(PETSC_SUCCESS);
+  // a1, x1 and v1, all from the solved x, u and the state at the step's start.
+  if (step_.uses_acceleration) PetscCall(Combine(step_.end_acceleration, x, v, end_acceleration_));
+  const bool new_position = !IsUnit(step_.end_position, kXsolved);
+  if (new_position) PetscCall(Combine(step_.end_position, x, v, combined_position_));
+  if (!IsUnit(step_.end_velocity, kU)) {
+    PetscCall(Combine(step_.end_velocity, x, v, combined_velocity_));
+    PetscCall(VecCopy(combined_velocity_, v));
+  }
+  if (new_position) {
+    PetscCall(VecCopy(combined_position_, x));
+    elastic_state_current_ = false;
+  }
+  // The history of the next step: x_{n-1}, v_{n-1} = this step's x_n, v_n; a_n = a1.
+  std::swap(previous_x_, step_x_);
+  std::swap(previous_v_, step_v_);
+  if (step_.uses_acceleration) std::swap(acceleration_, end_acceleration_);
+  acceleration_valid_ = step_.uses_acceleration;
+  previous_dt_ = dt_;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::GetHistory(SchemeHistory *history) {
+  PetscFunctionBeginUser;
+  history->scheme = kTimeSchemes[options_.scheme];
+  history->vectors.clear();
+  history->scalars = {previous_dt_, acceleration_valid_ ? 1.0 : 0.0};
+  if (options_.scheme == SCHEME_BDF2) {
+    PetscCall(CreateHistoryVectors());
+    history->vectors = {{"previous_positions", previous_x_}, {"previous_velocities", previous_v_}};
+  } else if (options_.scheme == SCHEME_ALPHA) {
+    PetscCall(CreateHistoryVectors());
+    history->vectors = {{"accelerations", acceleration_}};
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SetHistory(const std::vector<double> &scalars, bool found) {
+  PetscFunctionBeginUser;
+  const bool usable = found && scalars.size() == 2;
+  previous_dt_ = usable ? scalars[0] : 0;
+  acceleration_valid_ = usable && scalars[1] != 0;
+  PetscCall(PrepareStep());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -413,6 +587,7 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     // A = (1 + a dt) M + (b dt + dt^2) sum_e R K_e R^T, f_el and the energy in one pass.
     StageScope stage(Stages().assembly);
     const PetscReal a = options_.alpha, b = options_.beta;
+    const PetscReal hf = system_force_step_, hx = system_position_step_;
     PetscLogDouble start, end;
     PetscCall(PetscTime(&start));
     // Stiffness damping (b > 0): the corotated displacement gradients, and within
@@ -421,8 +596,8 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     RowAssembler::IncrementDamping damping{&corotated_, step_started_ ? &corotated_start_ : nullptr,
                                            damping_force_};
     PetscCall(assembler_.Fill(A_, RowAssembler::FillTerms()
-                                      .Stiffness(b * dt_ + dt_ * dt_)
-                                      .Mass(mass_, 1.0 + a * dt_)
+                                      .Stiffness(b * hf + hf * hx)
+                                      .Mass(mass_, 1.0 + a * hf)
                                       .CorotatedAt(x)
                                       .ElasticForce(elastic_force_)
                                       .StrainEnergy(&elastic_energy_)
@@ -447,12 +622,17 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
 PetscErrorCode ImplicitEuler::PrimeSolver(Vec x_first, PetscReal dt_first) {
   PetscFunctionBeginUser;
   if (options_.mode == MODE_LINEAR) PetscFunctionReturn(PETSC_SUCCESS);
-  const PetscReal dt = dt_;
-  dt_ = dt_first;
+  // A as the first step filled it (its scheme's coefficients without history),
+  // then this run's step sizes again (A is refilled at the next element pass).
+  const StepCoefficients first = SchemeStep(options_.scheme, dt_first, 0, options_.rho_inf);
+  const PetscReal hf = system_force_step_, hx = system_position_step_;
+  system_force_step_ = first.force_step;
+  system_position_step_ = first.position_step;
   elastic_state_current_ = false;
   PetscCall(UpdateElasticState(x_first));
   PetscCall(KSPSetUp(ksp_));
-  dt_ = dt;
+  system_force_step_ = hf;
+  system_position_step_ = hx;
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -566,7 +746,7 @@ PetscErrorCode ImplicitEuler::CorrectRigidBodyVelocities(const std::vector<Eigen
   const PetscScalar *X;
   PetscCall(VecGetArray(v, &w));
   PetscCall(VecGetArrayRead(rest_, &X));
-  const double damping = 1.0 + options_.alpha * dt_;
+  const double damping = 1.0 + options_.alpha * step_.force_step;
   for (size_t i = 0; i < owned_body_.size(); ++i) {
     const RigidBody &body = rigid_[owned_body_[i]];
     const Eigen::Vector3d dp = target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
@@ -591,7 +771,7 @@ PetscErrorCode ImplicitEuler::LinearStep(Vec x, Vec v) {
     PetscCall(BodyMomenta(v, false, &solved));
     PetscCall(CorrectRigidBodyVelocities(target, solved, v));
   }
-  PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
+  PetscCall(VecAXPY(x, step_.position_step, v));  // x1 = x0 + dt v1
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -604,7 +784,7 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
   PetscCall(VecCopy(x, x_start_));
   {
     StageScope stage(Stages().contact);
-    PetscCall(contact->BeginStep(x_start_, v, dt_));
+    PetscCall(contact->BeginStep(x_start_, v, step_.position_step));
   }
   // Sticking contacts that would need more than Coulomb's friction slip (their
   // friction impulse goes into rhs_) and the step is solved again.
@@ -613,12 +793,13 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
     PetscCall(Solve(v, contact));
     StageScope stage(Stages().contact);
     bool added, released = false;
-    PetscCall(contact->AddPenetrations(x_start_, v, dt_, &added));
+    PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, &added));
     if (!added) PetscCall(contact->ReleaseSlipping(reactions_, rhs_, &released));
     again = added || released;
   }
   if (again) PetscCall(Solve(v, contact));
-  PetscCall(VecWAXPY(x, dt_, v, x_start_));  // x1 = x0 + dt v1
+  PetscCall(VecWAXPY(x, step_.position_step, v, x_start_));  // x1 = x0 + dt v1
+  PetscCall(FinishSchemeStep(x, v));  // the response acts on the scheme's x1, v1
   bool changed;
   {
     StageScope stage(Stages().contact);
@@ -630,23 +811,33 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
 
 PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
+  // x, v to the scheme's x_b, u_b (backward Euler: x0, v0 as they are).
+  PetscCall(PrepareStep());
+  PetscCall(BeginSchemeStep(x, v));
   // rhs = M v0 - dt f_el(x0) + dt f_ext
+  const PetscReal dt = step_.force_step;
   PetscCall(UpdateElasticState(x));
   PetscCall(VecPointwiseMult(rhs_, mass_, v));
-  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
-  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
-  if (contact && contact->active())
+  PetscCall(VecAXPY(rhs_, -dt, elastic_force_));
+  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt, gravity_force_));
+  if (contact && contact->active()) {
     PetscCall(ContactStep(x, v, contact));
-  else if (options_.mode == MODE_COROTATIONAL)
-    PetscCall(CorotationalStep(x, v));
-  else
-    PetscCall(LinearStep(x, v));
+  } else {
+    if (options_.mode == MODE_COROTATIONAL)
+      PetscCall(CorotationalStep(x, v));
+    else
+      PetscCall(LinearStep(x, v));
+    PetscCall(FinishSchemeStep(x, v));
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
   PetscFunctionBeginUser;
-  const PetscReal a = options_.alpha, b = options_.beta, dt = dt_;
+  const PetscReal a = options_.alpha, dt = step_.force_step;
+  // The elastic and damping terms of h_f f_el(x_b + h_x u): E and Psi, per h_x of
+  // displacement, weigh h_f / h_x (1 for be, bdf2, newmark).
+  const PetscReal ratio = step_.force_step / step_.position_step, b = ratio * options_.beta;
   // g = M (v - v0) + a dt M v + dt f_el + b h - dt f_ext
   PetscCall(VecWAXPY(work_, -1.0, v_start_, v));  // v - v0
   PetscCall(VecPointwiseMult(g, mass_, work_));
@@ -664,8 +855,8 @@ PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
     PetscCall(VecDot(gravity_force_, v, &external));
   }
   // P = |v - v0|_M^2 / 2 + a dt |v|_M^2 / 2 + E + (b / dt) Psi - dt f_ext . v
-  *merit = 0.5 * inertia + 0.5 * a * dt * mass_damping + elastic_energy_ +
-           (b > 0 ? b / dt * damping_energy_ : 0) - dt * external;
+  *merit = 0.5 * inertia + 0.5 * a * dt * mass_damping + ratio * elastic_energy_ +
+           (b > 0 ? b / step_.position_step * damping_energy_ : 0) - dt * external;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -698,7 +889,7 @@ PetscErrorCode ImplicitEuler::StepScales(Vec v, PetscReal *scale, PetscReal *sta
   PetscCall(VecDot(work_, v, &start_kinetic));
   PetscCall(VecNorm(elastic_force_, NORM_2, &force));
   if (gravity_force_) PetscCall(VecNorm(gravity_force_, NORM_2, &external));
-  *scale = momentum + dt_ * (force + external);
+  *scale = momentum + step_.force_step * (force + external);
   *start_energy = 0.5 * start_kinetic + elastic_energy_;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -728,7 +919,7 @@ PetscErrorCode ImplicitEuler::LineSearch(Vec x, PetscReal slope, PetscReal scale
   PetscReal s = 1;
   for (int halvings = 0;; ++halvings) {
     PetscCall(VecWAXPY(iterate_, s, direction_, v_trial_base_));
-    PetscCall(VecWAXPY(x, dt_, iterate_, x_start_));
+    PetscCall(VecWAXPY(x, step_.position_step, iterate_, x_start_));
     elastic_state_current_ = false;
     PetscCall(UpdateElasticState(x));
     PetscCall(Residual(iterate_, rhs_, merit));
@@ -753,7 +944,7 @@ PetscErrorCode ImplicitEuler::IterateEnergy(PetscReal *energy, PetscReal *work) 
   PetscCall(VecPointwiseMult(work_, mass_, iterate_));
   PetscCall(VecDot(work_, iterate_, &kinetic));
   if (gravity_force_) PetscCall(VecDot(gravity_force_, iterate_, work));
-  *energy = 0.5 * kinetic + elastic_energy_ - dt_ * *work;
+  *energy = 0.5 * kinetic + elastic_energy_ - step_.force_step * *work;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -805,10 +996,13 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
                         (double)gain, (double)start_energy));
     if (residual <= tolerance) break;
     // The linearised step stands unless it gains energy (round-off allowed).
-    const PetscReal round_off =
-        kEnergyRoundOff * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
-    dissipative = gain <= round_off;
-    if (k == 0 && !options_.newton_always && dissipative) break;
+    const PetscReal round_off = kEnergyRoundOff * (start_energy + PetscAbsReal(energy) +
+                                                   step_.force_step * PetscAbsReal(work));
+    // The energy test is backward Euler's (its steps never gain energy); the
+    // other schemes' steps stand on |g| alone.
+    const bool backward_euler = step_.identity;
+    dissipative = !backward_euler || gain <= round_off;
+    if (k == 0 && backward_euler && !options_.newton_always && dissipative) break;
     // A dissipative iterate also stands once the iteration stalls (|g| falls by
     // less than a tenth: a kink of R at an inverted element, or the left-out
     // rotation derivative with lambda >> mu); counted as stopped short.
@@ -838,7 +1032,9 @@ PetscErrorCode ImplicitEuler::TimeAssembly(Vec x, PetscInt repeats, std::vector<
     PetscCallMPI(MPI_Barrier(PetscObjectComm((PetscObject)x)));
     PetscCall(PetscTime(&start));
     RowAssembler::FillTerms terms =
-        RowAssembler::FillTerms().Stiffness(b * dt_ + dt_ * dt_).Mass(mass_, 1.0 + a * dt_);
+        RowAssembler::FillTerms()
+            .Stiffness(b * system_force_step_ + system_force_step_ * system_position_step_)
+            .Mass(mass_, 1.0 + a * system_force_step_);
     if (rotated) terms.CorotatedAt(x).ElasticForce(elastic_force_).StrainEnergy(&elastic_energy_);
     PetscCall(assembler_.Fill(A_, terms));
     PetscCall(PetscTime(&end));

@@ -2,9 +2,22 @@
 //
 //     M x'' + D x' + f_el(x) = f_ext,    D = a M + b K  (Rayleigh damping),
 //
-// with backward (implicit) Euler in velocity form, one linear solve per step:
+// by one of the schemes of -integrator (time_scheme.hpp: backward Euler, the
+// default; BDF2; implicit Newmark; generalized-alpha). Each scheme's step is one
+// solve for a velocity-like unknown u, in backward Euler's velocity form:
+//
+//     A u = M u_b - h_f f_el(x_b) + h_f f_ext,    x = x_b + h_x u,
+//     A = (1 + a h_f) M + (b h_f + h_f h_x) K,
+//
+// with the scheme's base point x_b, u_b and step sizes h_x, h_f (s); the new
+// positions and velocities are combinations of x, u and the old state (and, per
+// scheme, its history: previous positions and velocities, or accelerations).
+// Backward Euler: h_x = h_f = dt, x_b = x0, u_b = v0, x1 = x, v1 = u:
 //
 //     (M + dt D + dt^2 K) v1 = M v0 - dt f_el(x0) + dt f_ext,    x1 = x0 + dt v1.
+//
+// Below, "dt" in a formula of the step stands for h_f (forces, damping) or h_x
+// (positions), "x0, v0" for x_b, u_b and "v" for u.
 //
 // M is the lumped mass (kg, kept as a Vec), X the rest positions (m), x positions
 // (m), v velocities (m/s), dt in s, a in 1/s, b in s. D is never formed:
@@ -36,6 +49,9 @@
 //   |v0|_M^2 / 2 + E(x0)); such steps iterate until |g| <= -newton_rtol
 //   (|M v0| + dt |f_el(x0)| + dt |f_ext|) (-newton_always: every step does), or
 //   until the iteration stalls at an iterate that gains no energy (reported).
+//   The energy test is backward Euler's (its step never gains energy); the
+//   other schemes iterate every step until |g| <= -newton_rtol (scale) or the
+//   iteration stalls (reported as stopped short).
 //   With contact, the step is the single linearised solve (projected_solve.hpp).
 // Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode
 // (summed element by element, each term non-negative),
@@ -45,6 +61,7 @@
 
 #include <petscksp.h>
 
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -52,6 +69,7 @@
 #include "fem/assembly.hpp"
 #include "fem/row_assembly.hpp"
 #include "solvers/projected_solve.hpp"
+#include "solvers/time_scheme.hpp"
 
 namespace softbody {
 
@@ -60,6 +78,12 @@ extern const char *const kElasticityModes[];
 
 struct IntegratorOptions {
   ElasticityMode mode = MODE_LINEAR;
+  TimeScheme scheme = SCHEME_BE;  // -integrator
+  // -alpha_rho_inf: generalized-alpha's spectral radius at dt*omega -> infinity.
+  // 0.9 damps an unresolved mode by 10 % per step while a mode resolved by 20
+  // steps per period loses only 0.05 % of its amplitude per period
+  // (docs/integrators.md); 1 is Newmark without dissipation, 0 the most.
+  PetscReal rho_inf = 0.9;
   PetscReal dt = 0.02;  // s
   // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
@@ -111,6 +135,16 @@ struct SolverStatistics {
   std::string choice;            // the default solver's choice and its reason (empty: none checked)
 };
 
+// A scheme's state beyond x and v (for checkpoints): its -integrator name,
+// per-vertex vectors (PETSc order, 3 values per vertex, owned by the integrator)
+// by dataset name, and scalars.
+struct SchemeHistory {
+  std::string scheme;
+  std::vector<std::pair<std::string, Vec>> vectors;
+  std::vector<double> scalars;
+};
+
+// The integrator of every scheme (the class keeps backward Euler's name).
 class ImplicitEuler {
  public:
   ImplicitEuler() = default;
@@ -144,8 +178,21 @@ class ImplicitEuler {
   // run (GAMG copies the near-null space at its first set-up and reuses the copy
   // at every later one, until PCReset). Nothing to do in linear mode.
   PetscErrorCode PrimeSolver(Vec x_first, PetscReal dt_first);
-  // Not collective. To be called after positions were changed outside Step.
-  void PositionsChanged() { elastic_state_current_ = false; }
+  // Not collective. To be called after positions were changed outside Step
+  // (-deform): the schemes' history restarts (bdf2 takes a backward Euler step,
+  // alpha takes the acceleration from the equation of motion).
+  void PositionsChanged() {
+    elastic_state_current_ = false;
+    previous_dt_ = 0;
+    acceleration_valid_ = false;
+  }
+  // Collective. The scheme's history for a checkpoint (vectors created on first
+  // use; after SetHistory they hold what a checkpoint stored).
+  PetscErrorCode GetHistory(SchemeHistory *history);
+  // Collective. After a restart: found tells whether the checkpoint held this
+  // scheme's history (its vectors, from GetHistory, now filled, and scalars);
+  // without it the history starts afresh as after PositionsChanged.
+  PetscErrorCode SetHistory(const std::vector<double> &scalars, bool found);
   // Collective. Kinetic, elastic and gravitational energy (J) of the state (x, v);
   // the gravitational energy is -sum_i m_i g . x_i (zero at the origin).
   PetscErrorCode Energies(Vec x, Vec v, EnergySample *energy);
@@ -163,6 +210,7 @@ class ImplicitEuler {
   // Elements this rank's assembly computes (its own and those shared with a neighbour).
   size_t assembled_elements() const { return assembler_.num_elements(); }
   PetscReal time_step() const { return dt_; }
+  TimeScheme scheme() const { return options_.scheme; }
   const SolverStatistics &statistics() const { return stats_; }
 
  private:
@@ -183,6 +231,17 @@ class ImplicitEuler {
   // Collective. A v = rhs again by the direct fallback (-fallback_direct) after
   // the solver broke down with `failed`; its reason in *reason.
   PetscErrorCode SolveDirectly(Vec v, KSPConvergedReason failed, KSPConvergedReason *reason);
+  // The scheme's step: its coefficients for the next step (A refilled, linear
+  // mode: refactorised, when its step sizes changed); x, v from x_n, v_n to
+  // x_b, u_b (the state kept); after the solve, x, v to x1, v1 and the history.
+  PetscErrorCode PrepareStep();
+  PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
+  PetscErrorCode BeginSchemeStep(Vec x, Vec v);
+  PetscErrorCode FinishSchemeStep(Vec x, Vec v);
+  PetscErrorCode Combine(const Combination &c, Vec x, Vec v, Vec result);
+  // alpha without history: a = M^-1 (f_ext - D v - f_el(x)) at the state (x, v).
+  PetscErrorCode InitialAcceleration(Vec x, Vec v);
+  PetscErrorCode CreateHistoryVectors();
   // Linear mode: per body, the momentum and angular momentum about the rest
   // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
   PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
@@ -214,6 +273,17 @@ class ImplicitEuler {
   const LocalElements *elements_ = nullptr;
   IntegratorOptions options_;
   PetscReal dt_ = 0;
+  // The next (during Step: this) step's coefficients; A's step sizes (h_f, h_x).
+  StepCoefficients step_;
+  PetscReal system_force_step_ = 0, system_position_step_ = 0;
+  // History: the last step's size (0: none, e.g. before the first step); x_n and
+  // v_n of the current step; bdf2's x_{n-1}, v_{n-1}; alpha's a_n and whether it
+  // holds the acceleration of the current state.
+  PetscReal previous_dt_ = 0;
+  Vec step_x_ = nullptr, step_v_ = nullptr, previous_x_ = nullptr, previous_v_ = nullptr,
+      acceleration_ = nullptr, end_acceleration_ = nullptr;
+  Vec combined_position_ = nullptr, combined_velocity_ = nullptr;  // work vectors of Combine
+  bool acceleration_valid_ = false;
   Vec rest_ = nullptr, mass_ = nullptr;  // not owned
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
