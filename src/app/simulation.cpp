@@ -239,7 +239,15 @@ PetscErrorCode Simulation::Resume() {
   bool changed;
   PetscCall(ApplyDueDeformations(scene_, layout_, 0.0, 0.5 * dt_first_, state_.lumped_mass,
                                  initial_positions_, &at_start, &changed));
-  if (has_unknowns()) PetscCall(integrator_.PrimeSolver(initial_positions_, dt_first_));
+  if (has_unknowns()) {
+    PetscCall(integrator_.PrimeSolver(initial_positions_, dt_first_));
+    SchemeHistory history;  // the time scheme's previous velocities or accelerations
+    bool found;
+    PetscCall(integrator_.GetHistory(&history));
+    PetscCall(ReadCheckpointHistory(comm_, options_.checkpoints.restart_path, scene_, layout_,
+                                    state_.positions, &history, &found));
+    PetscCall(integrator_.SetHistory(history.scalars, found));
+  }
   for (size_t i = 0; i < deformations_.size(); ++i)
     deformations_[i].applied = start_.deformations_applied[i] != 0;
   contact_.RestoreRestingContacts(start_.resting_contacts);
@@ -328,7 +336,10 @@ PetscErrorCode Simulation::Checkpoint(PetscInt step) {
   loop.frames = writer_->frames();
   for (const Deformation &d : deformations_) loop.deformations_applied.push_back(d.applied ? 1 : 0);
   PetscCall(contact_.GatherRestingContacts(&loop.resting_contacts));
-  PetscCall(WriteCheckpoint(writer_, loop, state_.positions, state_.velocities));
+  SchemeHistory history;
+  if (has_unknowns()) PetscCall(integrator_.GetHistory(&history));
+  PetscCall(WriteCheckpoint(writer_, loop, state_.positions, state_.velocities,
+                            has_unknowns() ? &history : nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -135,15 +135,6 @@ struct SolverStatistics {
   std::string choice;            // the default solver's choice and its reason (empty: none checked)
 };
 
-// A scheme's state beyond x and v (for checkpoints): its -integrator name,
-// per-vertex vectors (PETSc order, 3 values per vertex, owned by the integrator)
-// by dataset name, and scalars.
-struct SchemeHistory {
-  std::string scheme;
-  std::vector<std::pair<std::string, Vec>> vectors;
-  std::vector<double> scalars;
-};
-
 // The integrator of every scheme (the class keeps backward Euler's name).
 class ImplicitEuler {
  public:

@@ -45,9 +45,12 @@
 // TSTHETA): docs/integrators.md.
 #pragma once
 
-#include <petscsys.h>
+#include <petscvec.h>
 
 #include <array>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace softbody {
 
@@ -77,6 +80,15 @@ struct StepCoefficients {
   bool uses_acceleration = false;  // needs a_n, gives a1
   // x_b = x_n, u_b = v_n, x1 = x, v1 = u: backward Euler, nothing to combine.
   bool identity = false;
+};
+
+// A scheme's state beyond x and v (for checkpoints): its -integrator name,
+// per-vertex vectors (PETSc order, 3 values per vertex, owned by the integrator)
+// by dataset name, and scalars.
+struct SchemeHistory {
+  std::string scheme;
+  std::vector<std::pair<std::string, Vec>> vectors;
+  std::vector<double> scalars;
 };
 
 // Not collective. The step of `scheme` with step dt (s); previous_dt is the last
