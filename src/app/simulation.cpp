@@ -185,6 +185,7 @@ PetscErrorCode Simulation::OpenOutput() {
   const Eigen::Vector3d &gravity = options_.integration.gravity;
   const double ground_y = options_.contact.ground_y;
   PetscCall(writer_->WriteWorld(gravity.data(), options_.contact.ground ? &ground_y : nullptr));
+  PetscCall(writer_->WriteTextAttribute("integrator", kTimeSchemes[options_.integration.scheme]));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
