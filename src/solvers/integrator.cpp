@@ -523,7 +523,7 @@ PetscErrorCode ImplicitEuler::FinishSchemeStep(Vec x, Vec v) {
   PetscFunctionBeginUser;
   if (options_.scheme == SCHEME_BE) PetscFunctionReturn(PETSC_SUCCESS);
   // a1, x1 and v1, all from the solved x, u and the state at the step's start.
-  if (step_.uses_acceleration) PetscCall(Combine(step_.end_acceleration, x, v, end_acceleration_));
+  if (step_.gives_acceleration) PetscCall(Combine(step_.end_acceleration, x, v, end_acceleration_));
   const bool new_position = !IsUnit(step_.end_position, kXsolved);
   if (new_position) PetscCall(Combine(step_.end_position, x, v, combined_position_));
   if (!IsUnit(step_.end_velocity, kU)) {
@@ -537,8 +537,8 @@ PetscErrorCode ImplicitEuler::FinishSchemeStep(Vec x, Vec v) {
   // The history of the next step: x_{n-1}, v_{n-1} = this step's x_n, v_n; a_n = a1.
   std::swap(previous_x_, step_x_);
   std::swap(previous_v_, step_v_);
-  if (step_.uses_acceleration) std::swap(acceleration_, end_acceleration_);
-  acceleration_valid_ = step_.uses_acceleration;
+  if (step_.gives_acceleration) std::swap(acceleration_, end_acceleration_);
+  acceleration_valid_ = step_.gives_acceleration;
   previous_dt_ = dt_;
   PetscFunctionReturn(PETSC_SUCCESS);
 }

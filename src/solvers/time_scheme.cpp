@@ -17,6 +17,11 @@ AlphaParameters AlphaFromRhoInf(PetscReal rho_inf) {
 
 namespace {
 
+// BDF2's start: the theta method with theta = 2/3 has BDF2's step sizes at a
+// constant dt (h = 2/3 dt), so the first step needs no factorisation of its own;
+// it is A-stable and its local error O(dt^2) leaves the global error O(dt^2).
+constexpr PetscReal kBdf2StartTheta = 2.0 / 3.0;
+
 StepCoefficients BackwardEuler(PetscReal dt) {
   StepCoefficients s;
   s.position_step = s.force_step = dt;
@@ -28,9 +33,26 @@ StepCoefficients BackwardEuler(PetscReal dt) {
   return s;
 }
 
-// Variable-step BDF2 (time_scheme.hpp), w = dt / previous_dt.
+// The theta method on x' = v, M v' = F: x1 = x_n + dt (theta v1 + (1 - theta) v_n),
+// v1 = v_n + dt (theta a1 + (1 - theta) a_n): h_x = h_f = theta dt,
+// x_b = x_n + (1 - theta) dt v_n, u_b = v_n + (1 - theta) dt a_n.
+StepCoefficients Theta(PetscReal dt, PetscReal theta) {
+  StepCoefficients s;
+  s.position_step = s.force_step = theta * dt;
+  s.base_position[kXn] = 1;
+  s.base_position[kVn] = (1 - theta) * dt;
+  s.base_velocity[kVn] = 1;
+  s.base_velocity[kAn] = (1 - theta) * dt;
+  s.end_position[kXsolved] = 1;
+  s.end_velocity[kU] = 1;
+  s.uses_acceleration = true;
+  return s;
+}
+
+// Variable-step BDF2 (time_scheme.hpp), w = dt / previous_dt; without history
+// the theta method with theta = 2/3, whose A is BDF2's at a constant step.
 StepCoefficients Bdf2(PetscReal dt, PetscReal previous_dt) {
-  if (previous_dt <= 0) return BackwardEuler(dt);
+  if (previous_dt <= 0) return Theta(dt, kBdf2StartTheta);
   const PetscReal w = dt / previous_dt, denominator = 1 + 2 * w;
   const PetscReal current = (1 + w) * (1 + w) / denominator, previous = -w * w / denominator;
   StepCoefficients s;
@@ -83,6 +105,7 @@ StepCoefficients GeneralizedAlpha(PetscReal dt, PetscReal rho_inf) {
   s.end_position[kAn] = dt * dt * (0.5 - b) - b * dt * dt * (1 - g) / g;
   s.end_position[kU] = b * dt * dt * to_acceleration;
   s.uses_acceleration = true;
+  s.gives_acceleration = true;
   return s;
 }
 

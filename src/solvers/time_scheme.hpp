@@ -21,7 +21,8 @@
 //           for y = x and y = v: h_x = h_f = (1+w)/(1+2w) dt (2/3 dt at a constant
 //           step), x_b, u_b the combinations of x_n, x_{n-1} (v_n, v_{n-1}); v1 = u,
 //           x1 = x. Without history (the first step, after -deform moved positions)
-//           the step is backward Euler.
+//           the step is the theta method with theta = 2/3 (h_x = h_f = 2/3 dt, A
+//           as BDF2's), with a_n from the equation of motion.
 //   newmark implicit Newmark with beta = 1/4, gamma = 1/2 (the trapezoidal rule) in
 //           its implicit-midpoint form: u = (v_n + v1)/2, h_x = h_f = dt/2, x_b = x_n,
 //           u_b = v_n; v1 = 2u - v_n, x1 = x_n + dt u. For linear elasticity this is
@@ -76,8 +77,9 @@ struct StepCoefficients {
   Combination base_position{}, base_velocity{};
   // After the solve: x1, v1 and (alpha) a1.
   Combination end_position{}, end_velocity{}, end_acceleration{};
-  bool uses_previous = false;      // needs x_{n-1}, v_{n-1}
-  bool uses_acceleration = false;  // needs a_n, gives a1
+  bool uses_previous = false;       // needs x_{n-1}, v_{n-1}
+  bool uses_acceleration = false;   // needs a_n
+  bool gives_acceleration = false;  // gives a1 (end_acceleration)
   // x_b = x_n, u_b = v_n, x1 = x, v1 = u: backward Euler, nothing to combine.
   bool identity = false;
 };

@@ -67,13 +67,24 @@ def reference(scheme, w, c, dt, steps, q0, p0, rho=RHO_INF):
             v = (p[-1] - dt * w * w * q[-1]) / (1 + dt * c + dt * dt * w * w)
             p.append(v)
             q.append(q[-1] + dt * v)
-    elif scheme == "bdf2":  # 3/2 y1 - 2 y0 + 1/2 y_-1 = dt y1', first step backward Euler
-        q1, p1 = reference("be", w, c, dt, 1, q0, p0)
+    elif scheme == "bdf2":  # 3/2 y1 - 2 y0 + 1/2 y_-1 = dt y1', first step the theta method, theta = 2/3
+        q1, p1 = reference("theta", w, c, dt, 1, q0, p0)
         q, p = list(q1), list(p1)
         for _ in range(steps - 1):
             # 1.5 x - dt v = 2 q0 - 0.5 q_-1;  dt w^2 x + (1.5 + dt c) v = 2 p0 - 0.5 p_-1
             matrix = np.array([[1.5, -dt], [dt * w * w, 1.5 + dt * c]])
             rhs = np.array([2 * q[-1] - 0.5 * q[-2], 2 * p[-1] - 0.5 * p[-2]])
+            x, v = np.linalg.solve(matrix, rhs)
+            q.append(x)
+            p.append(v)
+    elif scheme == "theta":  # y1 = y0 + dt (theta y1' + (1 - theta) y0') for y = x, v; theta = 2/3
+        theta = 2.0 / 3.0
+        for _ in range(steps):
+            x0, v0 = q[-1], p[-1]
+            a0 = -c * v0 - w * w * x0
+            # x - theta dt v = x0 + (1-theta) dt v0;  theta dt w^2 x + (1 + theta dt c) v = v0 + (1-theta) dt a0
+            matrix = np.array([[1.0, -theta * dt], [theta * dt * w * w, 1.0 + theta * dt * c]])
+            rhs = np.array([x0 + (1 - theta) * dt * v0, v0 + (1 - theta) * dt * a0])
             x, v = np.linalg.solve(matrix, rhs)
             q.append(x)
             p.append(v)
