@@ -393,7 +393,8 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
 
 PetscErrorCode ImplicitEuler::PrepareStep() {
   PetscFunctionBeginUser;
-  step_ = SchemeStep(options_.scheme, dt_, previous_dt_, options_.rho_inf);
+  step_ = SchemeStep(options_.scheme, dt_, previous_dt_, options_.rho_inf,
+                     options_.mode == MODE_LINEAR);
   if (step_.force_step != system_force_step_ || step_.position_step != system_position_step_)
     PetscCall(FillSystem(step_.force_step, step_.position_step));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -624,7 +625,8 @@ PetscErrorCode ImplicitEuler::PrimeSolver(Vec x_first, PetscReal dt_first) {
   if (options_.mode == MODE_LINEAR) PetscFunctionReturn(PETSC_SUCCESS);
   // A as the first step filled it (its scheme's coefficients without history),
   // then this run's step sizes again (A is refilled at the next element pass).
-  const StepCoefficients first = SchemeStep(options_.scheme, dt_first, 0, options_.rho_inf);
+  const StepCoefficients first =
+      SchemeStep(options_.scheme, dt_first, 0, options_.rho_inf, options_.mode == MODE_LINEAR);
   const PetscReal hf = system_force_step_, hx = system_position_step_;
   system_force_step_ = first.force_step;
   system_position_step_ = first.position_step;
@@ -786,9 +788,15 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
     StageScope stage(Stages().contact);
     PetscCall(contact->BeginStep(x_start_, v, step_.position_step));
   }
+  // Corotational mode, schemes other than backward Euler: while no constraint
+  // holds, the step iterates as without contact (a single linearised solve
+  // would make them first order).
+  bool again = true;
+  if (options_.mode == MODE_COROTATIONAL && !step_.identity &&
+      contact->global_constraint_count() == 0)
+    PetscCall(IterateBeforeContact(x, v, contact, &again));
   // Sticking contacts that would need more than Coulomb's friction slip (their
   // friction impulse goes into rhs_) and the step is solved again.
-  bool again = true;
   for (int round = 0; again && round < kMaxContactRounds; ++round) {
     PetscCall(Solve(v, contact));
     StageScope stage(Stages().contact);
@@ -809,17 +817,42 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+PetscErrorCode ImplicitEuler::LinearisedRightHandSide(Vec x, Vec v) {
   PetscFunctionBeginUser;
-  // x, v to the scheme's x_b, u_b (backward Euler: x0, v0 as they are).
-  PetscCall(PrepareStep());
-  PetscCall(BeginSchemeStep(x, v));
   // rhs = M v0 - dt f_el(x0) + dt f_ext
   const PetscReal dt = step_.force_step;
   PetscCall(UpdateElasticState(x));
   PetscCall(VecPointwiseMult(rhs_, mass_, v));
   PetscCall(VecAXPY(rhs_, -dt, elastic_force_));
   if (gravity_force_) PetscCall(VecAXPY(rhs_, dt, gravity_force_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::IterateBeforeContact(Vec x, Vec v, ContactSolver *contact,
+                                                   bool *constrain) {
+  PetscFunctionBeginUser;
+  // The corotational iteration; it stands unless it takes a vertex into an obstacle.
+  PetscCall(CorotationalStep(x, v));
+  {
+    StageScope stage(Stages().contact);
+    PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, constrain));
+  }
+  reactions_.clear();
+  if (!*constrain) PetscFunctionReturn(PETSC_SUCCESS);
+  // Back to x_b, u_b for the single linearised solve with the constraints.
+  PetscCall(VecCopy(x_start_, x));
+  PetscCall(VecCopy(v_start_, v));
+  elastic_state_current_ = false;
+  PetscCall(LinearisedRightHandSide(x, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  // x, v to the scheme's x_b, u_b (backward Euler: x0, v0 as they are).
+  PetscCall(PrepareStep());
+  PetscCall(BeginSchemeStep(x, v));
+  PetscCall(LinearisedRightHandSide(x, v));
   if (contact && contact->active()) {
     PetscCall(ContactStep(x, v, contact));
   } else {

@@ -244,6 +244,12 @@ class ImplicitEuler {
                                             const std::vector<Eigen::Vector3d> &solved, Vec v);
   // Step with contact: solve, constrain, solve again (Step).
   PetscErrorCode ContactStep(Vec x, Vec v, ContactSolver *contact);
+  // rhs = M u_b - h_f f_el(x_b) + h_f f_ext for the state x = x_b, v = u_b.
+  PetscErrorCode LinearisedRightHandSide(Vec x, Vec v);
+  // Corotational mode with contact but no constraint yet, schemes other than
+  // backward Euler: the corotational iteration; *constrain when it took a
+  // vertex into an obstacle (x, v and rhs are then back at x_b, u_b).
+  PetscErrorCode IterateBeforeContact(Vec x, Vec v, ContactSolver *contact, bool *constrain);
   // Corotational step without contact: the Newton-type iteration above, in its
   // steps: x0, v0 and the damping's start; g's scale and the start energy; the
   // direction A_k d = -g(v_k) and the slope g.d; the line search on the step

@@ -50,9 +50,10 @@ StepCoefficients Theta(PetscReal dt, PetscReal theta) {
 }
 
 // Variable-step BDF2 (time_scheme.hpp), w = dt / previous_dt; without history
-// the theta method with theta = 2/3, whose A is BDF2's at a constant step.
-StepCoefficients Bdf2(PetscReal dt, PetscReal previous_dt) {
-  if (previous_dt <= 0) return Theta(dt, kBdf2StartTheta);
+// the theta method with theta = 2/3 (A as BDF2's at a constant step) or
+// backward Euler.
+StepCoefficients Bdf2(PetscReal dt, PetscReal previous_dt, bool theta_start) {
+  if (previous_dt <= 0) return theta_start ? Theta(dt, kBdf2StartTheta) : BackwardEuler(dt);
   const PetscReal w = dt / previous_dt, denominator = 1 + 2 * w;
   const PetscReal current = (1 + w) * (1 + w) / denominator, previous = -w * w / denominator;
   StepCoefficients s;
@@ -112,10 +113,10 @@ StepCoefficients GeneralizedAlpha(PetscReal dt, PetscReal rho_inf) {
 }  // namespace
 
 StepCoefficients SchemeStep(TimeScheme scheme, PetscReal dt, PetscReal previous_dt,
-                            PetscReal rho_inf) {
+                            PetscReal rho_inf, bool theta_start) {
   switch (scheme) {
     case SCHEME_BDF2:
-      return Bdf2(dt, previous_dt);
+      return Bdf2(dt, previous_dt, theta_start);
     case SCHEME_NEWMARK:
       return Newmark(dt);
     case SCHEME_ALPHA:

@@ -21,8 +21,12 @@
 //           for y = x and y = v: h_x = h_f = (1+w)/(1+2w) dt (2/3 dt at a constant
 //           step), x_b, u_b the combinations of x_n, x_{n-1} (v_n, v_{n-1}); v1 = u,
 //           x1 = x. Without history (the first step, after -deform moved positions)
-//           the step is the theta method with theta = 2/3 (h_x = h_f = 2/3 dt, A
-//           as BDF2's), with a_n from the equation of motion.
+//           the step is, in linear mode, the theta method with theta = 2/3
+//           (h_x = h_f = 2/3 dt: A as BDF2's, no factorisation of its own), with a_n
+//           from the equation of motion; in corotational mode (A is refilled every
+//           step anyway) backward Euler, which needs no a_n: after an impulsive
+//           start a_n holds M^-1 b K v_n, far beyond the motion's scale, and the
+//           corotational iteration stalls on the theta method's predictor.
 //   newmark implicit Newmark with beta = 1/4, gamma = 1/2 (the trapezoidal rule) in
 //           its implicit-midpoint form: u = (v_n + v1)/2, h_x = h_f = dt/2, x_b = x_n,
 //           u_b = v_n; v1 = 2u - v_n, x1 = x_n + dt u. For linear elasticity this is
@@ -94,9 +98,10 @@ struct SchemeHistory {
 };
 
 // Not collective. The step of `scheme` with step dt (s); previous_dt is the last
-// step's size (s), 0 when the scheme has no history (bdf2 then takes a backward
-// Euler step). rho_inf: alpha's spectral radius at infinity.
+// step's size (s), 0 when the scheme has no history (bdf2 then takes a theta
+// method step when theta_start, else a backward Euler step). rho_inf: alpha's
+// spectral radius at infinity.
 StepCoefficients SchemeStep(TimeScheme scheme, PetscReal dt, PetscReal previous_dt,
-                            PetscReal rho_inf);
+                            PetscReal rho_inf, bool theta_start);
 
 }  // namespace softbody
