@@ -38,6 +38,8 @@ compared with independent references:
     -newton_rtol 1e-10); the error at T against a bdf2 run at dt = 3.125e-4 s
     for dt = 0.02 .. 0.0025 s: fitted order 1 +- 0.3 for be, 2 +- 0.3 for the
     others (measured 0.87, 1.83, 2.00, 2.00).
+(f) bad values (-integrator foo, -alpha_rho_inf 2, -0.1, abc) stop both ranks
+    before set-up with one line naming the option.
 """
 import math
 import os
@@ -213,6 +215,20 @@ def corotational_orders(args, checks):
                      + ", ".join(f"{e:.3e}" for e in errors) + f"; order {slope:.3f} ({expected:g} +- 0.3)")
 
 
+def bad_values(args, checks, scene):
+    """(f): one error line naming the option, non-zero exit, no run summary."""
+    for option, value, keys in (("-integrator", "foo", ["not one of", "foo"]),
+                                ("-alpha_rho_inf", "2", ["[0, 1]"]),
+                                ("-alpha_rho_inf", "-0.1", ["[0, 1]"]),
+                                ("-alpha_rho_inf", "abc", ["not a number", "abc"])):
+        r = harness.run(args, RANKS, ["-scene", scene, "-steps", 1, option, value], check=False, timeout=120)
+        errors = [line for line in r.stderr.splitlines() if line.startswith("softbody: error:")]
+        ok = (r.returncode != 0 and len(errors) == 1 and f"option {option}" in errors[0]
+              and any(k in errors[0] for k in keys) and "run summary" not in r.stdout)
+        checks.check(ok, f"(f) {option} {value}: exit {r.returncode}, "
+                         f"'{errors[0] if errors else r.stderr.strip()[:200]}'")
+
+
 def main():
     args = harness.arguments()
     checks = harness.Checks()
@@ -286,6 +302,7 @@ def main():
                      f"step {measured:.5f} (rho_inf {rho} to 1 %, textbook recurrence {expected:.5f} to 1e-3)")
 
     corotational_orders(args, checks)
+    bad_values(args, checks, bar.scene)
     print(f"{time.time() - started:.1f} s")
     checks.exit()
 
