@@ -93,6 +93,13 @@ PetscErrorCode PrintModel(MPI_Comm comm, const IntegratorOptions &o, const Solve
                           FormatNumber(o.gravity[1]).c_str(), FormatNumber(o.gravity[2]).c_str()));
   if (solver.time_step_changes)
     PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " time step changes", solver.time_step_changes));
+  if (o.adaptive)
+    PetscCall(PetscPrintf(comm,
+                          "; -dt_adapt, -tol %s: %" PetscInt_FMT
+                          " substeps accepted, %" PetscInt_FMT " rejected, dt %s to %s s",
+                          FormatNumber(o.tolerance).c_str(), solver.accepted_steps,
+                          solver.rejected_steps, FormatNumber(solver.min_step).c_str(),
+                          FormatNumber(solver.max_step).c_str()));
   PetscCall(PetscPrintf(comm, "\n"));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

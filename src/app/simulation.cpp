@@ -83,6 +83,10 @@ std::vector<std::pair<std::string, double>> FileStatistics(const RunReport &repo
           {"max_newton_iterations", double(solver.max_newton_iterations)},
           {"newton_stopped_short", double(solver.newton_stopped_short)},
           {"fallback_solves", double(solver.fallback_solves)},
+          {"accepted_steps", double(solver.accepted_steps)},
+          {"rejected_steps", double(solver.rejected_steps)},
+          {"min_dt", solver.accepted_steps ? solver.min_step : 0.0},
+          {"max_dt", solver.max_step},
           {"contact_seconds", contact.statistics().seconds}};
 }
 

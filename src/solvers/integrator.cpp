@@ -35,6 +35,27 @@ constexpr PetscReal kEnergyRoundOff = 1e-12;
 // The iteration stalls when |g| keeps more than this fraction of its last value.
 constexpr PetscReal kStallRatio = 0.9;
 
+// -dt_adapt (AdaptiveStep). A new substep size is the old one times
+// kSafety (tol / error)^(1 / (order + 1)), the customary safety factor 0.9 so
+// that the next substep passes; a rejection shrinks it by at most kMaxShrink;
+// an accepted substep grows it only when the estimate allows kGrowthThreshold
+// (A is refactorised for every new size: sizes that would grow by less stay),
+// and by at most kMaxGrowth per substep.
+constexpr PetscReal kSafety = 0.9;
+constexpr PetscReal kMaxShrink = 0.2;
+constexpr PetscReal kGrowthThreshold = 1.5;
+constexpr PetscReal kMaxGrowth = 2.0;
+// Error constants of the estimates: backward Euler's local position error
+// h^2 x'' / 2; the second-order schemes' h^3 x^(3) / 6 (Newmark's constant is
+// 1/12, BDF2's 2/9).
+constexpr PetscReal kFirstOrderErrorConstant = 0.5;
+constexpr PetscReal kSecondOrderErrorConstant = 1.0 / 6.0;
+// A substep rejected this often in a row stops the run (the error estimate
+// does not fall with the size: not a smooth motion).
+constexpr int kMaxRejections = 30;
+// The substeps end the step when less than this fraction of it remains (round-off).
+constexpr PetscReal kIntervalTolerance = 1e-10;
+
 }  // namespace
 
 const char *const kElasticityModes[] = {"linear", "corotational", "ElasticityMode", "MODE_",
@@ -82,6 +103,8 @@ PetscErrorCode CheckIntegratorOptions(MPI_Comm comm, const IntegratorOptions &o)
              "option -newton_rtol: must be > 0 (got %g)", (double)o.newton_rtol);
   PetscCheck(o.newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
              "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o.newton_max_it);
+  PetscCheck(o.tolerance > 0 && o.tolerance < 1, comm, PETSC_ERR_USER_INPUT,
+             "option -tol: must be in (0, 1) (got %g)", (double)o.tolerance);
   PetscCheck(o.rho_inf >= 0 && o.rho_inf <= 1, comm, PETSC_ERR_USER_INPUT,
              "option -alpha_rho_inf: must be in [0, 1] (got %g)", (double)o.rho_inf);
   PetscCheck(o.shear_scale > 0, comm, PETSC_ERR_USER_INPUT,
@@ -121,6 +144,8 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kChoice, "-mode", kElasticityModes},
                                      {OptionSyntax::kChoice, "-integrator", kTimeSchemes},
                                      {OptionSyntax::kReal, "-alpha_rho_inf"},
+                                     {OptionSyntax::kBool, "-dt_adapt"},
+                                     {OptionSyntax::kReal, "-tol"},
                                      {OptionSyntax::kReal, "-dt"},
                                      {OptionSyntax::kRealList, "-gravity"},
                                      {OptionSyntax::kInteger, "-steps"},
@@ -154,6 +179,14 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                        "(1: no numerical dissipation, 0: the most)",
                        nullptr, o->rho_inf, &o->rho_inf, nullptr));
   PetscCall(PetscOptionsReal("-dt", "Time step (s)", nullptr, o->dt, &o->dt, nullptr));
+  PetscCall(PetscOptionsBool("-dt_adapt",
+                             "Take each time step in substeps sized by a local error estimate "
+                             "(-tol); frames stay at the steps' times (docs/integrators.md)",
+                             nullptr, o->adaptive, &o->adaptive, nullptr));
+  PetscCall(PetscOptionsReal("-tol",
+                             "-dt_adapt: largest relative local error of a substep (its estimate "
+                             "over |x - X| + dt |v|)",
+                             nullptr, o->tolerance, &o->tolerance, nullptr));
   PetscCall(
       PetscOptionsString("-dt_schedule",
                          "Change the time step during the run: t1:dt1,t2:dt2 (s) means dt1 from "
@@ -192,6 +225,11 @@ PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time) {
 }
 
 ImplicitEuler::~ImplicitEuler() {
+  VecDestroy(&saved_x_);
+  VecDestroy(&saved_v_);
+  VecDestroy(&saved_previous_x_);
+  VecDestroy(&saved_previous_v_);
+  VecDestroy(&saved_acceleration_);
   VecDestroy(&step_x_);
   VecDestroy(&step_v_);
   VecDestroy(&previous_x_);
@@ -385,8 +423,10 @@ PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force,
 
 PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscFunctionBeginUser;
-  if (dt_ > 0) ++stats_.time_step_changes;
-  dt_ = dt;
+  if (interval_ > 0) ++stats_.time_step_changes;
+  interval_ = dt;
+  if (options_.adaptive && (target_step_ <= 0 || target_step_ > dt)) target_step_ = dt;
+  dt_ = options_.adaptive ? target_step_ : dt;
   PetscCall(PrepareStep());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -548,22 +588,27 @@ PetscErrorCode ImplicitEuler::GetHistory(SchemeHistory *history) {
   PetscFunctionBeginUser;
   history->scheme = kTimeSchemes[options_.scheme];
   history->vectors.clear();
-  history->scalars = {previous_dt_, acceleration_valid_ ? 1.0 : 0.0};
-  if (options_.scheme == SCHEME_BDF2) {
-    PetscCall(CreateHistoryVectors());
+  history->scalars = {previous_dt_, acceleration_valid_ ? 1.0 : 0.0, target_step_};
+  if (options_.scheme == SCHEME_BE) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCall(CreateHistoryVectors());
+  // -dt_adapt's estimate needs the previous velocities with every scheme but be.
+  if (options_.scheme == SCHEME_BDF2)
     history->vectors = {{"previous_positions", previous_x_}, {"previous_velocities", previous_v_}};
-  } else if (options_.scheme == SCHEME_ALPHA) {
-    PetscCall(CreateHistoryVectors());
-    history->vectors = {{"accelerations", acceleration_}};
-  }
+  else if (options_.adaptive)
+    history->vectors = {{"previous_velocities", previous_v_}};
+  if (options_.scheme == SCHEME_ALPHA) history->vectors.push_back({"accelerations", acceleration_});
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ImplicitEuler::SetHistory(const std::vector<double> &scalars, bool found) {
   PetscFunctionBeginUser;
-  const bool usable = found && scalars.size() == 2;
+  const bool usable = found && scalars.size() >= 2;
   previous_dt_ = usable ? scalars[0] : 0;
   acceleration_valid_ = usable && scalars[1] != 0;
+  if (options_.adaptive && usable && scalars.size() >= 3 && scalars[2] > 0) {
+    target_step_ = scalars[2];
+    dt_ = PetscMin(target_step_, interval_);
+  }
   PetscCall(PrepareStep());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -848,6 +893,112 @@ PetscErrorCode ImplicitEuler::IterateBeforeContact(Vec x, Vec v, ContactSolver *
 }
 
 PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  if (!options_.adaptive) {
+    PetscCall(TakeStep(x, v, contact));
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  PetscCheck(!contact || !contact->active(), PetscObjectComm((PetscObject)x), PETSC_ERR_USER_INPUT,
+             "option -dt_adapt: not available with collisions or constraints (a rejected "
+             "substep would have to restore the contact state)");
+  PetscCall(AdaptiveStep(x, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SaveSubstepState(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscCall(CreateHistoryVectors());
+  if (!saved_x_)
+    for (Vec *vector :
+         {&saved_x_, &saved_v_, &saved_previous_x_, &saved_previous_v_, &saved_acceleration_})
+      PetscCall(VecDuplicate(rest_, vector));
+  PetscCall(VecCopy(x, saved_x_));
+  PetscCall(VecCopy(v, saved_v_));
+  PetscCall(VecCopy(previous_x_, saved_previous_x_));
+  PetscCall(VecCopy(previous_v_, saved_previous_v_));
+  PetscCall(VecCopy(acceleration_, saved_acceleration_));
+  saved_previous_dt_ = previous_dt_;
+  saved_acceleration_valid_ = acceleration_valid_;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::RestoreSubstepState(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscCall(VecCopy(saved_x_, x));
+  PetscCall(VecCopy(saved_v_, v));
+  PetscCall(VecCopy(saved_previous_x_, previous_x_));
+  PetscCall(VecCopy(saved_previous_v_, previous_v_));
+  PetscCall(VecCopy(saved_acceleration_, acceleration_));
+  previous_dt_ = saved_previous_dt_;
+  acceleration_valid_ = saved_acceleration_valid_;
+  elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated) {
+  PetscFunctionBeginUser;
+  // The velocity's first difference (backward Euler, schemes without history)
+  // or second difference (v1 - v0) - (h / h_prev) (v0 - v_prev).
+  const PetscReal h = dt_;
+  const bool second = options_.scheme != SCHEME_BE && saved_previous_dt_ > 0;
+  PetscCall(VecWAXPY(combined_velocity_, -1.0, saved_v_, v));
+  if (second) {
+    PetscCall(VecWAXPY(combined_position_, -1.0, saved_previous_v_, saved_v_));
+    PetscCall(VecAXPY(combined_velocity_, -h / saved_previous_dt_, combined_position_));
+  }
+  PetscReal difference, displacement, speed;
+  PetscCall(VecNorm(combined_velocity_, NORM_2, &difference));
+  PetscCall(VecWAXPY(combined_position_, -1.0, rest_, x));
+  PetscCall(VecNorm(combined_position_, NORM_2, &displacement));
+  PetscCall(VecNorm(v, NORM_2, &speed));
+  const PetscReal scale = displacement + h * speed;
+  *estimated = scale > 0;
+  *error = (second ? kSecondOrderErrorConstant : kFirstOrderErrorConstant) * h * difference /
+           (scale > 0 ? scale : 1);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscReal elapsed = 0;
+  int rejections = 0;
+  while (interval_ - elapsed > kIntervalTolerance * interval_) {
+    // The substeps left, all of one size near the target (no new size: no refactorisation).
+    const PetscReal remaining = interval_ - elapsed;
+    dt_ = remaining / PetscMax(1.0, std::ceil(remaining / target_step_ - kIntervalTolerance));
+    PetscCall(SaveSubstepState(x, v));
+    PetscCall(PrepareStep());
+    PetscCall(TakeStep(x, v, nullptr));
+    PetscReal error;
+    bool estimated;
+    PetscCall(SubstepError(x, v, &error, &estimated));
+    const PetscReal order = options_.scheme != SCHEME_BE && saved_previous_dt_ > 0 ? 2 : 1;
+    const PetscReal factor = estimated && error > 0
+                                 ? kSafety * std::pow(options_.tolerance / error, 1 / (order + 1))
+                                 : kMaxGrowth;
+    if (estimated && error > options_.tolerance) {
+      PetscCall(RestoreSubstepState(x, v));
+      ++stats_.rejected_steps;
+      PetscCheck(++rejections <= kMaxRejections, PetscObjectComm((PetscObject)x),
+                 PETSC_ERR_NOT_CONVERGED,
+                 "option -tol: %d substeps in a row missed the local error %g (last %g at "
+                 "dt = %g s); the motion is not smooth enough for -dt_adapt",
+                 rejections, (double)options_.tolerance, (double)error, (double)dt_);
+      target_step_ = dt_ * PetscMax(kMaxShrink, PetscMin(factor, kSafety));
+      continue;
+    }
+    rejections = 0;
+    elapsed += dt_;
+    ++stats_.accepted_steps;
+    stats_.min_step = PetscMin(stats_.min_step, dt_);
+    stats_.max_step = PetscMax(stats_.max_step, dt_);
+    if (factor >= kGrowthThreshold)
+      target_step_ = PetscMin(interval_, dt_ * PetscMin(factor, kMaxGrowth));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::TakeStep(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
   // x, v to the scheme's x_b, u_b (backward Euler: x0, v0 as they are).
   PetscCall(PrepareStep());

@@ -84,6 +84,11 @@ struct IntegratorOptions {
   // steps per period loses only 0.05 % of its amplitude per period
   // (docs/integrators.md); 1 is Newmark without dissipation, 0 the most.
   PetscReal rho_inf = 0.9;
+  // -dt_adapt: each step of -dt (the interval between steps the time loop sees,
+  // frames and -dt_schedule) is taken in substeps whose size follows a local
+  // error estimate: relative error per substep at most -tol (see Step).
+  PetscBool adaptive = PETSC_FALSE;
+  PetscReal tolerance = 1e-4;
   PetscReal dt = 0.02;  // s
   // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
@@ -132,7 +137,10 @@ struct SolverStatistics {
   // corotational: dissipative steps that stalled above -newton_rtol
   PetscInt newton_stopped_short = 0;
   PetscInt fallback_solves = 0;  // solves repeated by the direct fallback after a breakdown
-  std::string choice;            // the default solver's choice and its reason (empty: none checked)
+  // -dt_adapt: accepted and rejected substeps, the accepted substeps' sizes (s).
+  PetscInt accepted_steps = 0, rejected_steps = 0;
+  PetscReal min_step = PETSC_MAX_REAL, max_step = 0;
+  std::string choice;  // the default solver's choice and its reason (empty: none checked)
 };
 
 // The integrator of every scheme (the class keeps backward Euler's name).
@@ -157,7 +165,13 @@ class ImplicitEuler {
   PetscErrorCode SetBodies(std::vector<int32_t> owned_body, int num_bodies);
   // Collective. New time step size (s); linear mode refills A and refactorises.
   PetscErrorCode SetTimeStep(PetscReal dt);
-  // Collective. Advances positions x and velocities v by one step; the external
+  // Collective. Advances positions x and velocities v by one step; with
+  // -dt_adapt, by substeps of the step: each is repeated with a smaller size
+  // while its local error estimate exceeds -tol (relative to |x - X| + h |v|:
+  // backward Euler h |v1 - v0| / 2, the second-order schemes
+  // h |v1 - v0 - (h / h_prev)(v0 - v_prev)| / 6, the velocity's second difference),
+  // and the next substeps' size follows the estimate (grown only beyond a
+  // factor, so that A is refactorised seldom); not with contact. The external
   // force is gravity, f_ext = M g (none when g = 0). With contact (may be null):
   // solve, constrain the vertices the step would take inside obstacles, solve
   // again with the constraints until no new one appears (contact.hpp), then the
@@ -200,7 +214,7 @@ class ImplicitEuler {
   Mat stiffness_matrix() const { return K_; }
   // Elements this rank's assembly computes (its own and those shared with a neighbour).
   size_t assembled_elements() const { return assembler_.num_elements(); }
-  PetscReal time_step() const { return dt_; }
+  PetscReal time_step() const { return interval_; }
   TimeScheme scheme() const { return options_.scheme; }
   const SolverStatistics &statistics() const { return stats_; }
 
@@ -226,6 +240,14 @@ class ImplicitEuler {
   // mode: refactorised, when its step sizes changed); x, v from x_n, v_n to
   // x_b, u_b (the state kept); after the solve, x, v to x1, v1 and the history.
   PetscErrorCode PrepareStep();
+  // One step of size dt_ (Step without -dt_adapt).
+  PetscErrorCode TakeStep(Vec x, Vec v, ContactSolver *contact);
+  // -dt_adapt: the substeps of one step; saving and restoring the state of a
+  // substep; its relative local error estimate (*estimated false: no history).
+  PetscErrorCode AdaptiveStep(Vec x, Vec v);
+  PetscErrorCode SaveSubstepState(Vec x, Vec v);
+  PetscErrorCode RestoreSubstepState(Vec x, Vec v);
+  PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);
   PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
   PetscErrorCode BeginSchemeStep(Vec x, Vec v);
   PetscErrorCode FinishSchemeStep(Vec x, Vec v);
@@ -269,7 +291,14 @@ class ImplicitEuler {
 
   const LocalElements *elements_ = nullptr;
   IntegratorOptions options_;
-  PetscReal dt_ = 0;
+  PetscReal dt_ = 0;        // the size of the next (during Step: this) step or substep (s)
+  PetscReal interval_ = 0;  // the step the time loop asked for (s); dt_ without -dt_adapt
+  // -dt_adapt: the substep size the error estimate asks for (s); the state at the
+  // start of a substep (x, v, history) to restore after a rejection.
+  PetscReal target_step_ = 0, saved_previous_dt_ = 0;
+  bool saved_acceleration_valid_ = false;
+  Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
+      saved_previous_v_ = nullptr, saved_acceleration_ = nullptr;
   // The next (during Step: this) step's coefficients; A's step sizes (h_f, h_x).
   StepCoefficients step_;
   PetscReal system_force_step_ = 0, system_position_step_ = 0;

@@ -38,8 +38,16 @@ compared with independent references:
     -newton_rtol 1e-10); the error at T against a bdf2 run at dt = 3.125e-4 s
     for dt = 0.02 .. 0.0025 s: fitted order 1 +- 0.3 for be, 2 +- 0.3 for the
     others (measured 0.87, 1.83, 2.00, 2.00).
-(f) bad values (-integrator foo, -alpha_rho_inf 2, -0.1, abc) stop both ranks
-    before set-up with one line naming the option.
+(f) bad values (-integrator foo, -alpha_rho_inf 2, -0.1, abc, -tol 0) stop both
+    ranks before set-up with one line naming the option; -dt_adapt with a
+    ground stops with one line naming -dt_adapt.
+(g) -dt_adapt on the bar's mode (no damping), steps of T/2 (frames at
+    t = k T/2), 4 steps: for -tol 1e-2 .. 1e-6 the error at 2T against the exact
+    solution falls monotonically with -tol, every run rejects at least one
+    substep (the first substeps of size T/2 miss any of these tolerances: the
+    rejected path), the frames lie at k T/2 to 1e-12, the result file has
+    accepted_steps, rejected_steps, min_dt and max_dt and the run summary says
+    so; for bdf2 and newmark.
 """
 import math
 import os
@@ -220,13 +228,50 @@ def bad_values(args, checks, scene):
     for option, value, keys in (("-integrator", "foo", ["not one of", "foo"]),
                                 ("-alpha_rho_inf", "2", ["[0, 1]"]),
                                 ("-alpha_rho_inf", "-0.1", ["[0, 1]"]),
-                                ("-alpha_rho_inf", "abc", ["not a number", "abc"])):
-        r = harness.run(args, RANKS, ["-scene", scene, "-steps", 1, option, value], check=False, timeout=120)
+                                ("-alpha_rho_inf", "abc", ["not a number", "abc"]),
+                                ("-tol", "0", ["(0, 1)"]),
+                                ("-dt_adapt", "-ground -1", ["collisions"])):
+        extra = value.split() if option == "-dt_adapt" else [option, value]
+        r = harness.run(args, RANKS, ["-scene", scene, "-steps", 1] + ([option] if option == "-dt_adapt" else [])
+                        + extra, check=False, timeout=120)
         errors = [line for line in r.stderr.splitlines() if line.startswith("softbody: error:")]
         ok = (r.returncode != 0 and len(errors) == 1 and f"option {option}" in errors[0]
               and any(k in errors[0] for k in keys) and "run summary" not in r.stdout)
         checks.check(ok, f"(f) {option} {value}: exit {r.returncode}, "
                          f"'{errors[0] if errors else r.stderr.strip()[:200]}'")
+
+
+def adaptive(bar, checks):
+    """(g): -dt_adapt's error against -tol, its rejections and its frames."""
+    import h5py
+    w, T, p0 = bar.w, bar.period, bar.p0
+    amplitude = abs(p0) / w
+    q_exact, p_exact = exact(w, 0.0, 2 * T, p0)
+    for scheme in ("bdf2", "newmark"):
+        errors, rows = [], []
+        for tol in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6):
+            name = f"adapt_{scheme}_{tol:g}"
+            out = harness.fresh_result(bar.args.work, name)
+            r = harness.run(bar.args, RANKS, ["-scene", bar.scene, "-output", out, "-integrator", scheme,
+                                              "-dt", repr(T / 2), "-steps", 4, "-shear_scale", 1, "-alpha", 0,
+                                              "-beta", 0, "-dt_adapt", "-tol", tol])
+            frames = harness.read_frames(out)
+            q = float((frames["positions"][-1].ravel() - bar.rest) @ bar.mode_mass)
+            p = float(frames["velocities"][-1].ravel() @ bar.mode_mass)
+            errors.append(math.hypot(q - q_exact, (p - p_exact) / w) / amplitude)
+            with h5py.File(out, "r") as f:
+                attributes = {k: float(f.attrs[k]) for k in ("accepted_steps", "rejected_steps", "min_dt", "max_dt")}
+            times_ok = np.abs(frames["time"] - T / 2 * np.arange(5)).max() < 1e-12 * T
+            summary_ok = "-dt_adapt" in r.stdout and "rejected" in r.stdout
+            rows.append((tol, attributes, times_ok and summary_ok))
+        falling = all(b < a for a, b in zip(errors, errors[1:]))
+        checks.check(falling, f"(g) {scheme} -dt_adapt: error at 2T for -tol 1e-2 .. 1e-6: "
+                              + ", ".join(f"{e:.2e}" for e in errors) + " (falls monotonically)")
+        checks.check(all(row[1]["rejected_steps"] >= 1 and row[2] for row in rows),
+                     f"(g) {scheme} -dt_adapt: accepted / rejected substeps per -tol: "
+                     + ", ".join(f"{row[0]:g}: {row[1]['accepted_steps']:.0f}/{row[1]['rejected_steps']:.0f} "
+                                 f"(dt {row[1]['min_dt']:.2e} .. {row[1]['max_dt']:.2e} s)" for row in rows)
+                     + "; frames at k T/2, summary line")
 
 
 def main():
@@ -303,6 +348,7 @@ def main():
 
     corotational_orders(args, checks)
     bad_values(args, checks, bar.scene)
+    adaptive(bar, checks)
     print(f"{time.time() - started:.1f} s")
     checks.exit()
 
