@@ -21,6 +21,9 @@ For each of bdf2, newmark and alpha (be: test_restart.py), 2 ranks:
     checkpoint (every step a frame), bit for bit.
 (d) a checkpoint of another integrator is continued with a fresh history (no
     error): be's checkpoint restarted with bdf2 runs to the end.
+(e) -dt_adapt -tol 1e-4: the struck bar restarts bit for bit with bdf2 (linear
+    and corotational) and alpha (linear): the checkpoint holds the substep
+    size and the previous velocities the error estimate needs.
 """
 import os
 import sys
@@ -59,7 +62,7 @@ def restart_case(name, label, scene, options, steps):
     worst = 0.0 if same or len(a["time"]) != len(b["time"]) else \
         max(np.abs(a[k] - b[k]).max() for k in ("positions", "velocities"))
     checks.check(same and b["complete"] == 1,
-                 f"(a) {label}: {len(b['time'])} frames bit for bit equal after the restart"
+                 f"{'' if label.startswith('(') else '(a) '}{label}: {len(b['time'])} frames bit for bit equal after the restart"
                  + ("" if same else f" (largest difference {worst:.3e})")
                  + f"; checkpoint integrator '{stored[0]}', datasets {', '.join(stored[1])}")
     return full, part
@@ -107,6 +110,10 @@ for scheme in SCHEMES:
                      f"(b) {scheme}, {mode} drop: lowest vertex y = {lowest:.2e} m (> -{GROUND_TOLERANCE:g}), "
                      f"kinetic energy at the end {kinetic:.2e} J (< 1e-3 of the fall's {fall:.3g} J), "
                      f"centre at {centre:.4f} m (0.25 m to 2 %)")
+
+for scheme, mode in (("bdf2", "linear"), ("bdf2", "corotational"), ("alpha", "linear")):
+    restart_case(f"adapt_{mode}_{scheme}", f"(e) {scheme}, {mode} struck bar, -dt_adapt", bar,
+                 ["-integrator", scheme, "-mode", mode, "-dt_adapt", "-tol", "1e-4", "-dt", "0.05"], 20)
 
 part = path("switch_part")
 harness.run(args, 2, ["-scene", beam, "-steps", 10, "-checkpoint_every", 10, "-output", part, "-quiet"])
