@@ -22,10 +22,10 @@ BodiesWithoutUnknowns CountBodiesWithoutUnknowns(const Scene &scene, const DofLa
   for (const Body &body : scene.bodies)
     if (body.at_rest) {
       ++b.resting_bodies;
-      b.resting_vertices += body.mesh.num_vertices();
+      b.resting_vertices += body.num_vertices();
     } else if (body.fixed) {
       ++b.fixed_bodies;
-      b.fixed_vertices += body.mesh.num_vertices();
+      b.fixed_vertices += body.num_vertices();
     }
   b.stray_vertices =
       scene.num_vertices() - b.fixed_vertices - b.resting_vertices - layout.num_free();
@@ -55,9 +55,12 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
     max_dofs = std::max(max_dofs, dofs);
   }
   const size_t bodies = scene.bodies.size();
-  PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets\n",
+  const char *held = layout.size == 1    ? ""
+                     : scene.meshes_held ? "; meshes whole on every rank"
+                                         : "; meshes read on rank 0, then held in slabs";
+  PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
-                        scene.num_vertices(), (long long)scene.num_tets()));
+                        scene.num_vertices(), (long long)scene.num_tets(), held));
   PetscCall(PetscPrintf(comm,
                         "  unknowns     %" PetscInt_FMT " DOFs on %d %s (%" PetscInt_FMT
                         " to %" PetscInt_FMT " per rank%s)\n",

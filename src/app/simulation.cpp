@@ -122,9 +122,10 @@ PetscErrorCode Simulation::SetUp() {
   PetscFunctionBeginUser;
   PetscCall(CheckFiles());
   PetscCall(ReadScene());
-  PetscCall(BuildDofLayout(comm_, scene_, options_.partition, &layout_));
+  PetscCall(DistributeMesh());
   PetscCall(CreateInitialState());
   PetscCall(OpenOutput());
+  share_ = MeshShare();  // set-up only: the state and the result file hold what they need
   PetscCall(SetUpSolvers());
   PetscCall(StartTimeLoop());
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -141,22 +142,37 @@ PetscErrorCode Simulation::CheckFiles() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Every rank reads and validates the scene, its meshes and the -deform events.
-// Bodies that nothing can set in motion add no unknowns (partition.hpp); not on a
-// restart (its bodies move as the checkpoint says) or when -export_matrices asks
-// for the matrices of every free body.
+// Rank 0 reads and validates the scene and its meshes; every rank the -deform
+// events. The meshes then reach every rank whole only when contact may need them,
+// else each rank gets its shares (mesh_share.hpp). Bodies that nothing can set
+// in motion add no unknowns (partition.hpp); not on a restart (its bodies move as
+// the checkpoint says) or when -export_matrices asks for the matrices of every
+// free body.
 PetscErrorCode Simulation::ReadScene() {
   PetscFunctionBeginUser;
   PetscCall(LoadScene(comm_, options_.scene, &scene_));
   PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
+  const ContactOptions &contact = options_.contact;
+  const bool replicate =
+      options_.scene.replicate || ContactMayNeedWholeMeshes(contact, scene_.bodies.size());
+  PetscCall(DistributeScene(comm_, replicate, &scene_, &share_));
   if (!restart() && options_.output.matrix_dir.empty()) {
-    const ContactOptions &contact = options_.contact;
     MotionSources sources{options_.integration.gravity.squaredNorm() > 0, bool(contact.ground),
                           !contact.constraints_path.empty() || contact.edge_bounds,
                           std::vector<bool>(scene_.bodies.size(), false)};
     for (const Deformation &d : deformations_) sources.deformed[d.body] = true;
-    MarkBodiesAtRest(sources, &scene_);
+    int marked;
+    PetscCall(MarkBodiesAtRest(comm_, sources, &scene_, &share_, &marked));
   }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The numbering of the free vertices and the tets this rank assembles
+// (partition.hpp, migration.hpp).
+PetscErrorCode Simulation::DistributeMesh() {
+  PetscFunctionBeginUser;
+  PetscCall(BuildDofLayout(comm_, options_.partition, &share_, &layout_));
+  PetscCall(MigrateTets(comm_, share_, layout_, &tets_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -165,12 +181,12 @@ PetscErrorCode Simulation::ReadScene() {
 // the original initial positions to prime the solver.
 PetscErrorCode Simulation::CreateInitialState() {
   PetscFunctionBeginUser;
-  elements_ = CollectLocalElements(scene_, layout_);
-  PetscCall(CreateState(comm_, scene_, layout_, elements_, &state_));
+  elements_ = CollectLocalElements(scene_, layout_, tets_);
+  PetscCall(CreateState(comm_, share_, layout_, elements_, &state_));
   if (restart()) {
     PetscCall(VecDuplicate(state_.positions, &initial_positions_));
     PetscCall(VecCopy(state_.positions, initial_positions_));
-    PetscCall(ReadCheckpoint(comm_, options_.checkpoints.restart_path, scene_, layout_,
+    PetscCall(ReadCheckpoint(comm_, options_.checkpoints.restart_path, scene_, share_, layout_,
                              deformations_.size(), options_.integration.steps, state_.positions,
                              state_.velocities, &start_));
   }
@@ -184,7 +200,7 @@ PetscErrorCode Simulation::OpenOutput() {
   if (options_.output.path.empty()) PetscFunctionReturn(PETSC_SUCCESS);
   writer_ = &file_;
   const Continuation continuation{options_.checkpoints.restart_path, start_.frames};
-  PetscCall(writer_->Open(comm_, options_.output, scene_, layout_, state_.positions,
+  PetscCall(writer_->Open(comm_, options_.output, scene_, layout_, share_, state_.positions,
                           restart() ? &continuation : nullptr));
   const Eigen::Vector3d &gravity = options_.integration.gravity;
   const double ground_y = options_.contact.ground_y;
@@ -201,8 +217,8 @@ PetscErrorCode Simulation::SetUpSolvers() {
   dt_first_ = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start_.time);
   if (has_unknowns()) {
-    PetscCall(integrator_.Setup(comm_, scene_, layout_, elements_, state_.rest_positions,
-                                state_.lumped_mass, integration));
+    PetscCall(integrator_.Setup(comm_, scene_, layout_, std::move(tets_), elements_,
+                                state_.rest_positions, state_.lumped_mass, integration));
     PetscCall(integrator_.SetBodies(OwnedVertexBodies(scene_, layout_),
                                     static_cast<int>(scene_.bodies.size())));
   }

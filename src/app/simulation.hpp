@@ -62,6 +62,7 @@ class Simulation {
   PetscErrorCode SetUp();
   PetscErrorCode CheckFiles();
   PetscErrorCode ReadScene();
+  PetscErrorCode DistributeMesh();
   PetscErrorCode CreateInitialState();
   PetscErrorCode OpenOutput();
   PetscErrorCode SetUpSolvers();
@@ -86,7 +87,9 @@ class Simulation {
   RunOptions options_;
   Scene scene_;
   std::vector<Deformation> deformations_;
+  MeshShare share_;  // this rank's shares of the meshes (set-up only: freed after OpenOutput)
   DofLayout layout_;
+  LocalTets tets_;  // the free tets with an owned vertex (set-up only: the integrator takes them)
   LocalElements elements_;
   State state_;
   LoopState start_;                  // where the loop starts: step 0, or a checkpoint's

@@ -39,6 +39,8 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   DecideParts(scene, layout);
   PetscCall(distance_.Setup(comm, scene, options));
   if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCheck(scene.meshes_held, comm, PETSC_ERR_PLIB,
+             "contact needs every mesh on every rank (ContactMayNeedWholeMeshes)");
 
   state_.SetupBodies(scene);
   SharpFeatures::Candidates candidates;
@@ -69,26 +71,11 @@ void ContactSolver::SetupBodyObstacles(const SharpFeatures::Candidates &candidat
   features_.Keep(candidates, *scene_, state_, obstacles_);
 }
 
-// With body obstacles, every vertex of the free bodies (interior ones too: a
-// soft body hitting hard can push them through its surface); with the ground
-// alone, every owned vertex.
+// Every owned vertex, interior ones too (a soft body hitting hard can push them
+// through its surface): the owned vertices are the free bodies' vertices.
 void ContactSolver::CollectCheckedVertices() {
-  if (!body_obstacles_) {
-    for (PetscInt local = 0; local < state_.local_count(); ++local)
-      checked_vertices_.push_back({local, state_.owned_natural()[local]});
-    return;
-  }
-  for (const Body &body : scene_->bodies) {
-    if (body.fixed) continue;
-    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
-      const int32_t natural = body.first_vertex + v;
-      const PetscInt local = layout_->LocalOfNatural(natural);
-      if (local >= 0) checked_vertices_.push_back({local, natural});
-    }
-  }
-  std::sort(checked_vertices_.begin(), checked_vertices_.end());
-  checked_vertices_.erase(std::unique(checked_vertices_.begin(), checked_vertices_.end()),
-                          checked_vertices_.end());
+  for (PetscInt local = 0; local < state_.local_count(); ++local)
+    checked_vertices_.push_back({local, state_.owned_natural()[local]});
 }
 
 std::string ContactSolver::Description() const {

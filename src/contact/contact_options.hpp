@@ -24,4 +24,12 @@ struct ContactOptions {
 // -edge_bounds.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
+// Not collective. Whether contact may need the bodies' whole meshes on every
+// rank (ContactSolver reads them when it is active): with a ground, distance
+// constraints or edge bounds, or with more than one body (obstacles).
+inline bool ContactMayNeedWholeMeshes(const ContactOptions &options, size_t num_bodies) {
+  return options.ground || !options.constraints_path.empty() || options.edge_bounds ||
+         num_bodies > 1;
+}
+
 }  // namespace softbody

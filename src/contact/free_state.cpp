@@ -33,11 +33,7 @@ PetscErrorCode FreeState::SetupMasses(MPI_Comm comm, const DofLayout &layout, Ve
                                       bool gather) {
   PetscFunctionBeginUser;
   layout_ = &layout;
-  owned_natural_.resize(layout.local_count());
-  for (PetscInt f = 0; f < layout.num_free(); ++f) {
-    const PetscInt local = layout.LocalOfFree(f);
-    if (local >= 0) owned_natural_[local] = static_cast<int32_t>(layout.natural_of_free[f]);
-  }
+  owned_natural_.assign(layout.natural_of_owned.begin(), layout.natural_of_owned.end());
   inverse_mass_.assign(body_of_.size(), 0.0);
   if (gather)
     PetscCall(GatherInverseMasses(layout, lumped_mass));
@@ -67,10 +63,8 @@ PetscErrorCode FreeState::OwnInverseMasses(const DofLayout &layout, Vec lumped_m
   PetscFunctionBeginUser;
   const PetscScalar *mass;
   PetscCall(VecGetArrayRead(lumped_mass, &mass));
-  for (PetscInt f = 0; f < layout.num_free(); ++f) {
-    const PetscInt local = layout.LocalOfFree(f);
-    if (local >= 0) inverse_mass_[layout.natural_of_free[f]] = 1.0 / mass[3 * local];
-  }
+  for (PetscInt local = 0; local < layout.local_count(); ++local)
+    inverse_mass_[layout.natural_of_owned[local]] = 1.0 / mass[3 * local];
   PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -4,27 +4,19 @@
 
 namespace softbody {
 
-LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout) {
+LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout,
+                                   const LocalTets &tets) {
   LocalElements elements;
-  for (const Body &body : scene.bodies) {
-    if (body.fixed) continue;
-    const Lame lame = LameFromYoungPoisson(body.material.young, body.material.poisson);
-    for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
-      std::array<PetscInt, 4> vertices;
-      TetPositions X;
-      for (int a = 0; a < 4; ++a) {
-        const int32_t local = body.mesh.tets(t, a);
-        vertices[a] = layout.PetscVertexOfNatural(body.first_vertex + local);
-        X.row(a) = body.mesh.vertices.row(local);
-      }
-      // The lowest PETSc vertex's owner owns the element.
-      if (!layout.OwnsPetscVertex(*std::min_element(vertices.begin(), vertices.end()))) continue;
-      elements.vertices.push_back(vertices);
-      elements.gradients.push_back(ComputeShapeGradients(X));
-      elements.volumes.push_back(std::abs(SignedVolume(X)));
-      elements.lame.push_back(lame);
-      elements.densities.push_back(body.material.density);
-    }
+  for (size_t t = 0; t < tets.size(); ++t) {
+    const std::array<PetscInt, 4> &vertices = tets.vertices[t];
+    // The lowest PETSc vertex's owner owns the element.
+    if (!layout.OwnsPetscVertex(*std::min_element(vertices.begin(), vertices.end()))) continue;
+    const Material &material = scene.bodies[tets.body[t]].material;
+    elements.vertices.push_back(vertices);
+    elements.gradients.push_back(ComputeShapeGradients(tets.rest[t]));
+    elements.volumes.push_back(std::abs(SignedVolume(tets.rest[t])));
+    elements.lame.push_back(LameFromYoungPoisson(material.young, material.poisson));
+    elements.densities.push_back(material.density);
   }
   elements.touched_vertices.reserve(4 * elements.size());
   for (const auto &v : elements.vertices)
@@ -142,26 +134,22 @@ State::~State() {
   VecDestroy(&lumped_mass);
 }
 
-PetscErrorCode CreateState(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+PetscErrorCode CreateState(MPI_Comm comm, const MeshShare &share, const DofLayout &layout,
                            const LocalElements &elements, State *state) {
   PetscFunctionBeginUser;
   PetscCall(AssembleLumpedMass(comm, layout, elements, &state->lumped_mass));
   PetscCall(VecDuplicate(state->lumped_mass, &state->rest_positions));
   PetscCall(VecDuplicate(state->lumped_mass, &state->velocities));
+  PetscSF sf;
+  PetscCall(CreateSlabSF(comm, share, layout.natural_of_owned, &sf));
   PetscScalar *X, *v;
   PetscCall(VecGetArray(state->rest_positions, &X));
   PetscCall(VecGetArray(state->velocities, &v));
-  for (const Body &body : scene.bodies)
-    for (int32_t i = 0; i < body.mesh.num_vertices(); ++i) {
-      const PetscInt local = layout.LocalOfNatural(body.first_vertex + i);
-      if (local < 0) continue;
-      for (int c = 0; c < 3; ++c) {
-        X[3 * local + c] = body.mesh.vertices(i, c);
-        v[3 * local + c] = scene.initial_velocities(body.first_vertex + i, c);
-      }
-    }
+  PetscCall(FetchFromSlabs(sf, MPI_DOUBLE, 3, share.rest.data(), X));
+  PetscCall(FetchFromSlabs(sf, MPI_DOUBLE, 3, share.velocities.data(), v));
   PetscCall(VecRestoreArray(state->rest_positions, &X));
   PetscCall(VecRestoreArray(state->velocities, &v));
+  PetscCall(PetscSFDestroy(&sf));
   PetscCall(VecDuplicate(state->rest_positions, &state->positions));
   PetscCall(VecCopy(state->rest_positions, state->positions));
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "fem/element.hpp"
+#include "fem/migration.hpp"
 #include "fem/partition.hpp"
 #include "io/scene.hpp"
 
@@ -38,8 +39,10 @@ struct LocalElements {
   size_t size() const { return vertices.size(); }
 };
 
-// Not collective.
-LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout);
+// Not collective. The tets among `tets` whose lowest PETSc vertex this rank owns,
+// with their bodies' materials.
+LocalElements CollectLocalElements(const Scene &scene, const DofLayout &layout,
+                                   const LocalTets &tets);
 
 // Collective. A MATAIJ matrix (block size 3) with the COO pattern of the local
 // elements' 12 x 12 blocks.
@@ -98,8 +101,9 @@ struct EnergySample {
   PetscReal total() const { return kinetic + elastic + gravitational; }
 };
 
-// Collective. Rest and initial positions, initial velocities, lumped mass.
-PetscErrorCode CreateState(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+// Collective. Rest and initial positions, initial velocities (from the share's
+// slabs), lumped mass.
+PetscErrorCode CreateState(MPI_Comm comm, const MeshShare &share, const DofLayout &layout,
                            const LocalElements &elements, State *state);
 
 }  // namespace softbody

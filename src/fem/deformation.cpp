@@ -19,19 +19,6 @@ bool ParseDeformation(const std::string &text, Deformation *d) {
          !(in >> rest) && d->scale.allFinite() && std::isfinite(d->time);
 }
 
-// Body of each locally owned free vertex.
-std::vector<PetscInt> LocalBodies(const Scene &scene, const DofLayout &layout) {
-  std::vector<PetscInt> body_of(layout.local_count(), -1);
-  for (size_t b = 0; b < scene.bodies.size(); ++b) {
-    const Body &body = scene.bodies[b];
-    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
-      const PetscInt local = layout.LocalOfNatural(body.first_vertex + v);
-      if (local >= 0) body_of[local] = static_cast<PetscInt>(b);
-    }
-  }
-  return body_of;
-}
-
 }  // namespace
 
 PetscErrorCode ProcessDeformationOptions(MPI_Comm comm, std::string *text) {
@@ -76,10 +63,10 @@ PetscErrorCode ApplyDueDeformations(const Scene &scene, const DofLayout &layout,
                                     std::vector<Deformation> *deformations, bool *changed) {
   PetscFunctionBeginUser;
   *changed = false;
-  std::vector<PetscInt> body_of;
+  std::vector<int32_t> body_of;
   for (Deformation &d : *deformations) {
     if (d.applied || d.time > time + tolerance) continue;
-    if (body_of.empty()) body_of = LocalBodies(scene, layout);
+    if (body_of.empty()) body_of = OwnedVertexBodies(scene, layout);
     PetscScalar *x;
     const PetscScalar *m;
     PetscCall(VecGetArray(positions, &x));

@@ -1,46 +1,82 @@
 #include "fem/partition.hpp"
 
 #include <petscis.h>
+#include <petscsf.h>
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 
 namespace softbody {
 
-int MarkBodiesAtRest(const MotionSources &sources, Scene *scene) {
-  if (sources.gravity || sources.ground || sources.constraints) return 0;
-  const size_t n = scene->bodies.size();
-  std::vector<Eigen::Vector3d> lo(n), hi(n);
-  for (size_t b = 0; b < n; ++b) {
-    const Body &body = scene->bodies[b];
-    if (body.fixed) {
-      if (body.mesh.num_vertices() == 0) continue;
-    } else {
-      if (b < sources.deformed.size() && sources.deformed[b]) return 0;
-      for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
-        if (scene->initial_velocities.row(body.first_vertex + v).squaredNorm() != 0)
-          return 0;  // it moves
+namespace {
+
+// Per body, over all ranks' slabs: the bounding box of its rest positions and
+// whether any of its vertices has a non-zero initial velocity (reductions).
+struct BodyFacts {
+  std::vector<double> lo, hi;  // 3 per body; +inf / -inf for a body without vertices
+  std::vector<int> moving;     // per body, 0 or 1
+};
+
+PetscErrorCode GatherBodyFacts(MPI_Comm comm, const Scene &scene, const MeshShare &share,
+                               BodyFacts *facts) {
+  PetscFunctionBeginUser;
+  const size_t n = scene.bodies.size();
+  facts->lo.assign(3 * n, std::numeric_limits<double>::infinity());
+  facts->hi.assign(3 * n, -std::numeric_limits<double>::infinity());
+  facts->moving.assign(n, 0);
+  for (PetscInt i = 0; i < share.slab_size(); ++i) {
+    const int32_t b = BodyOfNatural(scene, share.first_vertex + i);
+    for (int c = 0; c < 3; ++c) {
+      facts->lo[3 * b + c] = std::min(facts->lo[3 * b + c], share.rest(i, c));
+      facts->hi[3 * b + c] = std::max(facts->hi[3 * b + c], share.rest(i, c));
     }
-    lo[b] = body.mesh.vertices.colwise().minCoeff().transpose();
-    hi[b] = body.mesh.vertices.colwise().maxCoeff().transpose();
+    if (share.velocities.row(i).squaredNorm() != 0) facts->moving[b] = 1;
   }
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, facts->lo.data(), 3 * n, MPI_DOUBLE, MPI_MIN, comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, facts->hi.data(), 3 * n, MPI_DOUBLE, MPI_MAX, comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, facts->moving.data(), n, MPI_INT, MPI_MAX, comm));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Whether the boxes of bodies a and b meet.
+bool BoxesMeet(const BodyFacts &facts, size_t a, size_t b) {
+  for (int c = 0; c < 3; ++c)
+    if (facts.lo[3 * a + c] > facts.hi[3 * b + c] || facts.lo[3 * b + c] > facts.hi[3 * a + c])
+      return false;
+  return true;
+}
+
+}  // namespace
+
+PetscErrorCode MarkBodiesAtRest(MPI_Comm comm, const MotionSources &sources, Scene *scene,
+                                MeshShare *share, int *marked) {
+  PetscFunctionBeginUser;
+  *marked = 0;
+  if (sources.gravity || sources.ground || sources.constraints) PetscFunctionReturn(PETSC_SUCCESS);
+  const size_t n = scene->bodies.size();
+  for (size_t b = 0; b < n; ++b)
+    if (!scene->bodies[b].fixed && b < sources.deformed.size() && sources.deformed[b])
+      PetscFunctionReturn(PETSC_SUCCESS);
+  BodyFacts facts;
+  PetscCall(GatherBodyFacts(comm, *scene, *share, &facts));
+  for (size_t b = 0; b < n; ++b)
+    if (!scene->bodies[b].fixed && facts.moving[b]) PetscFunctionReturn(PETSC_SUCCESS);  // it moves
   // Everything is still: a free body at rest unless its box meets another's.
   std::vector<bool> alone(n, true);
   for (size_t a = 0; a < n; ++a)
     for (size_t b = a + 1; b < n; ++b) {
-      if (scene->bodies[a].mesh.num_vertices() == 0 || scene->bodies[b].mesh.num_vertices() == 0)
-        continue;
-      if ((lo[a].array() <= hi[b].array()).all() && (lo[b].array() <= hi[a].array()).all())
-        alone[a] = alone[b] = false;
+      if (scene->bodies[a].num_vertices() == 0 || scene->bodies[b].num_vertices() == 0) continue;
+      if (BoxesMeet(facts, a, b)) alone[a] = alone[b] = false;
     }
-  int marked = 0;
   for (size_t b = 0; b < n; ++b) {
     Body &body = scene->bodies[b];
     if (body.fixed || !alone[b]) continue;
     body.fixed = body.at_rest = true;
-    ++marked;
+    share->body_fixed[b] = 1;
+    ++*marked;
   }
-  return marked;
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options) {
@@ -70,84 +106,198 @@ const char *PartitionerName(Partitioner partitioner) {
 
 namespace {
 
-// Free vertices in natural order: layout->free_of_natural and natural_of_free.
-void NumberFreeVertices(const Scene &scene, DofLayout *layout) {
-  std::vector<char> in_free_tet(scene.num_vertices(), 0);
-  for (const Body &body : scene.bodies)
-    if (!body.fixed)
-      for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-        for (int a = 0; a < 4; ++a) in_free_tet[body.first_vertex + body.mesh.tets(t, a)] = 1;
-  layout->free_of_natural.assign(scene.num_vertices(), -1);
-  layout->natural_of_free.clear();
-  for (PetscInt v = 0; v < scene.num_vertices(); ++v)
-    if (in_free_tet[v]) {
-      layout->free_of_natural[v] = layout->num_free();
-      layout->natural_of_free.push_back(v);
-    }
+// The natural vertices of the share's free tets, four per tet.
+std::vector<PetscInt> FreeTetVertices(const MeshShare &share) {
+  std::vector<PetscInt> naturals;
+  for (size_t t = 0; t < share.tets.size(); ++t)
+    if (share.TetIsFree(t))
+      naturals.insert(naturals.end(), share.tets[t].begin(), share.tets[t].end());
+  return naturals;
+}
+
+// Collective. share->free_index: a vertex is free when a free tet names it (a
+// reduction from the tets' vertices to their slabs, through tet_sf: CreateSlabSF
+// of FreeTetVertices), numbered in natural order (an exclusive scan over the
+// slabs). Returns the number of free vertices.
+PetscErrorCode NumberFreeVertices(MPI_Comm comm, PetscSF tet_sf, MeshShare *share,
+                                  PetscInt *num_free) {
+  PetscFunctionBeginUser;
+  PetscInt leaves;
+  PetscCall(PetscSFGetGraph(tet_sf, nullptr, &leaves, nullptr, nullptr));
+  const std::vector<PetscInt> named(leaves, 1);
+  share->free_index.assign(share->slab_size(), 0);
+  PetscCall(PetscSFReduceBegin(tet_sf, MPIU_INT, named.data(), share->free_index.data(), MPI_MAX));
+  PetscCall(PetscSFReduceEnd(tet_sf, MPIU_INT, named.data(), share->free_index.data(), MPI_MAX));
+  PetscInt count = std::accumulate(share->free_index.begin(), share->free_index.end(), PetscInt(0));
+  PetscInt next = 0;
+  PetscCallMPI(MPI_Exscan(&count, &next, 1, MPIU_INT, MPI_SUM, comm));
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  if (rank == 0) next = 0;  // MPI_Exscan leaves rank 0's result undefined
+  for (PetscInt &index : share->free_index) index = index ? next++ : -1;
+  PetscCallMPI(MPI_Allreduce(&count, num_free, 1, MPIU_INT, MPI_SUM, comm));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. The free indices of the vertices of the share's free tets (from the slabs).
+PetscErrorCode FreeTets(PetscSF tet_sf, const MeshShare &share,
+                        std::vector<std::array<PetscInt, 4>> *tets) {
+  PetscFunctionBeginUser;
+  PetscInt leaves;
+  PetscCall(PetscSFGetGraph(tet_sf, nullptr, &leaves, nullptr, nullptr));
+  tets->resize(leaves / 4);
+  PetscCall(FetchFromSlabs(tet_sf, MPIU_INT, 1, share.free_index.data(), tets->data()));
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 // PETSc numbers from the parts of this rank's graph rows: part by part, natural
-// order inside a part (ISPartitioningToNumbering). Sets vertex_start, and the
-// PETSc vertex of every free vertex (gathered to every rank while the rest of the
-// program reads the scene whole).
-PetscErrorCode NumberByPart(MPI_Comm comm, const std::vector<PetscInt> &part, DofLayout *layout) {
+// order inside a part (ISPartitioningToNumbering). Sets vertex_start; *numbers is
+// the PETSc vertex of each of this rank's rows (free indices).
+PetscErrorCode NumberByPart(MPI_Comm comm, const std::vector<PetscInt> &part, DofLayout *layout,
+                            IS *numbers) {
   PetscFunctionBeginUser;
-  IS parts, numbers;
+  IS parts;
   PetscCall(ISCreateGeneral(comm, static_cast<PetscInt>(part.size()), part.data(),
                             PETSC_USE_POINTER, &parts));
-  PetscCall(ISPartitioningToNumbering(parts, &numbers));
+  PetscCall(ISPartitioningToNumbering(parts, numbers));
   std::vector<PetscInt> counts(layout->size);
   PetscCall(ISPartitioningCount(parts, layout->size, counts.data()));
   layout->vertex_start.assign(layout->size + 1, 0);
   for (PetscMPIInt q = 0; q < layout->size; ++q)
     layout->vertex_start[q + 1] = layout->vertex_start[q] + counts[q];
-  const PetscInt *mine;
-  PetscCall(ISGetIndices(numbers, &mine));
-  std::vector<int> rows(layout->size), offsets(layout->size + 1, 0);
-  const int my_rows = static_cast<int>(part.size());
-  PetscCallMPI(MPI_Allgather(&my_rows, 1, MPI_INT, rows.data(), 1, MPI_INT, comm));
-  for (PetscMPIInt q = 0; q < layout->size; ++q) offsets[q + 1] = offsets[q] + rows[q];
-  layout->petsc_of_free.resize(layout->num_free());
-  PetscCallMPI(MPI_Allgatherv(mine, my_rows, MPIU_INT, layout->petsc_of_free.data(), rows.data(),
-                              offsets.data(), MPIU_INT, comm));
-  PetscCall(ISRestoreIndices(numbers, &mine));
-  PetscCall(ISDestroy(&numbers));
   PetscCall(ISDestroy(&parts));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. A star forest from the free vertices of the share's slab (leaves,
+// at their slab positions) to `key` of each (roots: `roots_here` consecutive
+// entries per rank).
+PetscErrorCode CreateFreeVertexSF(MPI_Comm comm, const MeshShare &share,
+                                  const std::vector<PetscInt> &key, PetscInt roots_here,
+                                  PetscSF *sf) {
+  PetscFunctionBeginUser;
+  std::vector<PetscInt> slab_position, remote;
+  for (PetscInt i = 0; i < share.slab_size(); ++i)
+    if (share.free_index[i] >= 0) {
+      slab_position.push_back(i);
+      remote.push_back(key[i]);
+    }
+  PetscLayout roots;
+  PetscCall(PetscLayoutCreate(comm, &roots));
+  PetscCall(PetscLayoutSetLocalSize(roots, roots_here));
+  PetscCall(PetscLayoutSetUp(roots));
+  PetscCall(PetscSFCreate(comm, sf));
+  PetscCall(PetscSFSetGraphLayout(*sf, roots, static_cast<PetscInt>(remote.size()),
+                                  slab_position.data(), PETSC_COPY_VALUES, remote.data()));
+  PetscCall(PetscLayoutDestroy(&roots));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. share->petsc_vertex from the numbering (distributed by free index,
+// like the graph rows), and layout->natural_of_owned from the slabs.
+PetscErrorCode SpreadNumbering(MPI_Comm comm, IS numbers, MeshShare *share, DofLayout *layout) {
+  PetscFunctionBeginUser;
+  PetscInt rows;
+  const PetscInt *petsc_of_row;
+  PetscCall(ISGetLocalSize(numbers, &rows));
+  PetscCall(ISGetIndices(numbers, &petsc_of_row));
+  PetscSF by_free, by_petsc;
+  PetscCall(CreateFreeVertexSF(comm, *share, share->free_index, rows, &by_free));
+  share->petsc_vertex.assign(share->slab_size(), -1);
+  PetscCall(
+      PetscSFBcastBegin(by_free, MPIU_INT, petsc_of_row, share->petsc_vertex.data(), MPI_REPLACE));
+  PetscCall(
+      PetscSFBcastEnd(by_free, MPIU_INT, petsc_of_row, share->petsc_vertex.data(), MPI_REPLACE));
+  PetscCall(ISRestoreIndices(numbers, &petsc_of_row));
+  PetscCall(PetscSFDestroy(&by_free));
+  std::vector<PetscInt> natural(share->slab_size());
+  std::iota(natural.begin(), natural.end(), share->first_vertex);
+  layout->natural_of_owned.assign(layout->local_count(), -1);
+  PetscCall(
+      CreateFreeVertexSF(comm, *share, share->petsc_vertex, layout->local_count(), &by_petsc));
+  PetscCall(PetscSFReduceBegin(by_petsc, MPIU_INT, natural.data(), layout->natural_of_owned.data(),
+                               MPI_REPLACE));
+  PetscCall(PetscSFReduceEnd(by_petsc, MPIU_INT, natural.data(), layout->natural_of_owned.data(),
+                             MPI_REPLACE));
+  PetscCall(PetscSFDestroy(&by_petsc));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. Appends to *all every rank's `mine`, in rank order.
+PetscErrorCode AllGather(MPI_Comm comm, const std::vector<PetscInt> &mine,
+                         std::vector<PetscInt> *all) {
+  PetscFunctionBeginUser;
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  std::vector<int> counts(size), offsets(size + 1, 0);
+  const int count = static_cast<int>(mine.size());
+  PetscCallMPI(MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm));
+  for (PetscMPIInt q = 0; q < size; ++q) offsets[q + 1] = offsets[q] + counts[q];
+  all->resize(offsets[size]);
+  PetscCallMPI(MPI_Allgatherv(mine.data(), count, MPIU_INT, all->data(), counts.data(),
+                              offsets.data(), MPIU_INT, comm));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. The replicated numbering arrays (free_of_natural, natural_of_free,
+// petsc_of_free, O(N) on every rank) gathered from the slabs: contact and output
+// still read them (docs/design/scale-out.md).
+PetscErrorCode ReplicateNumbering(MPI_Comm comm, const MeshShare &share, DofLayout *layout) {
+  PetscFunctionBeginUser;
+  std::vector<PetscInt> naturals, petsc;
+  for (PetscInt i = 0; i < share.slab_size(); ++i)
+    if (share.free_index[i] >= 0) {
+      naturals.push_back(share.first_vertex + i);
+      petsc.push_back(share.petsc_vertex[i]);
+    }
+  PetscCall(AllGather(comm, naturals, &layout->natural_of_free));
+  PetscCall(AllGather(comm, petsc, &layout->petsc_of_free));
+  layout->free_of_natural.assign(share.num_vertices, -1);
+  for (PetscInt f = 0; f < layout->num_free(); ++f)
+    layout->free_of_natural[layout->natural_of_free[f]] = f;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 }  // namespace
 
-PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, const PartitionOptions &options,
+PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, MeshShare *share,
                               DofLayout *layout) {
   PetscFunctionBeginUser;
   PetscCallMPI(MPI_Comm_rank(comm, &layout->rank));
   PetscCallMPI(MPI_Comm_size(comm, &layout->size));
-  NumberFreeVertices(scene, layout);
+  PetscSF tet_sf;
+  PetscCall(CreateSlabSF(comm, *share, FreeTetVertices(*share), &tet_sf));
+  PetscInt num_free;
+  PetscCall(NumberFreeVertices(comm, tet_sf, share, &num_free));
   VertexGraphRows graph;
-  PetscCall(BuildVertexGraphRows(comm, scene, layout->free_of_natural, layout->num_free(), &graph));
+  {
+    std::vector<std::array<PetscInt, 4>> free_tets;
+    PetscCall(FreeTets(tet_sf, *share, &free_tets));
+    PetscCall(BuildVertexGraphRows(comm, free_tets, num_free, &graph));
+  }
+  PetscCall(PetscSFDestroy(&tet_sf));
   std::vector<PetscInt> part;
   PetscCall(PartitionVertexGraph(comm, &graph, options.partitioner, &part, &layout->partitioner));
   graph = VertexGraphRows();
-  PetscCall(NumberByPart(comm, part, layout));
-  layout->natural_of_owned.resize(layout->local_count());
-  for (PetscInt f = 0; f < layout->num_free(); ++f) {
-    const PetscInt local = layout->LocalOfFree(f);
-    if (local >= 0) layout->natural_of_owned[local] = layout->natural_of_free[f];
-  }
+  IS numbers;
+  PetscCall(NumberByPart(comm, part, layout, &numbers));
+  PetscCall(SpreadNumbering(comm, numbers, share, layout));
+  PetscCall(ISDestroy(&numbers));
+  PetscCall(ReplicateNumbering(comm, *share, layout));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+int32_t BodyOfNatural(const Scene &scene, PetscInt natural) {
+  const auto after = std::upper_bound(
+      scene.bodies.begin(), scene.bodies.end(), natural,
+      [](PetscInt v, const Body &body) { return v < static_cast<PetscInt>(body.first_vertex); });
+  return static_cast<int32_t>(after - scene.bodies.begin()) - 1;
+}
+
 std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout) {
-  std::vector<int32_t> body_of_natural(scene.num_vertices());
-  for (size_t b = 0; b < scene.bodies.size(); ++b)
-    std::fill_n(body_of_natural.begin() + scene.bodies[b].first_vertex,
-                scene.bodies[b].mesh.num_vertices(), static_cast<int32_t>(b));
   std::vector<int32_t> owned(layout.local_count());
-  for (PetscInt f = 0; f < layout.num_free(); ++f) {
-    const PetscInt local = layout.LocalOfFree(f);
-    if (local >= 0) owned[local] = body_of_natural[layout.natural_of_free[f]];
-  }
+  for (PetscInt i = 0; i < layout.local_count(); ++i)
+    owned[i] = BodyOfNatural(scene, layout.natural_of_owned[i]);
   return owned;
 }
 

@@ -15,6 +15,7 @@
 
 #include <vector>
 
+#include "fem/mesh_share.hpp"
 #include "fem/vertex_graph.hpp"
 #include "io/scene.hpp"
 
@@ -31,17 +32,20 @@ PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options)
 const char *PartitionerName(Partitioner partitioner);
 
 struct DofLayout {
+  std::vector<PetscInt> vertex_start;  // size ranks + 1: ownership of PETSc vertices
+  // This rank's share (O(local), what scalable code uses): the natural vertex of
+  // each owned PETSc vertex, in PETSc order.
+  std::vector<PetscInt> natural_of_owned;
+  // Replicated (O(N) on every rank), gathered for contact and output, which still
+  // read them (docs/design/scale-out.md); new code uses natural_of_owned or a
+  // MeshShare lookup (mesh_share.hpp).
   std::vector<PetscInt> free_of_natural;  // natural vertex -> free index, or -1
   std::vector<PetscInt> natural_of_free;  // free index -> natural vertex
   std::vector<PetscInt> petsc_of_free;    // free index -> PETSc vertex
-  std::vector<PetscInt> vertex_start;     // size ranks + 1: ownership of PETSc vertices
-  // This rank's share only (O(local), what scalable code should use): the natural
-  // vertex of each owned PETSc vertex, in PETSc order.
-  std::vector<PetscInt> natural_of_owned;
   PetscMPIInt rank = 0, size = 1;
   Partitioner partitioner = Partitioner::kAuto;  // the one that ran (kAuto: one rank, none)
 
-  PetscInt num_free() const { return static_cast<PetscInt>(natural_of_free.size()); }
+  PetscInt num_free() const { return vertex_start.back(); }
   PetscInt local_begin() const { return vertex_start[rank]; }
   PetscInt local_count() const { return vertex_start[rank + 1] - vertex_start[rank]; }
   bool OwnsPetscVertex(PetscInt petsc) const {
@@ -67,10 +71,15 @@ struct DofLayout {
   }
 };
 
-// Collective. Partitions the free-vertex graph (vertex_graph.hpp) and numbers the
-// free vertices part by part (PETSc's ISPartitioningToNumbering).
-PetscErrorCode BuildDofLayout(MPI_Comm comm, const Scene &scene, const PartitionOptions &options,
+// Collective. Numbers the free vertices (the vertices of the share's tets) in
+// natural order, partitions their graph (vertex_graph.hpp) from the share's tets
+// and numbers them part by part (PETSc's ISPartitioningToNumbering). Fills
+// share->free_index and share->petsc_vertex for the slab, and the layout.
+PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, MeshShare *share,
                               DofLayout *layout);
+
+// Not collective. The body of a natural vertex (the last body starting at or before it).
+int32_t BodyOfNatural(const Scene &scene, PetscInt natural);
 
 // Not collective. The body of each vertex this rank owns, in PETSc order.
 std::vector<int32_t> OwnedVertexBodies(const Scene &scene, const DofLayout &layout);
@@ -83,13 +92,15 @@ struct MotionSources {
   std::vector<bool> deformed;  // per body: named by a -deform
 };
 
-// Not collective. Bodies that nothing can set in motion become immobile like
-// fixed ones (body.fixed = body.at_rest = true), so they add no unknowns: a body
-// that is not fixed, all of whose initial velocities are zero, that no -deform
-// names, in a scene without gravity, ground or constraints in which every other
-// free body is just as still (a moving body could hit it), and whose bounding
-// box meets no other body's (contact would push overlapping bodies apart).
-// Returns how many bodies were marked.
-int MarkBodiesAtRest(const MotionSources &sources, Scene *scene);
+// Collective. Bodies that nothing can set in motion become immobile like fixed
+// ones (body.fixed = body.at_rest = true, and in share->body_fixed), so they add
+// no unknowns: a body that is not fixed, all of whose initial velocities are
+// zero, that no -deform names, in a scene without gravity, ground or constraints
+// in which every other free body is just as still (a moving body could hit it),
+// and whose bounding box meets no other body's (contact would push overlapping
+// bodies apart). Boxes and velocities come from the slabs (reductions). Sets
+// *marked to how many bodies were marked.
+PetscErrorCode MarkBodiesAtRest(MPI_Comm comm, const MotionSources &sources, Scene *scene,
+                                MeshShare *share, int *marked);
 
 }  // namespace softbody

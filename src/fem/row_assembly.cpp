@@ -59,28 +59,24 @@ RowAssembler::Element RowAssembler::MakeElement(const TetPositions &X, int32_t m
 }
 
 void RowAssembler::CollectElements(const Scene &scene, const DofLayout &layout,
-                                   std::vector<std::array<PetscInt, 4>> *vertices) {
+                                   const LocalTets &tets) {
   elements_.clear();
   lame_.clear();
-  for (const Body &body : scene.bodies) {
-    if (body.fixed) continue;
-    const int32_t material = static_cast<int32_t>(lame_.size());
-    lame_.push_back(LameFromYoungPoisson(body.material.young, body.material.poisson));
-    for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
-      std::array<PetscInt, 4> p;
-      uint32_t owned = 0;
-      for (int a = 0; a < 4; ++a) {
-        p[a] = layout.PetscVertexOfNatural(body.first_vertex + body.mesh.tets(t, a));
-        if (layout.OwnsPetscVertex(p[a])) owned |= 1u << a;
-      }
-      if (!owned) continue;
-      if (layout.OwnsPetscVertex(*std::min_element(p.begin(), p.end())))
-        owned |= 1u << kEnergyCountsHereBit;
-      TetPositions X;
-      for (int a = 0; a < 4; ++a) X.row(a) = body.mesh.vertices.row(body.mesh.tets(t, a));
-      elements_.push_back(MakeElement(X, material, owned));
-      vertices->push_back(p);
-    }
+  std::vector<int32_t> material_of_body(scene.bodies.size(), -1);
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    if (scene.bodies[b].fixed) continue;
+    material_of_body[b] = static_cast<int32_t>(lame_.size());
+    lame_.push_back(
+        LameFromYoungPoisson(scene.bodies[b].material.young, scene.bodies[b].material.poisson));
+  }
+  for (size_t t = 0; t < tets.size(); ++t) {
+    const std::array<PetscInt, 4> &p = tets.vertices[t];
+    uint32_t owned = 0;
+    for (int a = 0; a < 4; ++a)
+      if (layout.OwnsPetscVertex(p[a])) owned |= 1u << a;
+    if (layout.OwnsPetscVertex(*std::min_element(p.begin(), p.end())))
+      owned |= 1u << kEnergyCountsHereBit;
+    elements_.push_back(MakeElement(tets.rest[t], material_of_body[tets.body[t]], owned));
   }
 }
 
@@ -122,15 +118,14 @@ PetscErrorCode RowAssembler::GatherHalo(Vec x) {
 }
 
 PetscErrorCode RowAssembler::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                                   double shear_scale, Vec rest_positions) {
+                                   LocalTets tets, double shear_scale, Vec rest_positions) {
   PetscFunctionBeginUser;
   comm_ = comm;
   shear_scale_ = shear_scale;
   begin_ = layout.local_begin();
   count_ = layout.local_count();
-  std::vector<std::array<PetscInt, 4>> vertices;  // PETSc vertex indices per element
-  CollectElements(scene, layout, &vertices);
-  PetscCall(IndexHalo(vertices));
+  CollectElements(scene, layout, tets);
+  PetscCall(IndexHalo(tets.vertices));
   PetscCall(CreateHaloScatter(rest_positions));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

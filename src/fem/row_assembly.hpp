@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "fem/element.hpp"
+#include "fem/migration.hpp"
 #include "fem/partition.hpp"
 #include "io/scene.hpp"
 
@@ -39,10 +40,12 @@ class RowAssembler {
   RowAssembler &operator=(const RowAssembler &) = delete;
   ~RowAssembler();
 
-  // Collective. The elements of the free bodies that touch a vertex this rank
-  // owns, their rest data and the gather plan for their vertices. rest_positions
-  // is a PETSc-ordered DOF vector (block size 3).
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+  // Collective. The elements of `tets` (MigrateTets: the free tets that touch a
+  // vertex this rank owns; taken by value, so a caller that moves them in frees
+  // them here) with their bodies' materials, their rest data and the gather plan
+  // for their vertices. rest_positions is a PETSc-ordered DOF vector
+  // (block size 3).
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, LocalTets tets,
                        double shear_scale, Vec rest_positions);
 
   // How PETSc multiplies with the matrix: its default "inode" kernel, or the
@@ -149,8 +152,7 @@ class RowAssembler {
   // Setup's steps: the elements touching an owned vertex (and their PETSc
   // vertices), the halo indices of those vertices, the gather plan.
   static Element MakeElement(const TetPositions &X, int32_t material, uint32_t owned);
-  void CollectElements(const Scene &scene, const DofLayout &layout,
-                       std::vector<std::array<PetscInt, 4>> *vertices);
+  void CollectElements(const Scene &scene, const DofLayout &layout, const LocalTets &tets);
   PetscErrorCode IndexHalo(const std::vector<std::array<PetscInt, 4>> &vertices);
   PetscErrorCode CreateHaloScatter(Vec rest_positions);
   PetscErrorCode GatherHalo(Vec x);  // x_halo_ = the halo vertices' entries of x

@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <cstdlib>
 
+#include "common/exchange.hpp"
+
 namespace softbody {
 
 namespace {
@@ -33,32 +35,14 @@ void SortUnique(std::vector<uint64_t> *edges) {
   edges->erase(std::unique(edges->begin(), edges->end()), edges->end());
 }
 
-// The edges of this rank's even share of the free bodies' tets (free bodies in
-// scene order, their tets in file order), each in both directions, without repeats.
-std::vector<uint64_t> EdgesOfTetShare(const Scene &scene,
-                                      const std::vector<PetscInt> &free_of_natural,
-                                      PetscMPIInt rank, PetscMPIInt size) {
-  int64_t free_tets = 0;
-  for (const Body &body : scene.bodies)
-    if (!body.fixed) free_tets += body.mesh.num_tets();
-  const int64_t begin = EvenShareBegin(free_tets, size, rank);
-  const int64_t end = EvenShareBegin(free_tets, size, rank + 1);
+// The edges of `tets` (free indices), each in both directions, without repeats.
+std::vector<uint64_t> EdgesOfTets(const std::vector<std::array<PetscInt, 4>> &tets) {
   std::vector<uint64_t> edges;
-  edges.reserve(12 * (end - begin));
-  int64_t first = 0;  // index of the body's tet 0 among the free tets
-  for (const Body &body : scene.bodies) {
-    if (body.fixed) continue;
-    const int64_t last = first + body.mesh.num_tets();
-    for (int64_t t = std::max(begin, first); t < std::min(end, last); ++t) {
-      PetscInt v[4];
-      for (int a = 0; a < 4; ++a)
-        v[a] = free_of_natural[body.first_vertex + body.mesh.tets(t - first, a)];
-      for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b)
-          if (a != b) edges.push_back(PackEdge(v[a], v[b]));
-    }
-    first = last;
-  }
+  edges.reserve(12 * tets.size());
+  for (const std::array<PetscInt, 4> &v : tets)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        if (a != b) edges.push_back(PackEdge(v[a], v[b]));
   SortUnique(&edges);
   return edges;
 }
@@ -68,41 +52,25 @@ std::vector<uint64_t> EdgesOfTetShare(const Scene &scene,
 PetscErrorCode SendEdgesToRows(MPI_Comm comm, PetscInt n, PetscMPIInt size,
                                const std::vector<uint64_t> &edges, std::vector<uint64_t> *mine) {
   PetscFunctionBeginUser;
-  std::vector<int> send_counts(size, 0), receive_counts(size), send_offsets(size + 1, 0),
-      receive_offsets(size + 1, 0);
+  std::vector<int> send_counts(size, 0);
   size_t e = 0;
   for (PetscMPIInt q = 0; q < size; ++q) {
     const size_t run_begin = e;
     while (e < edges.size() && EdgeRow(edges[e]) < EvenShareBegin(n, size, q + 1)) ++e;
-    PetscCheck(e - run_begin <= INT_MAX, comm, PETSC_ERR_SUP,
+    PetscCheck(e - run_begin <= INT_MAX, PETSC_COMM_SELF, PETSC_ERR_SUP,
                "the vertex graph has more edges for one rank than MPI can send at once: "
                "run on more ranks");
     send_counts[q] = static_cast<int>(e - run_begin);
-    send_offsets[q + 1] = static_cast<int>(e);
   }
-  PetscCallMPI(
-      MPI_Alltoall(send_counts.data(), 1, MPI_INT, receive_counts.data(), 1, MPI_INT, comm));
-  int64_t total = 0;
-  for (PetscMPIInt q = 0; q < size; ++q) {
-    total += receive_counts[q];
-    PetscCheck(total <= INT_MAX, comm, PETSC_ERR_SUP,
-               "the vertex graph has more edges for one rank than MPI can receive at once: "
-               "run on more ranks");
-    receive_offsets[q + 1] = static_cast<int>(total);
-  }
-  mine->resize(total);
-  PetscCallMPI(MPI_Alltoallv(edges.data(), send_counts.data(), send_offsets.data(), MPI_UINT64_T,
-                             mine->data(), receive_counts.data(), receive_offsets.data(),
-                             MPI_UINT64_T, comm));
+  PetscCall(ExchangeRecords(comm, edges, send_counts, mine));
   SortUnique(mine);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 }  // namespace
 
-PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const Scene &scene,
-                                    const std::vector<PetscInt> &free_of_natural, PetscInt num_free,
-                                    VertexGraphRows *graph) {
+PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const std::vector<std::array<PetscInt, 4>> &tets,
+                                    PetscInt num_free, VertexGraphRows *graph) {
   PetscFunctionBeginUser;
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
@@ -112,8 +80,7 @@ PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const Scene &scene,
   graph->row_begin = EvenShareBegin(n, size, rank);
   const PetscInt rows = EvenShareBegin(n, size, rank + 1) - graph->row_begin;
   std::vector<uint64_t> edges;
-  PetscCall(
-      SendEdgesToRows(comm, n, size, EdgesOfTetShare(scene, free_of_natural, rank, size), &edges));
+  PetscCall(SendEdgesToRows(comm, n, size, EdgesOfTets(tets), &edges));
   graph->offsets.assign(rows + 1, 0);
   graph->neighbours.resize(edges.size());
   for (size_t e = 0; e < edges.size(); ++e) {

@@ -11,10 +11,10 @@
 
 #include <petscsys.h>
 
+#include <array>
 #include <vector>
 
 #include "common/even_share.hpp"
-#include "io/scene.hpp"
 
 namespace softbody {
 
@@ -27,11 +27,11 @@ struct VertexGraphRows {
   PetscInt num_rows() const { return static_cast<PetscInt>(offsets.size()) - 1; }
 };
 
-// Collective. The rows of this rank's even share of the n = `num_free` free vertices.
-// `free_of_natural`: natural vertex -> free index, -1 for vertices of fixed bodies.
-PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const Scene &scene,
-                                    const std::vector<PetscInt> &free_of_natural, PetscInt num_free,
-                                    VertexGraphRows *graph);
+// Collective. The rows of this rank's even share of the n = `num_free` free vertices,
+// from `tets` (free indices of their vertices): this rank's share of the free tets;
+// together the ranks' tets are every free tet.
+PetscErrorCode BuildVertexGraphRows(MPI_Comm comm, const std::vector<std::array<PetscInt, 4>> &tets,
+                                    PetscInt num_free, VertexGraphRows *graph);
 
 // Which partitioner splits the graph.
 enum class Partitioner {

@@ -140,9 +140,9 @@ PetscErrorCode BodyMismatch(MPI_Comm comm, hid_t file, const Scene &scene,
   if (!read) *why = "it has no readable /mesh group";
   for (size_t b = 0; why->empty() && b < bodies; ++b) {
     const Body &body = scene.bodies[b];
-    if (counts[b] != body.mesh.num_vertices())
+    if (counts[b] != body.num_vertices())
       *why = "body " + std::to_string(b) + " has " + std::to_string(counts[b]) +
-             " vertices there, " + std::to_string(body.mesh.num_vertices()) + " in the scene";
+             " vertices there, " + std::to_string(body.num_vertices()) + " in the scene";
     else if (body_fixed[b] != (body.fixed ? 1 : 0))
       *why = "body " + std::to_string(b) + " is " + (body_fixed[b] ? "fixed" : "free") +
              " there, " + (body.fixed ? "fixed" : "free") + " in the scene";
@@ -151,8 +151,9 @@ PetscErrorCode BodyMismatch(MPI_Comm comm, hid_t file, const Scene &scene,
 }
 
 // Collective. Why the tets and rest positions of the result file differ from
-// the scene's ("" when they do not), each rank comparing its slabs.
-PetscErrorCode GeometryMismatch(MPI_Comm comm, hid_t file, const Scene &scene, std::string *why) {
+// the scene's ("" when they do not), each rank comparing its slabs with its share.
+PetscErrorCode GeometryMismatch(MPI_Comm comm, hid_t file, const Scene &scene,
+                                const MeshShare &share, std::string *why) {
   PetscFunctionBeginUser;
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
@@ -165,7 +166,7 @@ PetscErrorCode GeometryMismatch(MPI_Comm comm, hid_t file, const Scene &scene, s
   } else {
     std::vector<int32_t> file_tets;
     differ = !ReadSlab(file, "/mesh/tets", H5T_NATIVE_INT32, tets, 4, &file_tets) ||
-             file_tets != SlabTets(scene, tets);
+             file_tets != ShareTetRows(share);
   }
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &differ, 1, MPI_INT, MPI_LOR, comm));
   if (differ) {
@@ -174,7 +175,7 @@ PetscErrorCode GeometryMismatch(MPI_Comm comm, hid_t file, const Scene &scene, s
   }
   std::vector<double> rest;
   int read = ReadSlab(file, "/mesh/rest_positions", H5T_NATIVE_DOUBLE, vertices, 3, &rest);
-  const std::vector<double> scene_rest = SlabRestPositions(scene, vertices);
+  const double *scene_rest = share.rest.data();
   double largest = 0;
   for (size_t i = 0; read && i < rest.size(); ++i)
     largest = std::max(largest, std::abs(rest[i] - scene_rest[i]));
@@ -191,7 +192,8 @@ PetscErrorCode GeometryMismatch(MPI_Comm comm, hid_t file, const Scene &scene, s
 }
 
 // Collective. Why the result file does not match the scene ("" when it does).
-PetscErrorCode SceneMismatch(MPI_Comm comm, hid_t file, const Scene &scene, std::string *why) {
+PetscErrorCode SceneMismatch(MPI_Comm comm, hid_t file, const Scene &scene, const MeshShare &share,
+                             std::string *why) {
   PetscFunctionBeginUser;
   std::vector<int32_t> body_fixed;
   std::vector<double> materials;
@@ -208,7 +210,7 @@ PetscErrorCode SceneMismatch(MPI_Comm comm, hid_t file, const Scene &scene, std:
     PetscFunctionReturn(PETSC_SUCCESS);
   }
   PetscCall(BodyMismatch(comm, file, scene, body_fixed, why));
-  if (why->empty()) PetscCall(GeometryMismatch(comm, file, scene, why));
+  if (why->empty()) PetscCall(GeometryMismatch(comm, file, scene, share, why));
   if (why->empty() && ReadArray(file, "/mesh/body_material", H5T_NATIVE_DOUBLE, &materials) &&
       materials.size() == 3 * bodies)
     for (size_t b = 0; why->empty() && b < bodies; ++b) {
@@ -283,8 +285,9 @@ namespace {
 // checking it against the scene: the loop state and this rank's slabs of the
 // natural vectors. "" or why not (equal on every rank).
 PetscErrorCode ReadNewestCheckpoint(MPI_Comm comm, hid_t file, const std::string &path,
-                                    const Scene &scene, RowSlab slab, Vec natural_x, Vec natural_v,
-                                    LoopState *state, std::string *why) {
+                                    const Scene &scene, const MeshShare &share, RowSlab slab,
+                                    Vec natural_x, Vec natural_v, LoopState *state,
+                                    std::string *why) {
   PetscFunctionBeginUser;
   int64_t step;
   const int slot = file < 0 ? -1 : NewestSlot(file, &step);
@@ -293,7 +296,7 @@ PetscErrorCode ReadNewestCheckpoint(MPI_Comm comm, hid_t file, const std::string
     PetscFunctionReturn(PETSC_SUCCESS);
   }
   std::string mismatch;
-  PetscCall(SceneMismatch(comm, file, scene, &mismatch));
+  PetscCall(SceneMismatch(comm, file, scene, share, &mismatch));
   if (!mismatch.empty()) {
     *why = "option -restart: " + Quoted(path) + " does not match the scene: " + mismatch;
     PetscFunctionReturn(PETSC_SUCCESS);
@@ -311,19 +314,19 @@ PetscErrorCode ReadNewestCheckpoint(MPI_Comm comm, hid_t file, const std::string
 }  // namespace
 
 PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, const Scene &scene,
-                              const DofLayout &layout, size_t deformations, PetscInt steps, Vec x,
-                              Vec v, LoopState *state) {
+                              const MeshShare &share, const DofLayout &layout, size_t deformations,
+                              PetscInt steps, Vec x, Vec v, LoopState *state) {
   PetscFunctionBeginUser;
   NaturalSlab natural;
-  PetscCall(natural.Setup(scene, layout, x));
+  PetscCall(natural.Setup(share, layout, x));
   Vec natural_x, natural_v;
   PetscCall(natural.CreateVector(false, &natural_x));
   PetscCall(natural.CreateVector(false, &natural_v));
   H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // we report failures ourselves
   const hid_t file = OpenParallelFile(comm, path, false);
   std::string why;
-  PetscCall(ReadNewestCheckpoint(comm, file, path, scene, natural.vertices(), natural_x, natural_v,
-                                 state, &why));
+  PetscCall(ReadNewestCheckpoint(comm, file, path, scene, share, natural.vertices(), natural_x,
+                                 natural_v, state, &why));
   if (file >= 0) H5Fclose(file);
   if (why.empty() && state->deformations_applied.size() != deformations)
     why = "option -restart: " + Quoted(path) + " was written with " +

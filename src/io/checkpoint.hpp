@@ -74,12 +74,12 @@ struct LoopState {
 PetscErrorCode CheckRestartFile(MPI_Comm comm, const std::string &path);
 
 // Collective. Reads the newest checkpoint of `path` (every rank its slab),
-// checks it against the scene, the number of -deform events and -steps, and
-// sets the PETSc-ordered positions x and velocities v. Every rank reads the
-// whole LoopState. On failure, every rank fails with one message.
+// checks it against the scene (and this rank's share of its meshes), the number of -deform events
+// and -steps, and sets the PETSc-ordered positions x and velocities v. Every rank reads the whole
+// LoopState. On failure, every rank fails with one message.
 PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, const Scene &scene,
-                              const DofLayout &layout, size_t deformations, PetscInt steps, Vec x,
-                              Vec v, LoopState *state);
+                              const MeshShare &share, const DofLayout &layout, size_t deformations,
+                              PetscInt steps, Vec x, Vec v, LoopState *state);
 
 // Collective. Writes `state` with x and v (PETSc order) and the time scheme's
 // history (may be null) into the writer's file, in the slot not holding the

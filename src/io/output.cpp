@@ -7,6 +7,7 @@
 #include <string_view>
 
 #include "common/options.hpp"
+#include "fem/share_boundary.hpp"
 #include "io/hdf5_io.hpp"
 #include "io/parallel_hdf5.hpp"
 
@@ -116,20 +117,10 @@ template <typename Visit>
 void ForEachBodyVertices(const Scene &scene, RowSlab slab, Visit visit) {
   ForEachBodyPart(
       scene, slab, [&](size_t b) { return hsize_t(scene.bodies[b].first_vertex); },
-      [&](size_t b) { return hsize_t(scene.bodies[b].mesh.num_vertices()); }, visit);
+      [&](size_t b) { return hsize_t(scene.bodies[b].num_vertices()); }, visit);
 }
 
 }  // namespace
-
-std::vector<double> SlabRestPositions(const Scene &scene, RowSlab vertices) {
-  std::vector<double> rest;
-  rest.reserve(3 * vertices.count());
-  ForEachBodyVertices(scene, vertices, [&](const Body &body, size_t, hsize_t from, hsize_t to) {
-    for (hsize_t v = from; v < to; ++v)
-      for (int c = 0; c < 3; ++c) rest.push_back(body.mesh.vertices(v, c));
-  });
-  return rest;
-}
 
 std::vector<int32_t> SlabVertexBodies(const Scene &scene, RowSlab vertices) {
   std::vector<int32_t> bodies;
@@ -140,20 +131,11 @@ std::vector<int32_t> SlabVertexBodies(const Scene &scene, RowSlab vertices) {
   return bodies;
 }
 
-std::vector<int32_t> SlabTets(const Scene &scene, RowSlab tets) {
-  std::vector<hsize_t> first_tet(scene.bodies.size() + 1, 0);
-  for (size_t b = 0; b < scene.bodies.size(); ++b)
-    first_tet[b + 1] = first_tet[b] + scene.bodies[b].mesh.num_tets();
-  std::vector<int32_t> corners;
-  corners.reserve(4 * tets.count());
-  ForEachBodyPart(
-      scene, tets, [&](size_t b) { return first_tet[b]; },
-      [&](size_t b) { return first_tet[b + 1] - first_tet[b]; },
-      [&](const Body &body, size_t, hsize_t from, hsize_t to) {
-        for (hsize_t t = from; t < to; ++t)
-          for (int a = 0; a < 4; ++a) corners.push_back(body.first_vertex + body.mesh.tets(t, a));
-      });
-  return corners;
+std::vector<int32_t> ShareTetRows(const MeshShare &share) {
+  std::vector<int32_t> rows;
+  rows.reserve(4 * share.tets.size());
+  for (const auto &tet : share.tets) rows.insert(rows.end(), tet.begin(), tet.end());
+  return rows;
 }
 
 NaturalSlab::~NaturalSlab() {
@@ -161,14 +143,18 @@ NaturalSlab::~NaturalSlab() {
   VecDestroy(&natural_template_);
 }
 
-PetscErrorCode NaturalSlab::Setup(const Scene &scene, const DofLayout &layout, Vec like) {
+PetscErrorCode NaturalSlab::Setup(const MeshShare &share, const DofLayout &layout, Vec like) {
   PetscFunctionBeginUser;
-  scene_ = &scene;
+  num_vertices_ = static_cast<int32_t>(share.num_vertices);
   MPI_Comm comm = PetscObjectComm((PetscObject)like);
-  slab_ = EvenSlab(static_cast<hsize_t>(scene.num_vertices()), layout.rank, layout.size);
+  slab_ = EvenSlab(static_cast<hsize_t>(num_vertices_), layout.rank, layout.size);
+  PetscCheck(slab_.begin == static_cast<hsize_t>(share.first_vertex) &&
+                 slab_.count() == static_cast<hsize_t>(share.slab_size()),
+             PETSC_COMM_SELF, PETSC_ERR_PLIB, "the mesh share is not this rank's file slab");
+  rest_.assign(share.rest.data(), share.rest.data() + share.rest.size());
   PetscCall(VecCreate(comm, &natural_template_));
   PetscCall(VecSetSizes(natural_template_, 3 * static_cast<PetscInt>(slab_.count()),
-                        3 * static_cast<PetscInt>(scene.num_vertices())));
+                        3 * static_cast<PetscInt>(num_vertices_)));
   PetscCall(VecSetBlockSize(natural_template_, 3));
   PetscCall(VecSetType(natural_template_, VECMPI));
   // Each rank sends its owned vertices (PETSc block local_begin + i) to their
@@ -191,10 +177,9 @@ PetscErrorCode NaturalSlab::CreateVector(bool rest, Vec *natural) const {
   PetscCall(VecDuplicate(natural_template_, natural));
   PetscCall(VecZeroEntries(*natural));
   if (rest && slab_.count() > 0) {
-    const std::vector<double> positions = SlabRestPositions(*scene_, slab_);
     PetscScalar *x;
     PetscCall(VecGetArray(*natural, &x));
-    std::copy(positions.begin(), positions.end(), x);
+    std::copy(rest_.begin(), rest_.end(), x);
     PetscCall(VecRestoreArray(*natural, &x));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -242,19 +227,17 @@ bool WriteSlabDataset(hid_t location, const char *name, hid_t type, hsize_t rows
   return ok;
 }
 
-// Not collective. The boundary triangles (3 natural vertices per row, each
-// body's as BoundaryTriangles orders them) of bodies [bodies.begin, bodies.end).
-// Each body's boundary needs its whole mesh: the bodies are split between the
-// ranks, not the triangles.
-std::vector<int32_t> BodiesBoundaryTriangles(const Scene &scene, RowSlab bodies) {
-  std::vector<int32_t> triangles;
-  for (hsize_t b = bodies.begin; b < bodies.end; ++b) {
-    const Body &body = scene.bodies[b];
-    const auto boundary = BoundaryTriangles(body.mesh);
-    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-      for (int a = 0; a < 3; ++a) triangles.push_back(body.first_vertex + boundary(f, a));
-  }
-  return triangles;
+// Collective. This rank's rows of /mesh/boundary_triangles (3 natural vertices
+// per row, each body's rows as BoundaryTriangles orders them; ShareBoundaryTriangles).
+PetscErrorCode BoundaryRows(MPI_Comm comm, const MeshShare &share, std::vector<int32_t> *rows) {
+  PetscFunctionBeginUser;
+  std::vector<std::array<PetscInt, 3>> triangles;
+  PetscCall(ShareBoundaryTriangles(comm, share, &triangles));
+  rows->clear();
+  rows->reserve(3 * triangles.size());
+  for (const auto &triangle : triangles)
+    rows->insert(rows->end(), triangle.begin(), triangle.end());
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 // Collective. Rows [begin, end) of /mesh/boundary_triangles that `local` rows
@@ -276,15 +259,20 @@ PetscErrorCode RowsInRankOrder(MPI_Comm comm, hsize_t local, RowSlab *rows, hsiz
 }  // namespace
 
 // Collective. The static mesh datasets under /mesh, every rank its slabs.
-PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, bool *written) {
+PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, const MeshShare &share, bool *written) {
   PetscFunctionBeginUser;
-  const hid_t group = H5Gcreate2(file_, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   const RowSlab vertices = natural_.vertices();
   const RowSlab tets = EvenSlab(static_cast<hsize_t>(num_tets_), rank_, size_);
+  PetscCheck(tets.begin == static_cast<hsize_t>(share.first_tet) &&
+                 tets.count() == static_cast<hsize_t>(share.num_tets()) &&
+                 vertices.begin == static_cast<hsize_t>(share.first_vertex) &&
+                 vertices.count() == static_cast<hsize_t>(share.slab_size()),
+             PETSC_COMM_SELF, PETSC_ERR_PLIB, "the mesh share is not this rank's file slab");
   const hsize_t V = static_cast<hsize_t>(num_vertices_), T = static_cast<hsize_t>(num_tets_);
   const hsize_t bodies = scene.bodies.size();
-  const std::vector<int32_t> triangles =
-      BodiesBoundaryTriangles(scene, EvenSlab(bodies, rank_, size_));
+  std::vector<int32_t> triangles;
+  PetscCall(BoundaryRows(comm_, share, &triangles));
+  const hid_t group = H5Gcreate2(file_, "/mesh", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   hsize_t B = 0;
   RowSlab triangle_rows;
   PetscCall(RowsInRankOrder(comm_, triangles.size() / 3, &triangle_rows, &B));
@@ -299,13 +287,13 @@ PetscErrorCode ResultWriter::WriteMesh(const Scene &scene, bool *written) {
   }
   bool ok = group >= 0;
   ok = ok &&
-       WriteSlabDataset(group, "tets", H5T_NATIVE_INT32, T, 4, tets, SlabTets(scene, tets).data());
+       WriteSlabDataset(group, "tets", H5T_NATIVE_INT32, T, 4, tets, ShareTetRows(share).data());
   ok = ok && WriteSlabDataset(group, "boundary_triangles", H5T_NATIVE_INT32, B, 3, triangle_rows,
                               triangles.data());
   ok = ok && WriteSlabDataset(group, "vertex_body", H5T_NATIVE_INT32, V, 0, vertices,
                               SlabVertexBodies(scene, vertices).data());
   ok = ok && WriteSlabDataset(group, "rest_positions", H5T_NATIVE_DOUBLE, V, 3, vertices,
-                              SlabRestPositions(scene, vertices).data());
+                              share.rest.data());
   ok = ok && WriteSlabDataset(group, "body_fixed", H5T_NATIVE_INT32, bodies, 0, body_rows,
                               body_fixed.data());
   ok = ok && WriteSlabDataset(group, "body_material", H5T_NATIVE_DOUBLE, bodies, 3, body_rows,
@@ -324,7 +312,7 @@ ResultWriter::~ResultWriter() {
 }
 
 // Collective. A new file with the mesh and the empty series.
-PetscErrorCode ResultWriter::CreateFile(const Scene &scene, bool *created) {
+PetscErrorCode ResultWriter::CreateFile(const Scene &scene, const MeshShare &share, bool *created) {
   PetscFunctionBeginUser;
   file_ = CreateParallelFile(comm_, options_.path);
   *created = file_ >= 0;
@@ -341,7 +329,7 @@ PetscErrorCode ResultWriter::CreateFile(const Scene &scene, bool *created) {
     if (set >= 0) H5Dclose(set);
   }
   bool mesh = false;
-  PetscCall(WriteMesh(scene, &mesh));
+  PetscCall(WriteMesh(scene, share, &mesh));
   *created = ok && mesh && MarkComplete(file_, 0);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -423,7 +411,7 @@ bool ResultWriter::CopyFrames(const Continuation &continuation) {
 }
 
 PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
-                                  const DofLayout &layout, Vec like,
+                                  const DofLayout &layout, const MeshShare &share, Vec like,
                                   const Continuation *continuation) {
   PetscFunctionBeginUser;
   comm_ = comm;
@@ -432,7 +420,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
   PetscCallMPI(MPI_Comm_size(comm, &size_));
   num_vertices_ = scene.num_vertices();
   num_tets_ = scene.num_tets();
-  PetscCall(natural_.Setup(scene, layout, like));
+  PetscCall(natural_.Setup(share, layout, like));
   // Vertices without unknowns keep their rest position and zero velocity.
   PetscCall(natural_.CreateVector(true, &positions_));
   PetscCall(natural_.CreateVector(false, &velocities_));
@@ -451,7 +439,7 @@ PetscErrorCode ResultWriter::Open(MPI_Comm comm, const OutputOptions &options, c
     what = "cannot continue HDF5 file";
     ok = ContinueInPlace(*continuation);
   } else {
-    PetscCall(CreateFile(scene, &ok));
+    PetscCall(CreateFile(scene, share, &ok));
     if (ok && continuation) {
       what = "cannot copy the first frames of '" + continuation->source + "' into";
       ok = CopyFrames(*continuation);

@@ -39,6 +39,7 @@
 #include <vector>
 
 #include "fem/assembly.hpp"
+#include "fem/mesh_share.hpp"
 #include "fem/partition.hpp"
 #include "io/parallel_hdf5.hpp"
 #include "io/scene.hpp"
@@ -68,12 +69,12 @@ PetscErrorCode AgreeOnSuccess(MPI_Comm comm, bool ok, const std::string &message
 // rank succeeded (`ok` may differ between ranks).
 PetscErrorCode AgreeOnAllRanks(MPI_Comm comm, bool ok, const std::string &message);
 
-// Not collective. Natural-order mesh data of a slab of natural vertices or tets,
-// taken from the scene (every body's placed mesh; natural tet order: body 0's
-// tets in file order, then body 1's, ...). Sizes: 3 x, 1 x, 4 x slab.count().
-std::vector<double> SlabRestPositions(const Scene &scene, RowSlab vertices);
+// Not collective. The body of each natural vertex of a slab (from the bodies' counts).
 std::vector<int32_t> SlabVertexBodies(const Scene &scene, RowSlab vertices);
-std::vector<int32_t> SlabTets(const Scene &scene, RowSlab tets);
+
+// Not collective. The share's tets as rows of 4 natural vertices (as the result
+// file stores them).
+std::vector<int32_t> ShareTetRows(const MeshShare &share);
 
 // PETSc-ordered DOF vectors <-> natural-order vectors of every vertex, split in
 // even slabs: rank r of P holds natural vertices [V r / P, V (r + 1) / P) (3
@@ -87,8 +88,9 @@ class NaturalSlab {
   ~NaturalSlab();
 
   // `like` is a PETSc-ordered DOF vector; the scatter is built from
-  // layout.natural_of_owned (this rank's owned vertices only).
-  PetscErrorCode Setup(const Scene &scene, const DofLayout &layout, Vec like);
+  // layout.natural_of_owned (this rank's owned vertices only); the slab's rest
+  // positions are copied from the share (whose vertex slab is this slab).
+  PetscErrorCode Setup(const MeshShare &share, const DofLayout &layout, Vec like);
   // A natural vector: each rank's slab holds the rest positions (rest = true) or zeros.
   PetscErrorCode CreateVector(bool rest, Vec *natural) const;
   // natural <- dofs at the free vertices (the others keep their values).
@@ -96,12 +98,13 @@ class NaturalSlab {
   // dofs <- natural (the values of the free vertices).
   PetscErrorCode Scatter(Vec natural, Vec dofs) const;
   // Not collective. Vertices of the scene, and this rank's slab of them (after Setup).
-  int32_t num_vertices() const { return scene_->num_vertices(); }
+  int32_t num_vertices() const { return num_vertices_; }
   RowSlab vertices() const { return slab_; }
 
  private:
-  const Scene *scene_ = nullptr;
+  int32_t num_vertices_ = 0;
   RowSlab slab_;
+  std::vector<double> rest_;      // the slab's rest positions (m)
   VecScatter scatter_ = nullptr;  // PETSc-ordered free DOFs -> natural slabs of all vertices
   Vec natural_template_ = nullptr;
 };
@@ -124,7 +127,7 @@ class ResultWriter {
   // the file starts with the continued file's first frames instead: the same file, cut back to them
   // (source == path), or a new file with a copy of them. `like` is a PETSc-ordered DOF vector.
   PetscErrorCode Open(MPI_Comm comm, const OutputOptions &options, const Scene &scene,
-                      const DofLayout &layout, Vec like,
+                      const DofLayout &layout, const MeshShare &share, Vec like,
                       const Continuation *continuation = nullptr);
   // Collective. Root attributes describing the world the bodies move in, for
   // readers such as tools/render.py: "gravity" (3 doubles, m/s^2) and, when
@@ -153,8 +156,8 @@ class ResultWriter {
   MPI_Comm comm() const { return comm_; }
 
  private:
-  PetscErrorCode CreateFile(const Scene &scene, bool *created);
-  PetscErrorCode WriteMesh(const Scene &scene, bool *written);
+  PetscErrorCode CreateFile(const Scene &scene, const MeshShare &share, bool *created);
+  PetscErrorCode WriteMesh(const Scene &scene, const MeshShare &share, bool *written);
   bool ContinueInPlace(const Continuation &continuation);
   bool CopyFrames(const Continuation &continuation);
   PetscErrorCode OpenXdmf();

@@ -15,13 +15,23 @@
 namespace softbody {
 
 int32_t Scene::num_vertices() const {
-  return static_cast<int32_t>(initial_velocities.rows());
+  return bodies.empty() ? 0 : bodies.back().first_vertex + bodies.back().num_vertices();
 }
 
 int64_t Scene::num_tets() const {
   int64_t total = 0;
-  for (const Body &body : bodies) total += body.mesh.num_tets();
+  for (const Body &body : bodies) total += body.num_tets();
   return total;
+}
+
+void Scene::DropMeshes() {
+  for (Body &body : bodies) {
+    body.count_vertices = body.num_vertices();
+    body.count_tets = body.num_tets();
+    body.mesh = TetMesh();
+  }
+  initial_velocities.resize(0, 3);
+  meshes_held = false;
 }
 
 void PlaceMesh(const Eigen::Vector3d &position, const Eigen::Vector4d &quaternion_wxyz,
@@ -190,6 +200,10 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscOptionsBegin(comm, nullptr, "Scene", nullptr);
   PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
                                nullptr, path, path, sizeof(path), nullptr));
+  PetscCall(PetscOptionsBool("-scene_replicate",
+                             "Hold every mesh whole on every rank even when contact does not need "
+                             "them (by default they are distributed in slabs then)",
+                             nullptr, options->replicate, &options->replicate, nullptr));
   PetscOptionsEnd();
   options->path = path;
   PetscCall(ProcessMeshingOptions(comm, &options->meshing));
@@ -220,42 +234,59 @@ PetscErrorCode BroadcastString(MPI_Comm comm, std::string *text) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Rank 0's body (material, flags, placed mesh) on every rank.
-PetscErrorCode BroadcastBody(MPI_Comm comm, Body *body) {
+// Rank 0's body header (path, material, flags, counts) on every rank.
+PetscErrorCode BroadcastBodyHeader(MPI_Comm comm, Body *body) {
   PetscFunctionBeginUser;
   PetscCall(BroadcastString(comm, &body->mesh_path));
   PetscCall(BroadcastArray(comm, &body->material, 1));
-  int64_t sizes[5] = {body->fixed, body->at_rest, body->first_vertex, body->mesh.num_vertices(),
-                      body->mesh.num_tets()};
+  int64_t sizes[5] = {body->fixed, body->at_rest, body->first_vertex, body->num_vertices(),
+                      body->num_tets()};
   PetscCallMPI(MPI_Bcast(sizes, 5, MPI_INT64_T, 0, comm));
   body->fixed = sizes[0];
   body->at_rest = sizes[1];
   body->first_vertex = static_cast<int32_t>(sizes[2]);
-  body->mesh.vertices.resize(sizes[3], 3);
-  body->mesh.tets.resize(sizes[4], 4);
-  PetscCall(BroadcastArray(comm, body->mesh.vertices.data(), body->mesh.vertices.size()));
-  PetscCall(BroadcastArray(comm, body->mesh.tets.data(), body->mesh.tets.size()));
+  if (body->mesh.num_vertices() != sizes[3] || body->mesh.num_tets() != sizes[4]) {
+    body->count_vertices = static_cast<int32_t>(sizes[3]);  // the mesh stays on rank 0
+    body->count_tets = sizes[4];
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Rank 0's scene on every rank.
-PetscErrorCode BroadcastScene(MPI_Comm comm, Scene *scene) {
+// Rank 0's scene header (bodies' headers and the velocity counts) on every rank.
+PetscErrorCode BroadcastSceneHeader(MPI_Comm comm, Scene *scene) {
   PetscFunctionBeginUser;
   PetscCall(BroadcastString(comm, &scene->path));
-  int64_t sizes[4] = {static_cast<int64_t>(scene->bodies.size()), scene->initial_velocities.rows(),
-                      scene->num_velocity_entries, scene->ignored_fixed_velocities};
-  PetscCallMPI(MPI_Bcast(sizes, 4, MPI_INT64_T, 0, comm));
+  int64_t sizes[3] = {static_cast<int64_t>(scene->bodies.size()), scene->num_velocity_entries,
+                      scene->ignored_fixed_velocities};
+  PetscCallMPI(MPI_Bcast(sizes, 3, MPI_INT64_T, 0, comm));
   scene->bodies.resize(sizes[0]);
-  for (Body &body : scene->bodies) PetscCall(BroadcastBody(comm, &body));
-  scene->initial_velocities.resize(sizes[1], 3);
-  PetscCall(
-      BroadcastArray(comm, scene->initial_velocities.data(), scene->initial_velocities.size()));
-  scene->num_velocity_entries = static_cast<int>(sizes[2]);
-  scene->ignored_fixed_velocities = static_cast<int>(sizes[3]);
+  for (Body &body : scene->bodies) PetscCall(BroadcastBodyHeader(comm, &body));
+  scene->num_velocity_entries = static_cast<int>(sizes[1]);
+  scene->ignored_fixed_velocities = static_cast<int>(sizes[2]);
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  scene->meshes_held = rank == 0;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 }  // namespace
+
+PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene) {
+  PetscFunctionBeginUser;
+  for (Body &body : scene->bodies) {
+    body.mesh.vertices.resize(body.num_vertices(), 3);
+    body.mesh.tets.resize(body.num_tets(), 4);
+    body.count_vertices = -1;
+    body.count_tets = -1;
+    PetscCall(BroadcastArray(comm, body.mesh.vertices.data(), body.mesh.vertices.size()));
+    PetscCall(BroadcastArray(comm, body.mesh.tets.data(), body.mesh.tets.size()));
+  }
+  scene->initial_velocities.resize(scene->num_vertices(), 3);
+  PetscCall(
+      BroadcastArray(comm, scene->initial_velocities.data(), scene->initial_velocities.size()));
+  scene->meshes_held = true;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
 PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scene) {
   PetscFunctionBeginUser;
@@ -276,7 +307,7 @@ PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scen
   }
   PetscCall(BroadcastString(comm, &error));
   PetscCheck(error.empty(), comm, PETSC_ERR_USER_INPUT, "%s", error.c_str());
-  PetscCall(BroadcastScene(comm, scene));
+  PetscCall(BroadcastSceneHeader(comm, scene));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -35,20 +35,34 @@ struct Body {
   Material material;
   bool fixed;            // immobile: contributes no unknowns
   bool at_rest = false;  // free in the file, but nothing can set it in motion: treated as fixed
-  TetMesh mesh;          // placed: vertices are the rest positions in the world
+  TetMesh mesh;          // placed: the rest positions in the world; empty where not held
   int32_t first_vertex;  // natural index of the body's vertex 0
+  // The mesh's counts where the mesh is not held (-1: it is).
+  int32_t count_vertices = -1;
+  int64_t count_tets = -1;
+
+  int32_t num_vertices() const {
+    return count_vertices >= 0 ? count_vertices : mesh.num_vertices();
+  }
+  int64_t num_tets() const { return count_tets >= 0 ? count_tets : mesh.num_tets(); }
 };
 
 struct Scene {
   std::string path;
   std::vector<Body> bodies;
-  // Natural order, #V x 3 initial velocities (m/s), zero where none is given.
+  // Natural order, #V x 3 initial velocities (m/s), zero where none is given;
+  // empty where the meshes are not held.
   Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> initial_velocities;
   int num_velocity_entries = 0;      // entries in the file's velocity section
   int ignored_fixed_velocities = 0;  // of which on fixed bodies (they never move)
+  // Whether this rank holds the bodies' meshes and the initial velocities
+  // (DistributeScene); the counts are known either way.
+  bool meshes_held = true;
 
   int32_t num_vertices() const;
   int64_t num_tets() const;
+  // Not collective. Frees the meshes and initial velocities, keeping the counts.
+  void DropMeshes();
 };
 
 // Reads and validates a scene and its meshes (OFF surfaces meshed with `meshing`).
@@ -69,6 +83,8 @@ namespace softbody {
 struct SceneOptions {
   std::string path;        // -scene: the scene file
   MeshingOptions meshing;  // -tetgen_switches, -tetgen_max_volume: for .off meshes
+  // -scene_replicate: every rank holds every mesh, also when contact does not need them.
+  PetscBool replicate = PETSC_FALSE;
 };
 
 // Collective. Reads -tetgen_switches and -tetgen_max_volume (how .off surfaces
@@ -80,8 +96,12 @@ PetscErrorCode ProcessMeshingOptions(MPI_Comm comm, MeshingOptions *meshing);
 PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options);
 
 // Collective: rank 0 reads the scene and its meshes (TetGen runs once, there) and
-// broadcasts them, so every rank holds the whole scene. Input errors become one
-// PETSC_ERR_USER_INPUT error on every rank.
+// broadcasts the bodies' materials, flags and counts; the meshes stay on rank 0
+// until DistributeScene. Input errors become one PETSC_ERR_USER_INPUT error on
+// every rank.
 PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, Scene *scene);
+
+// Collective. Rank 0's meshes and initial velocities on every rank (after LoadScene).
+PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene);
 
 }  // namespace softbody

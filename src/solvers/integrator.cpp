@@ -1,6 +1,7 @@
 #include "solvers/integrator.hpp"
 
 #include <cmath>
+#include <utility>
 
 #include "app/log_stages.hpp"
 #include "common/options.hpp"
@@ -273,9 +274,9 @@ PetscErrorCode ImplicitEuler::CreateGravityForce() {
 }
 
 PetscErrorCode ImplicitEuler::CreateMatrices(MPI_Comm comm, const Scene &scene,
-                                             const DofLayout &layout) {
+                                             const DofLayout &layout, LocalTets &&tets) {
   PetscFunctionBeginUser;
-  PetscCall(assembler_.Setup(comm, scene, layout, options_.shear_scale, rest_));
+  PetscCall(assembler_.Setup(comm, scene, layout, std::move(tets), options_.shear_scale, rest_));
   // A: the plain product for CG's many products with it; K (one product per
   // linear step) keeps PETSc's default product and its order of summation.
   PetscCall(assembler_.CreateMatrix(&A_, options_.mode == MODE_COROTATIONAL
@@ -340,8 +341,9 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
 }
 
 PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                                    const LocalElements &elements, Vec rest_positions,
-                                    Vec lumped_mass, const IntegratorOptions &options) {
+                                    LocalTets &&tets, const LocalElements &elements,
+                                    Vec rest_positions, Vec lumped_mass,
+                                    const IntegratorOptions &options) {
   PetscFunctionBeginUser;
   elements_ = &elements;
   options_ = options;
@@ -350,7 +352,7 @@ PetscErrorCode ImplicitEuler::Setup(MPI_Comm comm, const Scene &scene, const Dof
   PetscCall(VecDuplicate(rest_, &elastic_force_));
   PetscCall(VecDuplicate(rest_, &rhs_));
   if (options.gravity.squaredNorm() > 0) PetscCall(CreateGravityForce());  // f_ext = M g
-  PetscCall(CreateMatrices(comm, scene, layout));
+  PetscCall(CreateMatrices(comm, scene, layout, std::move(tets)));
   // Owned and ghost positions of every vertex the local elements touch
   // (element-wise energies in linear mode).
   PetscCall(CreateTouchedScatter(elements));

@@ -151,9 +151,11 @@ class ImplicitEuler {
   ImplicitEuler &operator=(const ImplicitEuler &) = delete;
   ~ImplicitEuler();
 
-  // Collective. Creates the matrices and the solver for options.dt (linear mode:
-  // assembles and factorises A). rest_positions and lumped_mass are referenced.
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+  // Collective. Creates the matrices (from `tets`, MigrateTets, consumed: freed
+  // before the solver's set-up) and the solver for options.dt (linear mode:
+  // assembles and factorises A). elements, rest_positions and lumped_mass are
+  // referenced.
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, LocalTets &&tets,
                        const LocalElements &elements, Vec rest_positions, Vec lumped_mass,
                        const IntegratorOptions &options);
   // Collective. Linear mode: owned_body[i] is the body of owned vertex i; each
@@ -222,7 +224,8 @@ class ImplicitEuler {
   // Setup's steps: f_ext = M g; the assembler, A (and K in linear mode); the
   // gather plan of the local elements' vertices; the KSP (and the warp PC's A0).
   PetscErrorCode CreateGravityForce();
-  PetscErrorCode CreateMatrices(MPI_Comm comm, const Scene &scene, const DofLayout &layout);
+  PetscErrorCode CreateMatrices(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                                LocalTets &&tets);
   PetscErrorCode CreateTouchedScatter(const LocalElements &elements);
   PetscErrorCode CreateLinearSolver(const DofLayout &layout);
   // f_el(x) into elastic_force_ and the elastic energy; corotational mode also

@@ -11,8 +11,11 @@
 //   partition cuts fewer edges than the trivial split of the natural order into P even
 //   blocks (which cuts the beam across its long side: an independent, easily computed
 //   baseline any partitioner must beat).
-// - BuildDofLayout numbers the free vertices part by part, natural order inside a part,
-//   and natural_of_owned agrees with the global arrays.
+// - BuildDofLayout numbers the free vertices (those of free tets: a stray vertex is not)
+//   as a serial count here does, part by part, natural order inside a part;
+//   natural_of_owned and the slabs' lookups agree with the global arrays.
+// - MigrateTets brings every free tet with an owned vertex, and only those, in tet
+//   order, with its PETSc vertices and rest positions (checked against the scene).
 #include <gtest/gtest.h>
 #include <petscsys.h>
 
@@ -21,6 +24,7 @@
 #include <vector>
 
 #include "box_mesh.hpp"
+#include "fem/migration.hpp"
 #include "fem/partition.hpp"
 #include "fem/vertex_graph.hpp"
 #include "io/scene.hpp"
@@ -111,13 +115,28 @@ long CutEdges(const std::vector<std::set<PetscInt>> &adjacency, const std::vecto
   return cut / 2;
 }
 
+// The free tets of this rank's even share of the tets, as free indices.
+std::vector<std::array<PetscInt, 4>> FreeTetShare(const Scene &scene,
+                                                  const std::vector<PetscInt> &free_of_natural) {
+  const MeshShare share = ShareScene(scene, Rank(), Size());
+  std::vector<std::array<PetscInt, 4>> tets;
+  for (size_t t = 0; t < share.tets.size(); ++t)
+    if (share.TetIsFree(t)) {
+      const auto &natural = share.tets[t];
+      tets.push_back({free_of_natural[natural[0]], free_of_natural[natural[1]],
+                      free_of_natural[natural[2]], free_of_natural[natural[3]]});
+    }
+  return tets;
+}
+
 // The scene, its free numbering and this rank's graph rows.
 struct ThreeBoxGraph {
   Scene scene = ThreeBoxes();
   PetscInt n = 0;
   std::vector<PetscInt> free_of_natural = FreeOfNatural(scene, &n);
   VertexGraphRows graph;
-  PetscErrorCode status = BuildVertexGraphRows(PETSC_COMM_WORLD, scene, free_of_natural, n, &graph);
+  PetscErrorCode status =
+      BuildVertexGraphRows(PETSC_COMM_WORLD, FreeTetShare(scene, free_of_natural), n, &graph);
 };
 
 TEST(VertexGraph, RowsPutTogetherAreTheAdjacencyOfTheTets) {
@@ -178,11 +197,48 @@ TEST_P(Partitioners, BalancedAndBetterThanNaturalBlocks) {
 INSTANTIATE_TEST_SUITE_P(MetisAndPtScotch, Partitioners,
                          ::testing::Values(Partitioner::kMetis, Partitioner::kPtScotch));
 
+// ThreeBoxes with a vertex in no tet (a stray vertex: not free) appended to the
+// first box, so that the later bodies' natural numbers shift by one.
+Scene ThreeBoxesWithStrayVertex() {
+  Scene scene = ThreeBoxes();
+  TetMesh &mesh = scene.bodies[0].mesh;
+  mesh.vertices.conservativeResize(mesh.num_vertices() + 1, 3);
+  mesh.vertices.row(mesh.num_vertices() - 1) << 9, 9, 9;
+  for (size_t b = 1; b < scene.bodies.size(); ++b) ++scene.bodies[b].first_vertex;
+  scene.initial_velocities.setZero(scene.initial_velocities.rows() + 1, 3);
+  return scene;
+}
+
+// Natural vertex -> free index, serially: the vertices of free tets, natural order.
+std::vector<PetscInt> FreeOfNaturalByTets(const Scene &scene) {
+  std::vector<PetscInt> free_of_natural(scene.num_vertices(), -1);
+  for (const Body &body : scene.bodies)
+    if (!body.fixed)
+      for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
+        for (int a = 0; a < 4; ++a) free_of_natural[body.first_vertex + body.mesh.tets(t, a)] = 0;
+  PetscInt next = 0;
+  for (PetscInt &f : free_of_natural)
+    if (f == 0) f = next++;
+  return free_of_natural;
+}
+
+struct BuiltLayout {
+  MeshShare share;
+  DofLayout layout;
+  PetscErrorCode status;
+  BuiltLayout(const Scene &scene, Partitioner partitioner)
+      : share(ShareScene(scene, Rank(), Size())),
+        status(BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions{partitioner}, &share, &layout)) {}
+};
+
 TEST(DofLayout, NumberedPartByPartInNaturalOrder) {
-  const Scene scene = ThreeBoxes();
+  const Scene scene = ThreeBoxesWithStrayVertex();
+  const std::vector<PetscInt> expected_free = FreeOfNaturalByTets(scene);
   for (Partitioner partitioner : {Partitioner::kAuto, Partitioner::kPtScotch}) {
-    DofLayout layout;
-    ASSERT_EQ(BuildDofLayout(PETSC_COMM_WORLD, scene, PartitionOptions{partitioner}, &layout), 0);
+    BuiltLayout built(scene, partitioner);
+    ASSERT_EQ(built.status, 0);
+    const DofLayout &layout = built.layout;
+    ASSERT_EQ(layout.free_of_natural, expected_free);
     const PetscInt n = layout.num_free();
     std::vector<PetscInt> sorted = layout.petsc_of_free;
     std::sort(sorted.begin(), sorted.end());
@@ -200,7 +256,50 @@ TEST(DofLayout, NumberedPartByPartInNaturalOrder) {
     ASSERT_EQ(static_cast<PetscInt>(layout.natural_of_owned.size()), layout.local_count());
     for (PetscInt i = 0; i < layout.local_count(); ++i)
       EXPECT_EQ(layout.PetscVertexOfNatural(layout.natural_of_owned[i]), layout.local_begin() + i);
+    // The slab's own lookups agree with the replicated arrays.
+    for (PetscInt i = 0; i < built.share.slab_size(); ++i) {
+      const PetscInt natural = built.share.first_vertex + i;
+      EXPECT_EQ(built.share.free_index[i], expected_free[natural]);
+      EXPECT_EQ(built.share.petsc_vertex[i], layout.PetscVertexOfNatural(natural));
+    }
   }
+}
+
+// Every free tet with an owned vertex arrives once, in tet order, with its
+// PETSc vertices and the scene's rest positions; no other tet arrives.
+TEST(MigrateTets, TheTetsOfTheOwnedVertices) {
+  const Scene scene = ThreeBoxesWithStrayVertex();
+  BuiltLayout built(scene, Partitioner::kAuto);
+  ASSERT_EQ(built.status, 0);
+  const DofLayout &layout = built.layout;
+  LocalTets tets;
+  ASSERT_EQ(MigrateTets(PETSC_COMM_WORLD, built.share, layout, &tets), 0);
+  size_t next = 0;
+  int64_t index = 0;
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const Body &body = scene.bodies[b];
+    if (body.fixed) {
+      index += body.mesh.num_tets();
+      continue;
+    }
+    for (int32_t t = 0; t < body.mesh.num_tets(); ++t, ++index) {
+      std::array<PetscInt, 4> petsc;
+      bool touches = false;
+      for (int a = 0; a < 4; ++a) {
+        petsc[a] = layout.PetscVertexOfNatural(body.first_vertex + body.mesh.tets(t, a));
+        touches = touches || layout.OwnsPetscVertex(petsc[a]);
+      }
+      if (!touches) continue;
+      ASSERT_LT(next, tets.size()) << "tet " << index << " missing";
+      ASSERT_EQ(tets.index[next], index);
+      EXPECT_EQ(tets.body[next], static_cast<int32_t>(b));
+      EXPECT_EQ(tets.vertices[next], petsc);
+      for (int a = 0; a < 4; ++a)
+        EXPECT_EQ(tets.rest[next].row(a), body.mesh.vertices.row(body.mesh.tets(t, a)));
+      ++next;
+    }
+  }
+  EXPECT_EQ(next, tets.size()) << "tets that touch no owned vertex arrived";
 }
 
 }  // namespace

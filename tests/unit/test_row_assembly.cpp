@@ -88,17 +88,25 @@ double RelativeMatrixDifference(Mat A, Mat B) {
 
 struct Fixture {
   Scene scene;
+  MeshShare share;
   DofLayout layout;
+  LocalTets tets;
   LocalElements elements;
   State state;
   RowAssembler assembler;
   Mat A = nullptr;
 
   explicit Fixture(int nx, int ny, int nz, double shear_scale) : scene(BoxScene(nx, ny, nz)) {
-    BuildDofLayout(PETSC_COMM_WORLD, scene, PartitionOptions(), &layout);
-    elements = CollectLocalElements(scene, layout);
-    CreateState(PETSC_COMM_WORLD, scene, layout, elements, &state);
-    assembler.Setup(PETSC_COMM_WORLD, scene, layout, shear_scale, state.rest_positions);
+    PetscMPIInt rank, size;
+    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
+    MPI_Comm_size(PETSC_COMM_WORLD, &size);
+    share = ShareScene(scene, rank, size);
+    BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions(), &share, &layout);
+    MigrateTets(PETSC_COMM_WORLD, share, layout, &tets);
+    elements = CollectLocalElements(scene, layout, tets);
+    CreateState(PETSC_COMM_WORLD, share, layout, elements, &state);
+    assembler.Setup(PETSC_COMM_WORLD, scene, layout, std::move(tets), shear_scale,
+                    state.rest_positions);
     assembler.CreateMatrix(&A);
   }
   ~Fixture() { MatDestroy(&A); }
