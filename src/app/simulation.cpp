@@ -263,10 +263,11 @@ PetscErrorCode Simulation::Resume() {
   if (has_unknowns()) {
     PetscCall(integrator_.PrimeSolver(initial_positions_, dt_first_));
     SchemeHistory history;  // the time scheme's previous velocities or accelerations
-    bool found;
+    bool found = false;
     PetscCall(integrator_.GetHistory(&history));
-    PetscCall(ReadCheckpointHistory(comm_, options_.checkpoints.restart_path, scene_, layout_,
-                                    state_.positions, &history, &found));
+    if (writer_)  // a restart always writes (into the restart file by default)
+      PetscCall(ReadCheckpointHistory(comm_, options_.checkpoints.restart_path,
+                                      writer_->natural_slab(), &history, &found));
     PetscCall(integrator_.SetHistory(history.scalars, found));
   }
   for (size_t i = 0; i < deformations_.size(); ++i)

@@ -494,12 +494,10 @@ bool ReadSlotHistory(hid_t slot, RowSlab slab, int32_t num_vertices, SchemeHisto
 
 }  // namespace
 
-PetscErrorCode ReadCheckpointHistory(MPI_Comm comm, const std::string &path, const Scene &scene,
-                                     const DofLayout &layout, Vec x, SchemeHistory *history,
+PetscErrorCode ReadCheckpointHistory(MPI_Comm comm, const std::string &path,
+                                     const NaturalSlab &natural, SchemeHistory *history,
                                      bool *found) {
   PetscFunctionBeginUser;
-  NaturalSlab natural;
-  PetscCall(natural.Setup(scene, layout, x));
   std::vector<Vec> natural_vectors(history->vectors.size());
   for (size_t i = 0; i < natural_vectors.size(); ++i)
     PetscCall(
@@ -510,7 +508,7 @@ PetscErrorCode ReadCheckpointHistory(MPI_Comm comm, const std::string &path, con
   const int slot_index = file < 0 ? -1 : NewestSlot(file, &step);
   const hid_t slot = slot_index < 0 ? -1 : H5Gopen2(file, kSlots[slot_index], H5P_DEFAULT);
   std::vector<double> scalars;
-  int ok = slot >= 0 && ReadSlotHistory(slot, natural.vertices(), scene.num_vertices(), history,
+  int ok = slot >= 0 && ReadSlotHistory(slot, natural.vertices(), natural.num_vertices(), history,
                                         natural_vectors, &scalars);
   if (slot >= 0) H5Gclose(slot);
   if (file >= 0) H5Fclose(file);

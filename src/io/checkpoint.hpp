@@ -89,12 +89,13 @@ PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec
                                const SchemeHistory *history = nullptr);
 
 // Collective. Reads the time scheme's history from the newest checkpoint of
-// `path` (after ReadCheckpoint checked it): history->vectors (PETSc order, laid
-// out as x) are filled and history->scalars set when the slot holds the history
-// of history->scheme (*found); otherwise nothing changes and *found is false (a
-// checkpoint of another -integrator, or of a version without history).
-PetscErrorCode ReadCheckpointHistory(MPI_Comm comm, const std::string &path, const Scene &scene,
-                                     const DofLayout &layout, Vec x, SchemeHistory *history,
+// `path` (after ReadCheckpoint checked it; `natural` is the result file's slab
+// plan): history->vectors (PETSc order) are filled and history->scalars set when
+// the slot holds the history of history->scheme (*found); otherwise nothing
+// changes and *found is false (a checkpoint of another -integrator, or of a
+// version without history).
+PetscErrorCode ReadCheckpointHistory(MPI_Comm comm, const std::string &path,
+                                     const NaturalSlab &natural, SchemeHistory *history,
                                      bool *found);
 
 }  // namespace softbody
