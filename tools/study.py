@@ -4,13 +4,15 @@
 Runs one scene to a fixed end time T over a grid of
   time steps   dt0, dt0/2, dt0/4, ... (-study_levels of them; steps = round(T / dt)),
   modes        linear, corotational,
+  integrators  -integrator be (default), bdf2, newmark, alpha (-study_integrators),
   solvers      direct (config/direct.opts: CHOLMOD Cholesky), CG + GAMG
                (config/cg-gamg.opts), CG + Jacobi (config/cg-jacobi.opts); the
                iterative ones at every -ksp_rtol of -study_rtols,
   ranks        1 and 2,
 and compares the positions at T with a reference run of the same mode (by default
 dt ten times smaller than the finest level, direct solver, the largest rank
-count). Per run:
+count; integrator be when the study runs be alone, else newmark, second order:
+-study_reference_integrator). Per run:
   error_l2   ||u - u_ref|| / ||u_ref||, u = x - X over all free vertices
              (relative L2 norm of the displacement field, dimensionless),
   error_max  max_i |x_i - x_ref,i| over the free vertices (m),
@@ -58,11 +60,12 @@ from softbody_tools import (ToolParser, CONFIG_DIR, ROOT, add_option, add_run_op
                             mpi_environment, one_line_error, parse_with_passthrough)
 
 MODES = ("linear", "corotational")
+INTEGRATORS = ("be", "bdf2", "newmark", "alpha")
 # Options the study sets itself on every run; passing them after `--` would break it.
 CONTROLLED = ("-scene", "-mode", "-dt", "-dt_schedule", "-steps", "-output", "-output_every",
-              "-options_file", "-ksp_rtol", "-deform")
+              "-options_file", "-ksp_rtol", "-deform", "-integrator")
 COLUMNS = ["mode", "solver", "ranks", "dt", "rtol", "steps", "setup_s", "loop_s", "iterations",
-           "error_l2", "error_max", "status", "contact_s", "message"]
+           "error_l2", "error_max", "status", "contact_s", "message", "integrator"]
 SOLVER_LABELS = {"direct": "direct (CHOLMOD Cholesky)", "cg-gamg": "CG + GAMG", "cg-jacobi": "CG + Jacobi",
                  "cg-warp": "CG + warp"}
 
@@ -89,6 +92,12 @@ def parse_arguments(argv):
                help="number of time-step levels (default 5; at least 2 for an order)")
     add_option(parser, "study_modes", "--modes", dest="modes", metavar="MODE", nargs="+", type=comma_list(str),
                default=[list(MODES)], help="elasticity modes (default: linear,corotational)")
+    add_option(parser, "study_integrators", "--integrators", dest="integrators", metavar="NAME", nargs="+",
+               type=comma_list(str), default=[["be"]],
+               help="time integrators, values of softbody's -integrator (default: be; all: be,bdf2,newmark,alpha)")
+    add_option(parser, "study_reference_integrator", "--reference-integrator", dest="reference_integrator",
+               metavar="NAME", default=None,
+               help="integrator of the reference runs (default: be when the study runs be alone, else newmark)")
     add_option(parser, "study_solvers", "--solvers", dest="solvers", metavar="NAME", nargs="+",
                type=comma_list(str), default=[["direct", "cg-gamg", "cg-jacobi"]],
                help="solver presets, names of config/NAME.opts; a preset with -ksp_type preonly is direct, "
@@ -108,6 +117,7 @@ def parse_arguments(argv):
                help="seconds after which a run is stopped and recorded as failed (default 3600)")
     args = parse_with_passthrough(parser, argv)
     args.modes = flatten(args.modes)
+    args.integrators = flatten(args.integrators)
     args.solvers = flatten(args.solvers)
     args.rtols = flatten(args.rtols)
     args.ranks = flatten(args.ranks)
@@ -118,6 +128,11 @@ def parse_arguments(argv):
     for mode in args.modes:
         if mode not in MODES:
             fail(f"-study_modes: unknown mode {mode!r} (choose from {', '.join(MODES)})")
+    for integrator in args.integrators + [args.reference_integrator or "be"]:
+        if integrator not in INTEGRATORS:
+            fail(f"-study_integrators: unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+    if args.reference_integrator is None:
+        args.reference_integrator = "be" if args.integrators == ["be"] else "newmark"
     args.direct = {}
     for solver in args.solvers:
         path = os.path.join(CONFIG_DIR, solver + ".opts")
@@ -168,7 +183,7 @@ def _is_direct(path):
 
 # ----------------------------------------------------------------------------- runs
 
-def run_softbody(args, name, mode, solver, rtol, ranks, dt):
+def run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator="be"):
     """Runs softbody once; returns a dict with status, message, attributes and final positions."""
     import h5py
     runs = os.path.join(args.study_dir, "runs")
@@ -176,13 +191,13 @@ def run_softbody(args, name, mode, solver, rtol, ranks, dt):
     steps = round(args.end_time / dt)
     command = [args.mpiexec, "-n", str(ranks), args.softbody,
                "-scene", os.path.abspath(args.scene), "-mode", mode,
-               "-dt", repr(float(dt)), "-steps", str(steps),
+               "-dt", repr(float(dt)), "-steps", str(steps), "-integrator", integrator,
                "-output", os.path.abspath(out), "-output_every", str(steps),
                "-options_file", os.path.join(CONFIG_DIR, solver + ".opts")]
     if rtol is not None:
         command += ["-ksp_rtol", repr(float(rtol))]
     command += list(args.extra)
-    result = {"mode": mode, "solver": solver, "ranks": ranks, "dt": dt, "rtol": rtol,
+    result = {"mode": mode, "integrator": integrator, "solver": solver, "ranks": ranks, "dt": dt, "rtol": rtol,
               "steps": steps, "status": "failed", "message": "", "name": name}
     for path in (out, os.path.join(runs, name + ".xdmf")):
         if os.path.exists(path):
@@ -205,8 +220,10 @@ def run_softbody(args, name, mode, solver, rtol, ranks, dt):
         return result
     try:
         with h5py.File(out, "r") as f:
-            # The run's statistics are the scalar attributes ("gravity" is a vector).
-            attrs = {key: float(value) for key, value in f.attrs.items() if np.size(value) == 1}
+            # The run's statistics are the numeric scalar attributes ("gravity" is a vector,
+            # "integrator" a name).
+            attrs = {key: float(value) for key, value in f.attrs.items()
+                     if np.size(value) == 1 and np.issubdtype(np.asarray(value).dtype, np.number)}
             positions = f["positions"][-1].astype(np.float64)
             rest = f["mesh/rest_positions"][()].astype(np.float64)
             vertex_body = f["mesh/vertex_body"][()]
@@ -253,11 +270,11 @@ def add_errors(row, reference):
 # ----------------------------------------------------------------------------- analysis
 
 def config_key(row):
-    return (row["mode"], row["solver"], row["rtol"], row["ranks"])
+    return (row["mode"], row["solver"], row["rtol"], row["ranks"], row["integrator"])
 
 
-def config_label(solver, rtol, ranks, mode=None):
-    text = SOLVER_LABELS.get(solver, solver)
+def config_label(solver, rtol, ranks, mode=None, integrator="be"):
+    text = f"{integrator}, " + SOLVER_LABELS.get(solver, solver)
     if rtol is not None:
         text += f", rtol {rtol:g}"
     text += f", {ranks} rank" + ("s" if ranks != 1 else "")
@@ -342,7 +359,7 @@ def write_csv(path, rows):
                              _fmt(r.get("setup_s"), ".6g"), _fmt(r.get("loop_s"), ".6g"),
                              _fmt(r.get("iterations"), ".0f"), _fmt(r.get("error_l2"), ".17g"),
                              _fmt(r.get("error_max"), ".17g"), r["status"],
-                             _fmt(r.get("contact_s"), ".6g"), r.get("message", "")])
+                             _fmt(r.get("contact_s"), ".6g"), r.get("message", ""), r["integrator"]])
 
 
 def _rtol_text(rtol):
@@ -350,7 +367,7 @@ def _rtol_text(rtol):
 
 
 def _row_cells(r):
-    return [SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]), str(r["ranks"]),
+    return [r["integrator"], SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]), str(r["ranks"]),
             f"{r['dt']:g}", str(r["steps"]), _fmt(r.get("setup_s"), ".3f"), _fmt(r.get("loop_s"), ".3f"),
             _fmt(r.get("iterations"), ".0f"), _fmt(r.get("error_l2"), ".3e"), _fmt(r.get("error_max"), ".3e"),
             "ok" if r["status"] == "ok" else "FAILED: " + r.get("message", "").replace("|", "/")]
@@ -365,7 +382,8 @@ def _table(header, rows):
 def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md = [f"# Work-precision study: `{args.scene}`", ""]
     md.append(f"End time T = {args.end_time:g} s; time steps {', '.join(f'{dt:g}' for dt in args.dts)} s; "
-              f"modes {', '.join(args.modes)}; solvers {', '.join(args.solvers)} "
+              f"modes {', '.join(args.modes)}; integrators {', '.join(args.integrators)} "
+              f"(reference: {args.reference_integrator}); solvers {', '.join(args.solvers)} "
               f"(iterative at -ksp_rtol {', '.join(f'{t:g}' for t in args.rtols)}); "
               f"ranks {', '.join(map(str, args.ranks))}."
               + (f" Extra options: `{' '.join(args.extra)}`." if args.extra else ""))
@@ -383,8 +401,10 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md.append("")
     md.append("## References")
     md.append("")
-    md.append(_table(["mode", "solver", "ranks", "dt (s)", "steps", "set-up (s)", "loop (s)", "status"],
-                     [[ref["mode"], SOLVER_LABELS.get(ref["solver"], ref["solver"]), str(ref["ranks"]),
+    md.append(_table(["mode", "integrator", "solver", "ranks", "dt (s)", "steps", "set-up (s)", "loop (s)",
+                      "status"],
+                     [[ref["mode"], ref["integrator"], SOLVER_LABELS.get(ref["solver"], ref["solver"]),
+                       str(ref["ranks"]),
                        f"{ref['dt']:g}", str(ref["steps"]), _fmt(ref.get("setup_s"), ".3f"),
                        _fmt(ref.get("loop_s"), ".3f"),
                        "ok" if ref["status"] == "ok" else "FAILED: " + ref["message"]]
@@ -398,13 +418,13 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md.append("")
     order_rows = []
     for key, (order, used) in orders.items():
-        mode, solver, rtol, ranks = key
+        mode, solver, rtol, ranks, integrator = key
         finest = [r for r in rows if config_key(r) == key and _good(r)]
         finest = min(finest, key=lambda r: r["dt"]) if finest else None
-        order_rows.append([mode, SOLVER_LABELS.get(solver, solver), _rtol_text(rtol), str(ranks),
+        order_rows.append([mode, integrator, SOLVER_LABELS.get(solver, solver), _rtol_text(rtol), str(ranks),
                            "" if order is None else f"{order:.2f}", f"{used}/{len(args.dts)}",
                            _fmt(finest["error_l2"], ".3e") if finest else ""])
-    md.append(_table(["mode", "solver", "rtol", "ranks", "order", "levels used",
+    md.append(_table(["mode", "integrator", "solver", "rtol", "ranks", "order", "levels used",
                       "rel. L2 at finest dt"], order_rows))
     md.append("")
     md.append("## Pareto front")
@@ -415,8 +435,9 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
         md.append("")
         md.append(f"### {mode}")
         md.append("")
-        md.append(_table(["solver", "rtol", "ranks", "dt (s)", "loop (s)", "rel. L2", "max (m)"],
-                         [[SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]), str(r["ranks"]),
+        md.append(_table(["integrator", "solver", "rtol", "ranks", "dt (s)", "loop (s)", "rel. L2", "max (m)"],
+                         [[r["integrator"], SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]),
+                           str(r["ranks"]),
                            f"{r['dt']:g}", f"{r['loop_s']:.3f}", f"{r['error_l2']:.3e}",
                            _fmt(r.get("error_max"), ".3e")] for r in fronts.get(mode, [])]))
         cheapest = cheapest_per_accuracy([r for r in rows if r["mode"] == mode])
@@ -424,8 +445,9 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
             md.append("")
             md.append("Fastest run reaching a given accuracy:")
             md.append("")
-            md.append(_table(["rel. L2 <=", "solver", "rtol", "ranks", "dt (s)", "loop (s)", "rel. L2"],
-                             [[f"{target:g}", SOLVER_LABELS.get(r["solver"], r["solver"]),
+            md.append(_table(["rel. L2 <=", "integrator", "solver", "rtol", "ranks", "dt (s)", "loop (s)",
+                              "rel. L2"],
+                             [[f"{target:g}", r["integrator"], SOLVER_LABELS.get(r["solver"], r["solver"]),
                                _rtol_text(r["rtol"]), str(r["ranks"]), f"{r['dt']:g}",
                                f"{r['loop_s']:.3f}", f"{r['error_l2']:.3e}"] for target, r in cheapest]))
     failed = [r for r in rows if r["status"] != "ok"]
@@ -433,12 +455,12 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md.append(f"## Failed runs: {len(failed)}")
     if failed:
         md.append("")
-        md.append(_table(["mode", "solver", "rtol", "ranks", "dt (s)", "error"],
-                         [[r["mode"], r["solver"], _rtol_text(r["rtol"]), str(r["ranks"]), f"{r['dt']:g}",
+        md.append(_table(["mode", "integrator", "solver", "rtol", "ranks", "dt (s)", "error"],
+                         [[r["mode"], r["integrator"], r["solver"], _rtol_text(r["rtol"]), str(r["ranks"]), f"{r['dt']:g}",
                            r["message"].replace("|", "/")] for r in failed]))
     md.append("")
     md.append("## All runs")
-    header = ["solver", "rtol", "ranks", "dt (s)", "steps", "set-up (s)", "loop (s)", "iterations",
+    header = ["integrator", "solver", "rtol", "ranks", "dt (s)", "steps", "set-up (s)", "loop (s)", "iterations",
               "rel. L2", "max (m)", "status"]
     for mode in args.modes:
         md.append("")
@@ -460,13 +482,21 @@ def write_plot(path, args, rows, fronts):
     from matplotlib.lines import Line2D
 
     modes = [m for m in args.modes]
-    solver_rtols = _unique((r["solver"], r["rtol"]) for r in rows)
+    solver_rtols = _unique((r["solver"], r["rtol"], r["integrator"]) for r in rows)
+    several = len(args.integrators) > 1
     palette = {("direct", None): "#1f4e9c", ("cg-gamg", 1e-8): "#1a9850", ("cg-gamg", 1e-4): "#91cf60",
                ("cg-jacobi", 1e-8): "#d73027", ("cg-jacobi", 1e-4): "#fc8d59"}
     spare = iter(["#7b3294", "#c2a5cf", "#8c510a", "#dfc27d", "#01665e", "#80cdc1", "#636363"])
+    # One colour per solver; with several integrators one per integrator (and solver).
+    integrator_palette = {"be": "#1f4e9c", "bdf2": "#1a9850", "newmark": "#d73027", "alpha": "#7b3294"}
+    one_solver = len(_unique(k[:2] for k in solver_rtols)) == 1
     colours = {}
     for key in solver_rtols:
-        colours[key] = palette.get(key) or next(spare, "#999999")
+        if not several:
+            colour = palette.get(key[:2])
+        else:
+            colour = integrator_palette.get(key[2]) if one_solver else None
+        colours[key] = colour or next(spare, "#999999")
     rank_list = sorted(_unique(r["ranks"] for r in rows))
     styles = ["-", "--", ":", "-."]
     markers = ["o", "s", "^", "D"]
@@ -477,16 +507,17 @@ def write_plot(path, args, rows, fronts):
     all_errors = [r["error_l2"] for r in rows if _good(r)]
     for ax, mode in zip(axes[0], modes):
         mode_rows = [r for r in rows if r["mode"] == mode]
-        for (solver, rtol) in solver_rtols:
+        for (solver, rtol, integrator) in solver_rtols:
             for ranks in rank_list:
                 series = sorted([r for r in mode_rows if r["solver"] == solver and r["rtol"] == rtol
-                                 and r["ranks"] == ranks and _good(r)], key=lambda r: -r["dt"])
+                                 and r["integrator"] == integrator and r["ranks"] == ranks and _good(r)],
+                                key=lambda r: -r["dt"])
                 if not series:
                     continue
                 style, marker = rank_style[ranks]
                 ax.plot([r["loop_s"] for r in series], [r["error_l2"] for r in series], linestyle=style,
-                        marker=marker, color=colours[(solver, rtol)], markersize=5, linewidth=1.4,
-                        markerfacecolor="white" if ranks != rank_list[0] else colours[(solver, rtol)])
+                        marker=marker, color=colours[(solver, rtol, integrator)], markersize=5, linewidth=1.4,
+                        markerfacecolor="white" if ranks != rank_list[0] else colours[(solver, rtol, integrator)])
         front = fronts.get(mode, [])
         if front:
             xs, ys = [], []
@@ -501,10 +532,11 @@ def write_plot(path, args, rows, fronts):
                        facecolors="none", edgecolors="black", linewidths=1.0, zorder=5)
         # dt labels along the direct solver's series on the largest rank count (one per level)
         labelled = sorted([r for r in mode_rows if r["solver"] == (args.solvers[0]) and _good(r)
-                           and r["ranks"] == rank_list[-1] and r["rtol"] is None], key=lambda r: -r["dt"])
+                           and r["ranks"] == rank_list[-1] and r["rtol"] is None
+                           and r["integrator"] == args.integrators[0]], key=lambda r: -r["dt"])
         for r in labelled:
             ax.annotate(f"dt={r['dt']:g}", (r["loop_s"], r["error_l2"]), textcoords="offset points",
-                        xytext=(6, 3), fontsize=7, color=colours.get((r["solver"], None), "black"))
+                        xytext=(6, 3), fontsize=7, color=colours.get((r["solver"], None, r["integrator"]), "black"))
         failed = sum(1 for r in mode_rows if r["status"] != "ok")
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -525,7 +557,8 @@ def write_plot(path, args, rows, fronts):
         axes[0][0].set_ylim(min(all_errors) / 2, max(all_errors) * 2)
 
     solver_handles = [Line2D([], [], color=colours[k], linewidth=2.5,
-                             label=SOLVER_LABELS.get(k[0], k[0]) + ("" if k[1] is None else f", rtol {k[1]:g}"))
+                             label=(f"{k[2]}, " if several else "") + SOLVER_LABELS.get(k[0], k[0])
+                             + ("" if k[1] is None else f", rtol {k[1]:g}"))
                       for k in solver_rtols]
     other_handles = [Line2D([], [], color="grey", linestyle=rank_style[n][0], marker=rank_style[n][1],
                             markerfacecolor="grey" if n == rank_list[0] else "white",
@@ -563,23 +596,27 @@ def main(argv=None):
 
     grid = []
     for mode in args.modes:
-        for solver in args.solvers:
-            for rtol in ([None] if args.direct[solver] else args.rtols):
-                for ranks in args.ranks:
-                    for dt in args.dts:
-                        grid.append((mode, solver, rtol, ranks, dt))
+        for integrator in args.integrators:
+            for solver in args.solvers:
+                for rtol in ([None] if args.direct[solver] else args.rtols):
+                    for ranks in args.ranks:
+                        for dt in args.dts:
+                            grid.append((mode, solver, rtol, ranks, dt, integrator))
     reference_solver = next((s for s in args.solvers if args.direct[s]), "direct")
     total = len(grid) * args.repeat + len(args.modes)
     print(f"study: {args.scene}, T = {args.end_time:g} s, {len(grid)} runs + {len(args.modes)} "
-          f"reference(s) (dt {args.reference_dt:g} s, {reference_solver}, {args.reference_ranks} ranks) "
+          f"reference(s) (dt {args.reference_dt:g} s, {args.reference_integrator}, {reference_solver}, "
+          f"{args.reference_ranks} ranks) "
           f"into {args.study_dir}", flush=True)
 
     count = 0
     references = {}
     for mode in args.modes:
         count += 1
-        name = f"reference_{mode}_{reference_solver}_np{args.reference_ranks}_dt{args.reference_dt:g}"
-        ref = run_softbody(args, name, mode, reference_solver, None, args.reference_ranks, args.reference_dt)
+        name = (f"reference_{mode}_{args.reference_integrator}_{reference_solver}_np{args.reference_ranks}"
+                f"_dt{args.reference_dt:g}")
+        ref = run_softbody(args, name, mode, reference_solver, None, args.reference_ranks, args.reference_dt,
+                           args.reference_integrator)
         references[mode] = ref
         print(f"[{count}/{total}] reference {mode}: "
               + (f"{ref['steps']} steps, loop {ref['loop_s']:.2f} s" if ref["status"] == "ok"
@@ -591,12 +628,13 @@ def main(argv=None):
     rows = {}
     for repetition in range(args.repeat):
         for point in (grid if repetition % 2 == 0 else grid[::-1]):
-            mode, solver, rtol, ranks, dt = point
+            mode, solver, rtol, ranks, dt, integrator = point
             count += 1
             if repetition and rows[point]["status"] != "ok":
                 continue
-            name = f"{mode}_{solver}" + ("" if rtol is None else f"_rtol{rtol:g}") + f"_np{ranks}_dt{dt:g}"
-            row = run_softbody(args, name, mode, solver, rtol, ranks, dt)
+            name = (f"{mode}_{integrator}_{solver}" + ("" if rtol is None else f"_rtol{rtol:g}")
+                    + f"_np{ranks}_dt{dt:g}")
+            row = run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator)
             if repetition == 0:
                 add_errors(row, references[mode])
                 if row["status"] == "ok" and references[mode]["status"] != "ok":
@@ -611,7 +649,7 @@ def main(argv=None):
                     + (f", rel. L2 {_fmt(rows[point].get('error_l2'), '.3e')}" if repetition == 0 else "")
                     if row["status"] == "ok" else "FAILED: " + row["message"])
             label = f"pass {repetition + 1}: " if args.repeat > 1 else ""
-            print(f"[{count}/{total}] {label}{config_label(solver, rtol, ranks, mode)}, dt {dt:g}: {text}",
+            print(f"[{count}/{total}] {label}{config_label(solver, rtol, ranks, mode, integrator)}, dt {dt:g}: {text}",
                   flush=True)
     rows = [rows[point] for point in grid]
 
@@ -628,18 +666,19 @@ def main(argv=None):
     print()
     print("observed order in dt (slope of log rel. L2 error vs log dt):")
     for key, (order, used) in orders.items():
-        print(f"  {config_label(key[1], key[2], key[3], key[0]):58s} "
+        print(f"  {config_label(key[1], key[2], key[3], key[0], key[4]):66s} "
               + ("  n/a" if order is None else f"{order:5.2f}") + f"  ({used} levels)")
     for mode in args.modes:
         print(f"Pareto front, {mode} (fastest first):")
         for r in fronts[mode]:
-            print(f"  {config_label(r['solver'], r['rtol'], r['ranks']):44s} dt {r['dt']:<9g} "
+            print(f"  {config_label(r['solver'], r['rtol'], r['ranks'], None, r['integrator']):52s} dt {r['dt']:<9g} "
                   f"loop {r['loop_s']:8.3f} s  rel. L2 {r['error_l2']:.3e}")
     failed = [r for r in rows if r["status"] != "ok"]
     if failed:
         print(f"{len(failed)} failed run(s):")
         for r in failed:
-            print(f"  {config_label(r['solver'], r['rtol'], r['ranks'], r['mode'])}, dt {r['dt']:g}: {r['message']}")
+            print(f"  {config_label(r['solver'], r['rtol'], r['ranks'], r['mode'], r['integrator'])}, dt {r['dt']:g}: "
+                  f"{r['message']}")
     print(f"wrote {csv_path}, {md_path}, {png_path} ({elapsed:.0f} s)")
     bad_references = [m for m, ref in references.items() if ref["status"] != "ok"]
     if bad_references:

@@ -70,16 +70,25 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// "  model ..." line: elasticity, damping, time step, gravity.
+// -integrator's name and what it is, e.g. "alpha (generalized-alpha, rho_inf 0.9)".
+std::string SchemeDescription(const IntegratorOptions &o) {
+  const char *const what[] = {"backward Euler", "BDF2", "Newmark, trapezoidal rule",
+                              "generalized-alpha"};
+  std::string text = std::string(kTimeSchemes[o.scheme]) + " (" + what[o.scheme];
+  if (o.scheme == SCHEME_ALPHA) text += ", rho_inf " + FormatNumber(o.rho_inf);
+  return text + ")";
+}
+
+// "  model ..." line: elasticity, damping, integrator, time step, gravity.
 PetscErrorCode PrintModel(MPI_Comm comm, const IntegratorOptions &o, const SolverStatistics &solver,
                           const RunReport &r) {
   PetscFunctionBeginUser;
   PetscCall(PetscPrintf(comm,
                         "  model        %s elasticity, shear scale %s; damping a = %s 1/s, "
-                        "b = %s s; dt = %s s, %" PetscInt_FMT " steps",
+                        "b = %s s; integrator %s; dt = %s s, %" PetscInt_FMT " steps",
                         kElasticityModes[o.mode], FormatNumber(o.shear_scale).c_str(),
                         FormatNumber(o.alpha).c_str(), FormatNumber(o.beta).c_str(),
-                        FormatNumber(o.dt).c_str(), r.steps));
+                        SchemeDescription(o).c_str(), FormatNumber(o.dt).c_str(), r.steps));
   if (!r.restarted_from.empty())
     PetscCall(PetscPrintf(comm, " (restarted at step %" PetscInt_FMT " from %s)", r.first_step,
                           r.restarted_from.c_str()));
@@ -88,6 +97,13 @@ PetscErrorCode PrintModel(MPI_Comm comm, const IntegratorOptions &o, const Solve
                           FormatNumber(o.gravity[1]).c_str(), FormatNumber(o.gravity[2]).c_str()));
   if (solver.time_step_changes)
     PetscCall(PetscPrintf(comm, "; %" PetscInt_FMT " time step changes", solver.time_step_changes));
+  if (o.adaptive)
+    PetscCall(PetscPrintf(comm,
+                          "; -dt_adapt, -tol %s: %" PetscInt_FMT
+                          " substeps accepted, %" PetscInt_FMT " rejected, dt %s to %s s",
+                          FormatNumber(o.tolerance).c_str(), solver.accepted_steps,
+                          solver.rejected_steps, FormatNumber(solver.min_step).c_str(),
+                          FormatNumber(solver.max_step).c_str()));
   PetscCall(PetscPrintf(comm, "\n"));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

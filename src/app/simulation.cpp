@@ -83,6 +83,10 @@ std::vector<std::pair<std::string, double>> FileStatistics(const RunReport &repo
           {"max_newton_iterations", double(solver.max_newton_iterations)},
           {"newton_stopped_short", double(solver.newton_stopped_short)},
           {"fallback_solves", double(solver.fallback_solves)},
+          {"accepted_steps", double(solver.accepted_steps)},
+          {"rejected_steps", double(solver.rejected_steps)},
+          {"min_dt", solver.accepted_steps ? solver.min_step : 0.0},
+          {"max_dt", solver.max_step},
           {"contact_seconds", contact.statistics().seconds}};
 }
 
@@ -204,6 +208,7 @@ PetscErrorCode Simulation::OpenOutput() {
   const Eigen::Vector3d &gravity = options_.integration.gravity;
   const double ground_y = options_.contact.ground_y;
   PetscCall(writer_->WriteWorld(gravity.data(), options_.contact.ground ? &ground_y : nullptr));
+  PetscCall(writer_->WriteTextAttribute("integrator", kTimeSchemes[options_.integration.scheme]));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -258,7 +263,16 @@ PetscErrorCode Simulation::Resume() {
   bool changed;
   PetscCall(ApplyDueDeformations(scene_, layout_, 0.0, 0.5 * dt_first_, state_.lumped_mass,
                                  initial_positions_, &at_start, &changed));
-  if (has_unknowns()) PetscCall(integrator_.PrimeSolver(initial_positions_, dt_first_));
+  if (has_unknowns()) {
+    PetscCall(integrator_.PrimeSolver(initial_positions_, dt_first_));
+    SchemeHistory history;  // the time scheme's previous velocities or accelerations
+    bool found = false;
+    PetscCall(integrator_.GetHistory(&history));
+    if (writer_)  // a restart always writes (into the restart file by default)
+      PetscCall(ReadCheckpointHistory(comm_, options_.checkpoints.restart_path,
+                                      writer_->natural_slab(), &history, &found));
+    PetscCall(integrator_.SetHistory(history.scalars, found));
+  }
   for (size_t i = 0; i < deformations_.size(); ++i)
     deformations_[i].applied = start_.deformations_applied[i] != 0;
   contact_.RestoreRestingContacts(start_.resting_contacts);
@@ -347,7 +361,10 @@ PetscErrorCode Simulation::Checkpoint(PetscInt step) {
   loop.frames = writer_->frames();
   for (const Deformation &d : deformations_) loop.deformations_applied.push_back(d.applied ? 1 : 0);
   PetscCall(contact_.GatherRestingContacts(&loop.resting_contacts));
-  PetscCall(WriteCheckpoint(writer_, loop, state_.positions, state_.velocities));
+  SchemeHistory history;
+  if (has_unknowns()) PetscCall(integrator_.GetHistory(&history));
+  PetscCall(WriteCheckpoint(writer_, loop, state_.positions, state_.velocities,
+                            has_unknowns() ? &history : nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -385,9 +385,41 @@ PetscErrorCode WriteSlotData(MPI_Comm comm, hid_t slot, const NaturalSlab &natur
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Natural vectors of a scheme's history: positions show the fixed vertices'
+// rest positions, the other vectors zeros there.
+bool IsPositionVector(const std::string &name) {
+  return name.find("positions") != std::string::npos;
+}
+
+// Collective. The time scheme's history into the slot: its name, its scalars
+// (rank 0) and its vectors (natural slabs).
+PetscErrorCode WriteSlotHistory(MPI_Comm comm, hid_t slot, const NaturalSlab &natural,
+                                const SchemeHistory &history, bool *ok) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  const hsize_t V = static_cast<hsize_t>(natural.num_vertices()), S = history.scalars.size();
+  *ok = *ok && SetAttribute(slot, "integrator", history.scheme) &&
+        WriteTable(slot, "integrator_scalars", H5T_NATIVE_DOUBLE, S, 1, {0, rank == 0 ? S : 0},
+                   history.scalars.data());
+  for (const auto &[name, vector] : history.vectors) {
+    Vec natural_vector;
+    PetscCall(natural.CreateVector(IsPositionVector(name), &natural_vector));
+    PetscCall(natural.Gather(vector, natural_vector));
+    const PetscScalar *values;
+    PetscCall(VecGetArrayRead(natural_vector, &values));
+    *ok =
+        *ok && WriteTable(slot, name.c_str(), H5T_NATIVE_DOUBLE, V, 3, natural.vertices(), values);
+    PetscCall(VecRestoreArrayRead(natural_vector, &values));
+    PetscCall(VecDestroy(&natural_vector));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 }  // namespace
 
-PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec x, Vec v) {
+PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec x, Vec v,
+                               const SchemeHistory *history) {
   PetscFunctionBeginUser;
   MPI_Comm comm = writer->comm();
   PetscMPIInt size;
@@ -407,6 +439,7 @@ PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec
   bool ok =
       slot >= 0 && SetAttribute(slot, "valid", int64_t{0}) && H5Fflush(file, H5F_SCOPE_LOCAL) >= 0;
   PetscCall(WriteSlotData(comm, slot, natural, state, natural_x, natural_v, &ok));
+  if (history) PetscCall(WriteSlotHistory(comm, slot, natural, *history, &ok));
   ok = ok && SetAttribute(slot, "step", int64_t{state.step}) &&
        SetAttribute(slot, "time", double{state.time}) &&
        SetAttribute(slot, "frames", int64_t{state.frames}) &&
@@ -417,6 +450,76 @@ PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec
   PetscCall(VecDestroy(&natural_v));
   PetscCall(AgreeOnAllRanks(comm, ok, "cannot write a checkpoint to '" + writer->path() + "'"));
   PetscCall(writer->Flush());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+namespace {
+
+// A fixed-length string attribute ("" when missing).
+std::string StringAttribute(hid_t object, const char *name) {
+  if (H5Aexists(object, name) <= 0) return "";
+  const hid_t attribute = H5Aopen(object, name, H5P_DEFAULT);
+  const hid_t type = attribute >= 0 ? H5Aget_type(attribute) : -1;
+  std::string value(type >= 0 ? H5Tget_size(type) : 0, '\0');
+  const bool ok = type >= 0 && H5Tget_class(type) == H5T_STRING && !H5Tis_variable_str(type) &&
+                  H5Aread(attribute, type, value.data()) >= 0;
+  if (type >= 0) H5Tclose(type);
+  if (attribute >= 0) H5Aclose(attribute);
+  return ok ? value.substr(0, value.find('\0')) : "";
+}
+
+// Collective. Reads the history of history->scheme from the open slot into
+// natural vectors (one per history vector) and scalars; false when the slot holds
+// another scheme's history or none.
+bool ReadSlotHistory(hid_t slot, RowSlab slab, int32_t num_vertices, SchemeHistory *history,
+                     const std::vector<Vec> &natural, std::vector<double> *scalars) {
+  if (StringAttribute(slot, "integrator") != history->scheme ||
+      !ReadArray(slot, "integrator_scalars", H5T_NATIVE_DOUBLE, scalars))
+    return false;
+  const std::vector<hsize_t> expected{static_cast<hsize_t>(num_vertices), 3};
+  bool ok = true;
+  for (size_t i = 0; i < history->vectors.size(); ++i) {
+    const char *name = history->vectors[i].first.c_str();
+    const hid_t set = ok && LinkExists(slot, name) ? H5Dopen2(slot, name, H5P_DEFAULT) : -1;
+    PetscScalar *values;
+    ok = set >= 0 && DatasetDims(set) == expected && VecGetArray(natural[i], &values) == 0;
+    if (ok) {
+      ok = ReadRows(set, H5T_NATIVE_DOUBLE, slab, values);
+      VecRestoreArray(natural[i], &values);
+    }
+    if (set >= 0) H5Dclose(set);
+  }
+  return ok;
+}
+
+}  // namespace
+
+PetscErrorCode ReadCheckpointHistory(MPI_Comm comm, const std::string &path,
+                                     const NaturalSlab &natural, SchemeHistory *history,
+                                     bool *found) {
+  PetscFunctionBeginUser;
+  std::vector<Vec> natural_vectors(history->vectors.size());
+  for (size_t i = 0; i < natural_vectors.size(); ++i)
+    PetscCall(
+        natural.CreateVector(IsPositionVector(history->vectors[i].first), &natural_vectors[i]));
+  H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);  // a missing history is not an error
+  const hid_t file = OpenParallelFile(comm, path, false);
+  int64_t step;
+  const int slot_index = file < 0 ? -1 : NewestSlot(file, &step);
+  const hid_t slot = slot_index < 0 ? -1 : H5Gopen2(file, kSlots[slot_index], H5P_DEFAULT);
+  std::vector<double> scalars;
+  int ok = slot >= 0 && ReadSlotHistory(slot, natural.vertices(), natural.num_vertices(), history,
+                                        natural_vectors, &scalars);
+  if (slot >= 0) H5Gclose(slot);
+  if (file >= 0) H5Fclose(file);
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &ok, 1, MPI_INT, MPI_MIN, comm));
+  *found = ok != 0;
+  if (*found) {
+    history->scalars = scalars;
+    for (size_t i = 0; i < natural_vectors.size(); ++i)
+      PetscCall(natural.Scatter(natural_vectors[i], history->vectors[i].second));
+  }
+  for (Vec &vector : natural_vectors) PetscCall(VecDestroy(&vector));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -17,7 +17,10 @@
 // Layout: two slots, /checkpoint/0 and /checkpoint/1, written alternately, each
 // with attributes valid, step, time, frames, ranks and datasets positions
 // [V][3], velocities [V][3], deformations_applied [D][1], resting_contacts
-// [n][2] (natural vertex, obstacle body; -1 the ground). A slot is marked
+// [n][2] (natural vertex, obstacle body; -1 the ground), and the time scheme's
+// history (solvers/time_scheme.hpp): attribute integrator (its -integrator
+// name), integrator_scalars [k][1] and its vectors [V][3] (bdf2:
+// previous_positions, previous_velocities; alpha: accelerations). A slot is marked
 // invalid and flushed before it is overwritten, and marked valid and flushed
 // after, so a run killed while checkpointing still holds the other slot. Every
 // rank writes the rows of its natural vertex slab (output.hpp's NaturalSlab);
@@ -43,6 +46,7 @@
 #include "fem/partition.hpp"
 #include "io/output.hpp"
 #include "io/scene.hpp"
+#include "solvers/time_scheme.hpp"
 
 namespace softbody {
 
@@ -77,9 +81,21 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, const Scen
                               const MeshShare &share, const DofLayout &layout, size_t deformations,
                               PetscInt steps, Vec x, Vec v, LoopState *state);
 
-// Collective. Writes `state` with x and v (PETSc order) into the writer's file,
-// in the slot not holding the newest checkpoint, and flushes the file. Only
-// rank 0's state.resting_contacts is used.
-PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec x, Vec v);
+// Collective. Writes `state` with x and v (PETSc order) and the time scheme's
+// history (may be null) into the writer's file, in the slot not holding the
+// newest checkpoint, and flushes the file. Only rank 0's state.resting_contacts
+// is used.
+PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec x, Vec v,
+                               const SchemeHistory *history = nullptr);
+
+// Collective. Reads the time scheme's history from the newest checkpoint of
+// `path` (after ReadCheckpoint checked it; `natural` is the result file's slab
+// plan): history->vectors (PETSc order) are filled and history->scalars set when
+// the slot holds the history of history->scheme (*found); otherwise nothing
+// changes and *found is false (a checkpoint of another -integrator, or of a
+// version without history).
+PetscErrorCode ReadCheckpointHistory(MPI_Comm comm, const std::string &path,
+                                     const NaturalSlab &natural, SchemeHistory *history,
+                                     bool *found);
 
 }  // namespace softbody

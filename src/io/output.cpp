@@ -568,6 +568,13 @@ PetscErrorCode ResultWriter::WriteWorld(const double gravity[3], const double *g
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode ResultWriter::WriteTextAttribute(const char *name, const std::string &value) {
+  PetscFunctionBeginUser;
+  const bool ok = SetAttribute(file_, name, value);
+  PetscCall(AgreeOnAllRanks(comm_, ok, "cannot write to '" + options_.path + "'"));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ResultWriter::Close(const std::vector<std::pair<std::string, double>> &statistics,
                                    int interrupted_by) {
   PetscFunctionBeginUser;

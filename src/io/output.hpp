@@ -133,6 +133,8 @@ class ResultWriter {
   // readers such as tools/render.py: "gravity" (3 doubles, m/s^2) and, when
   // the scene has a ground plane, "ground_y" (m).
   PetscErrorCode WriteWorld(const double gravity[3], const double *ground_y);
+  // Collective. A text attribute of the file's root (every rank gives the same value).
+  PetscErrorCode WriteTextAttribute(const char *name, const std::string &value);
   // Collective. Appends one frame; flushes every options.flush_every frames.
   PetscErrorCode WriteFrame(PetscReal time, Vec positions, Vec velocities,
                             const EnergySample &energy);

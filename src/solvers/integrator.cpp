@@ -36,6 +36,27 @@ constexpr PetscReal kEnergyRoundOff = 1e-12;
 // The iteration stalls when |g| keeps more than this fraction of its last value.
 constexpr PetscReal kStallRatio = 0.9;
 
+// -dt_adapt (AdaptiveStep). A new substep size is the old one times
+// kSafety (tol / error)^(1 / (order + 1)), the customary safety factor 0.9 so
+// that the next substep passes; a rejection shrinks it by at most kMaxShrink;
+// an accepted substep grows it only when the estimate allows kGrowthThreshold
+// (A is refactorised for every new size: sizes that would grow by less stay),
+// and by at most kMaxGrowth per substep.
+constexpr PetscReal kSafety = 0.9;
+constexpr PetscReal kMaxShrink = 0.2;
+constexpr PetscReal kGrowthThreshold = 1.5;
+constexpr PetscReal kMaxGrowth = 2.0;
+// Error constants of the estimates: backward Euler's local position error
+// h^2 x'' / 2; the second-order schemes' h^3 x^(3) / 6 (Newmark's constant is
+// 1/12, BDF2's 2/9).
+constexpr PetscReal kFirstOrderErrorConstant = 0.5;
+constexpr PetscReal kSecondOrderErrorConstant = 1.0 / 6.0;
+// A substep rejected this often in a row stops the run (the error estimate
+// does not fall with the size: not a smooth motion).
+constexpr int kMaxRejections = 30;
+// The substeps end the step when less than this fraction of it remains (round-off).
+constexpr PetscReal kIntervalTolerance = 1e-10;
+
 }  // namespace
 
 const char *const kElasticityModes[] = {"linear", "corotational", "ElasticityMode", "MODE_",
@@ -83,6 +104,10 @@ PetscErrorCode CheckIntegratorOptions(MPI_Comm comm, const IntegratorOptions &o)
              "option -newton_rtol: must be > 0 (got %g)", (double)o.newton_rtol);
   PetscCheck(o.newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
              "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o.newton_max_it);
+  PetscCheck(o.tolerance > 0 && o.tolerance < 1, comm, PETSC_ERR_USER_INPUT,
+             "option -tol: must be in (0, 1) (got %g)", (double)o.tolerance);
+  PetscCheck(o.rho_inf >= 0 && o.rho_inf <= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -alpha_rho_inf: must be in [0, 1] (got %g)", (double)o.rho_inf);
   PetscCheck(o.shear_scale > 0, comm, PETSC_ERR_USER_INPUT,
              "option -shear_scale: must be > 0 (got %g)", (double)o.shear_scale);
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -118,6 +143,10 @@ PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, Integrator
 PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscFunctionBeginUser;
   PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kChoice, "-mode", kElasticityModes},
+                                     {OptionSyntax::kChoice, "-integrator", kTimeSchemes},
+                                     {OptionSyntax::kReal, "-alpha_rho_inf"},
+                                     {OptionSyntax::kBool, "-dt_adapt"},
+                                     {OptionSyntax::kReal, "-tol"},
                                      {OptionSyntax::kReal, "-dt"},
                                      {OptionSyntax::kRealList, "-gravity"},
                                      {OptionSyntax::kInteger, "-steps"},
@@ -132,13 +161,33 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
   PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
   PetscInt gravity_count = 3;
   PetscBool gravity_set = PETSC_FALSE;
-  PetscOptionsBegin(comm, nullptr, "Time integration (backward Euler)", nullptr);
+  PetscOptionsBegin(comm, nullptr, "Time integration", nullptr);
   PetscCall(PetscOptionsEnum("-mode",
                              "Elasticity: linear (K factorised once) or corotational (per-tet "
                              "rotations, K rebuilt and solved every step)",
                              nullptr, kElasticityModes, (PetscEnum)o->mode, (PetscEnum *)&o->mode,
                              nullptr));
+  PetscCall(PetscOptionsEnum("-integrator",
+                             "Time integration scheme: be (backward Euler, first order), bdf2, "
+                             "newmark (beta 1/4, gamma 1/2: energy-conserving), alpha "
+                             "(generalized-alpha); all but be are second order "
+                             "(docs/integrators.md)",
+                             nullptr, kTimeSchemes, (PetscEnum)o->scheme, (PetscEnum *)&o->scheme,
+                             nullptr));
+  PetscCall(
+      PetscOptionsReal("-alpha_rho_inf",
+                       "-integrator alpha: spectral radius at dt*omega -> infinity, in [0, 1] "
+                       "(1: no numerical dissipation, 0: the most)",
+                       nullptr, o->rho_inf, &o->rho_inf, nullptr));
   PetscCall(PetscOptionsReal("-dt", "Time step (s)", nullptr, o->dt, &o->dt, nullptr));
+  PetscCall(PetscOptionsBool("-dt_adapt",
+                             "Take each time step in substeps sized by a local error estimate "
+                             "(-tol); frames stay at the steps' times (docs/integrators.md)",
+                             nullptr, o->adaptive, &o->adaptive, nullptr));
+  PetscCall(PetscOptionsReal("-tol",
+                             "-dt_adapt: largest relative local error of a substep (its estimate "
+                             "over |x - X| + dt |v|)",
+                             nullptr, o->tolerance, &o->tolerance, nullptr));
   PetscCall(
       PetscOptionsString("-dt_schedule",
                          "Change the time step during the run: t1:dt1,t2:dt2 (s) means dt1 from "
@@ -177,6 +226,19 @@ PetscReal TimeStepAt(const IntegratorOptions &options, PetscReal time) {
 }
 
 ImplicitEuler::~ImplicitEuler() {
+  VecDestroy(&saved_x_);
+  VecDestroy(&saved_v_);
+  VecDestroy(&saved_previous_x_);
+  VecDestroy(&saved_previous_v_);
+  VecDestroy(&saved_acceleration_);
+  VecDestroy(&step_x_);
+  VecDestroy(&step_v_);
+  VecDestroy(&previous_x_);
+  VecDestroy(&previous_v_);
+  VecDestroy(&acceleration_);
+  VecDestroy(&end_acceleration_);
+  VecDestroy(&combined_position_);
+  VecDestroy(&combined_velocity_);
   VecDestroy(&gravity_force_);
   VecDestroy(&x_start_);
   VecDestroy(&v_start_);
@@ -348,7 +410,7 @@ PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force,
     const int b = owned_body_[i];
     Eigen::Vector3d p = Eigen::Vector3d(m[3 * i] * v[3 * i], m[3 * i + 1] * v[3 * i + 1],
                                         m[3 * i + 2] * v[3 * i + 2]);
-    if (f) p += dt_ * Eigen::Vector3d(&f[3 * i]);
+    if (f) p += step_.force_step * Eigen::Vector3d(&f[3 * i]);
     (*momenta)[2 * b] += p;
     (*momenta)[2 * b + 1] += (Eigen::Vector3d(&X[3 * i]) - rigid_[b].centre).cross(p);
   }
@@ -363,25 +425,47 @@ PetscErrorCode ImplicitEuler::BodyMomenta(Vec w, bool with_force,
 
 PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscFunctionBeginUser;
-  if (dt_ > 0) ++stats_.time_step_changes;
-  dt_ = dt;
+  if (interval_ > 0) ++stats_.time_step_changes;
+  interval_ = dt;
+  if (options_.adaptive && (target_step_ <= 0 || target_step_ > dt)) target_step_ = dt;
+  dt_ = options_.adaptive ? target_step_ : dt;
+  PetscCall(PrepareStep());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::PrepareStep() {
+  PetscFunctionBeginUser;
+  step_ = SchemeStep(options_.scheme, dt_, previous_dt_, options_.rho_inf,
+                     options_.mode == MODE_LINEAR);
+  if (step_.force_step != system_force_step_ || step_.position_step != system_position_step_)
+    PetscCall(FillSystem(step_.force_step, step_.position_step));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// A = (1 + a h_f) M + (b h_f + h_f h_x) K: linear mode fills and factorises it;
+// corotational mode refills it at the next element pass (and the warp
+// preconditioner's linear system now).
+PetscErrorCode ImplicitEuler::FillSystem(PetscReal hf, PetscReal hx) {
+  PetscFunctionBeginUser;
+  system_force_step_ = hf;
+  system_position_step_ = hx;
+  const PetscReal a = options_.alpha, b = options_.beta;
   if (options_.mode == MODE_COROTATIONAL) {
     elastic_state_current_ = false;  // A depends on dt: refilled at the next step
     if (A_linear_) {
       StageScope stage(Stages().assembly);
-      PetscCall(assembler_.Fill(A_linear_, RowAssembler::FillTerms()
-                                               .Stiffness(options_.beta * dt + dt * dt)
-                                               .Mass(mass_, 1.0 + options_.alpha * dt)));
+      PetscCall(assembler_.Fill(
+          A_linear_,
+          RowAssembler::FillTerms().Stiffness(b * hf + hf * hx).Mass(mass_, 1.0 + a * hf)));
     }
     PetscFunctionReturn(PETSC_SUCCESS);
   }
-  const PetscReal a = options_.alpha, b = options_.beta;
   PetscLogDouble start, end;
   {
     StageScope stage(Stages().assembly);
     PetscCall(PetscTime(&start));
     PetscCall(assembler_.Fill(
-        A_, RowAssembler::FillTerms().Stiffness(b * dt + dt * dt).Mass(mass_, 1.0 + a * dt)));
+        A_, RowAssembler::FillTerms().Stiffness(b * hf + hf * hx).Mass(mass_, 1.0 + a * hf)));
     PetscCall(PetscTime(&end));
     stats_.assemble_seconds = end - start;
     ++stats_.assemblies;
@@ -392,6 +476,142 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   PetscCall(KSPSetUp(ksp_));
   PetscCall(PetscTime(&end));
   stats_.factor_seconds = end - start;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+namespace {
+
+// c is the single vector `which` with coefficient 1.
+bool IsUnit(const Combination &c, StepVector which) {
+  for (int i = 0; i < kStepVectors; ++i)
+    if (c[i] != (i == which ? 1.0 : 0.0)) return false;
+  return true;
+}
+
+}  // namespace
+
+PetscErrorCode ImplicitEuler::CreateHistoryVectors() {
+  PetscFunctionBeginUser;
+  if (step_x_) PetscFunctionReturn(PETSC_SUCCESS);
+  for (Vec *vector : {&step_x_, &step_v_, &previous_x_, &previous_v_, &acceleration_,
+                      &end_acceleration_, &combined_position_, &combined_velocity_}) {
+    PetscCall(VecDuplicate(rest_, vector));
+    PetscCall(VecZeroEntries(*vector));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Combine(const Combination &c, Vec x, Vec v, Vec result) {
+  PetscFunctionBeginUser;
+  const Vec vectors[kStepVectors] = {step_x_,       previous_x_, step_v_, previous_v_,
+                                     acceleration_, v,           x};
+  PetscCall(VecZeroEntries(result));
+  for (int i = 0; i < kStepVectors; ++i)
+    if (c[i] != 0) PetscCall(VecAXPY(result, c[i], vectors[i]));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::InitialAcceleration(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  // a = (f_ext - f_el(x) - b K v) / M - a v
+  const PetscReal b = options_.beta;
+  Vec stiffness_damping = combined_velocity_;  // b K v
+  if (options_.mode == MODE_LINEAR) {
+    PetscCall(VecWAXPY(displacement_, -1.0, rest_, x));
+    PetscCall(VecAXPY(displacement_, b, v));
+    PetscCall(MatMult(K_, displacement_, acceleration_));  // f_el + b K v
+    PetscCall(VecZeroEntries(stiffness_damping));
+  } else {
+    PetscCall(UpdateElasticState(x));  // f_el(x) and A = (1 + a h_f) M + (b h_f + h_f h_x) K(R)
+    PetscCall(VecCopy(elastic_force_, acceleration_));
+    const PetscReal hf = system_force_step_, hx = system_position_step_;
+    // K(R) v from A v - (1 + a h_f) M v.
+    PetscCall(VecZeroEntries(stiffness_damping));
+    if (b > 0) {
+      PetscCall(MatMult(A_, v, stiffness_damping));
+      PetscCall(VecPointwiseMult(combined_position_, mass_, v));
+      PetscCall(VecAXPY(stiffness_damping, -(1.0 + options_.alpha * hf), combined_position_));
+      PetscCall(VecScale(stiffness_damping, b / (b * hf + hf * hx)));
+    }
+  }
+  PetscCall(VecAXPY(acceleration_, 1.0, stiffness_damping));
+  PetscCall(VecScale(acceleration_, -1.0));
+  if (gravity_force_) PetscCall(VecAXPY(acceleration_, 1.0, gravity_force_));
+  PetscCall(VecPointwiseDivide(acceleration_, acceleration_, mass_));
+  PetscCall(VecAXPY(acceleration_, -options_.alpha, v));
+  acceleration_valid_ = true;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::BeginSchemeStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  if (options_.scheme == SCHEME_BE) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCall(CreateHistoryVectors());
+  PetscCall(VecCopy(x, step_x_));
+  PetscCall(VecCopy(v, step_v_));
+  if (step_.uses_acceleration && !acceleration_valid_) PetscCall(InitialAcceleration(x, v));
+  if (!IsUnit(step_.base_position, kXn)) {
+    PetscCall(Combine(step_.base_position, x, v, combined_position_));
+    PetscCall(VecCopy(combined_position_, x));
+    elastic_state_current_ = false;
+  }
+  if (!IsUnit(step_.base_velocity, kVn)) {
+    PetscCall(Combine(step_.base_velocity, x, v, combined_velocity_));
+    PetscCall(VecCopy(combined_velocity_, v));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::FinishSchemeStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  if (options_.scheme == SCHEME_BE) PetscFunctionReturn(PETSC_SUCCESS);
+  // a1, x1 and v1, all from the solved x, u and the state at the step's start.
+  if (step_.gives_acceleration) PetscCall(Combine(step_.end_acceleration, x, v, end_acceleration_));
+  const bool new_position = !IsUnit(step_.end_position, kXsolved);
+  if (new_position) PetscCall(Combine(step_.end_position, x, v, combined_position_));
+  if (!IsUnit(step_.end_velocity, kU)) {
+    PetscCall(Combine(step_.end_velocity, x, v, combined_velocity_));
+    PetscCall(VecCopy(combined_velocity_, v));
+  }
+  if (new_position) {
+    PetscCall(VecCopy(combined_position_, x));
+    elastic_state_current_ = false;
+  }
+  // The history of the next step: x_{n-1}, v_{n-1} = this step's x_n, v_n; a_n = a1.
+  std::swap(previous_x_, step_x_);
+  std::swap(previous_v_, step_v_);
+  if (step_.gives_acceleration) std::swap(acceleration_, end_acceleration_);
+  acceleration_valid_ = step_.gives_acceleration;
+  previous_dt_ = dt_;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::GetHistory(SchemeHistory *history) {
+  PetscFunctionBeginUser;
+  history->scheme = kTimeSchemes[options_.scheme];
+  history->vectors.clear();
+  history->scalars = {previous_dt_, acceleration_valid_ ? 1.0 : 0.0, target_step_};
+  if (options_.scheme == SCHEME_BE) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCall(CreateHistoryVectors());
+  // -dt_adapt's estimate needs the previous velocities with every scheme but be.
+  if (options_.scheme == SCHEME_BDF2)
+    history->vectors = {{"previous_positions", previous_x_}, {"previous_velocities", previous_v_}};
+  else if (options_.adaptive)
+    history->vectors = {{"previous_velocities", previous_v_}};
+  if (options_.scheme == SCHEME_ALPHA) history->vectors.push_back({"accelerations", acceleration_});
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SetHistory(const std::vector<double> &scalars, bool found) {
+  PetscFunctionBeginUser;
+  const bool usable = found && scalars.size() >= 2;
+  previous_dt_ = usable ? scalars[0] : 0;
+  acceleration_valid_ = usable && scalars[1] != 0;
+  if (options_.adaptive && usable && scalars.size() >= 3 && scalars[2] > 0) {
+    target_step_ = scalars[2];
+    dt_ = PetscMin(target_step_, interval_);
+  }
+  PetscCall(PrepareStep());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -415,6 +635,7 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     // A = (1 + a dt) M + (b dt + dt^2) sum_e R K_e R^T, f_el and the energy in one pass.
     StageScope stage(Stages().assembly);
     const PetscReal a = options_.alpha, b = options_.beta;
+    const PetscReal hf = system_force_step_, hx = system_position_step_;
     PetscLogDouble start, end;
     PetscCall(PetscTime(&start));
     // Stiffness damping (b > 0): the corotated displacement gradients, and within
@@ -423,8 +644,8 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
     RowAssembler::IncrementDamping damping{&corotated_, step_started_ ? &corotated_start_ : nullptr,
                                            damping_force_};
     PetscCall(assembler_.Fill(A_, RowAssembler::FillTerms()
-                                      .Stiffness(b * dt_ + dt_ * dt_)
-                                      .Mass(mass_, 1.0 + a * dt_)
+                                      .Stiffness(b * hf + hf * hx)
+                                      .Mass(mass_, 1.0 + a * hf)
                                       .CorotatedAt(x)
                                       .ElasticForce(elastic_force_)
                                       .StrainEnergy(&elastic_energy_)
@@ -449,12 +670,18 @@ PetscErrorCode ImplicitEuler::UpdateElasticState(Vec x) {
 PetscErrorCode ImplicitEuler::PrimeSolver(Vec x_first, PetscReal dt_first) {
   PetscFunctionBeginUser;
   if (options_.mode == MODE_LINEAR) PetscFunctionReturn(PETSC_SUCCESS);
-  const PetscReal dt = dt_;
-  dt_ = dt_first;
+  // A as the first step filled it (its scheme's coefficients without history),
+  // then this run's step sizes again (A is refilled at the next element pass).
+  const StepCoefficients first =
+      SchemeStep(options_.scheme, dt_first, 0, options_.rho_inf, options_.mode == MODE_LINEAR);
+  const PetscReal hf = system_force_step_, hx = system_position_step_;
+  system_force_step_ = first.force_step;
+  system_position_step_ = first.position_step;
   elastic_state_current_ = false;
   PetscCall(UpdateElasticState(x_first));
   PetscCall(KSPSetUp(ksp_));
-  dt_ = dt;
+  system_force_step_ = hf;
+  system_position_step_ = hx;
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -568,7 +795,7 @@ PetscErrorCode ImplicitEuler::CorrectRigidBodyVelocities(const std::vector<Eigen
   const PetscScalar *X;
   PetscCall(VecGetArray(v, &w));
   PetscCall(VecGetArrayRead(rest_, &X));
-  const double damping = 1.0 + options_.alpha * dt_;
+  const double damping = 1.0 + options_.alpha * step_.force_step;
   for (size_t i = 0; i < owned_body_.size(); ++i) {
     const RigidBody &body = rigid_[owned_body_[i]];
     const Eigen::Vector3d dp = target[2 * owned_body_[i]] / damping - solved[2 * owned_body_[i]];
@@ -593,7 +820,7 @@ PetscErrorCode ImplicitEuler::LinearStep(Vec x, Vec v) {
     PetscCall(BodyMomenta(v, false, &solved));
     PetscCall(CorrectRigidBodyVelocities(target, solved, v));
   }
-  PetscCall(VecAXPY(x, dt_, v));  // x1 = x0 + dt v1
+  PetscCall(VecAXPY(x, step_.position_step, v));  // x1 = x0 + dt v1
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -606,21 +833,28 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
   PetscCall(VecCopy(x, x_start_));
   {
     StageScope stage(Stages().contact);
-    PetscCall(contact->BeginStep(x_start_, v, dt_));
+    PetscCall(contact->BeginStep(x_start_, v, step_.position_step));
   }
+  // Corotational mode, schemes other than backward Euler: while no constraint
+  // holds, the step iterates as without contact (a single linearised solve
+  // would make them first order).
+  bool again = true;
+  if (options_.mode == MODE_COROTATIONAL && !step_.identity &&
+      contact->global_constraint_count() == 0)
+    PetscCall(IterateBeforeContact(x, v, contact, &again));
   // Sticking contacts that would need more than Coulomb's friction slip (their
   // friction impulse goes into rhs_) and the step is solved again.
-  bool again = true;
   for (int round = 0; again && round < kMaxContactRounds; ++round) {
     PetscCall(Solve(v, contact));
     StageScope stage(Stages().contact);
     bool added, released = false;
-    PetscCall(contact->AddPenetrations(x_start_, v, dt_, &added));
+    PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, &added));
     if (!added) PetscCall(contact->ReleaseSlipping(reactions_, rhs_, &released));
     again = added || released;
   }
   if (again) PetscCall(Solve(v, contact));
-  PetscCall(VecWAXPY(x, dt_, v, x_start_));  // x1 = x0 + dt v1
+  PetscCall(VecWAXPY(x, step_.position_step, v, x_start_));  // x1 = x0 + dt v1
+  PetscCall(FinishSchemeStep(x, v));  // the response acts on the scheme's x1, v1
   bool changed;
   {
     StageScope stage(Stages().contact);
@@ -630,25 +864,166 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+PetscErrorCode ImplicitEuler::LinearisedRightHandSide(Vec x, Vec v) {
   PetscFunctionBeginUser;
   // rhs = M v0 - dt f_el(x0) + dt f_ext
+  const PetscReal dt = step_.force_step;
   PetscCall(UpdateElasticState(x));
   PetscCall(VecPointwiseMult(rhs_, mass_, v));
-  PetscCall(VecAXPY(rhs_, -dt_, elastic_force_));
-  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt_, gravity_force_));
-  if (contact && contact->active())
+  PetscCall(VecAXPY(rhs_, -dt, elastic_force_));
+  if (gravity_force_) PetscCall(VecAXPY(rhs_, dt, gravity_force_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::IterateBeforeContact(Vec x, Vec v, ContactSolver *contact,
+                                                   bool *constrain) {
+  PetscFunctionBeginUser;
+  // The corotational iteration; it stands unless it takes a vertex into an obstacle.
+  PetscCall(CorotationalStep(x, v));
+  {
+    StageScope stage(Stages().contact);
+    PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, constrain));
+  }
+  reactions_.clear();
+  if (!*constrain) PetscFunctionReturn(PETSC_SUCCESS);
+  // Back to x_b, u_b for the single linearised solve with the constraints.
+  PetscCall(VecCopy(x_start_, x));
+  PetscCall(VecCopy(v_start_, v));
+  elastic_state_current_ = false;
+  PetscCall(LinearisedRightHandSide(x, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  if (!options_.adaptive) {
+    PetscCall(TakeStep(x, v, contact));
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  PetscCheck(!contact || !contact->active(), PetscObjectComm((PetscObject)x), PETSC_ERR_USER_INPUT,
+             "option -dt_adapt: not available with collisions or constraints (a rejected "
+             "substep would have to restore the contact state)");
+  PetscCall(AdaptiveStep(x, v));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SaveSubstepState(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscCall(CreateHistoryVectors());
+  if (!saved_x_)
+    for (Vec *vector :
+         {&saved_x_, &saved_v_, &saved_previous_x_, &saved_previous_v_, &saved_acceleration_})
+      PetscCall(VecDuplicate(rest_, vector));
+  PetscCall(VecCopy(x, saved_x_));
+  PetscCall(VecCopy(v, saved_v_));
+  PetscCall(VecCopy(previous_x_, saved_previous_x_));
+  PetscCall(VecCopy(previous_v_, saved_previous_v_));
+  PetscCall(VecCopy(acceleration_, saved_acceleration_));
+  saved_previous_dt_ = previous_dt_;
+  saved_acceleration_valid_ = acceleration_valid_;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::RestoreSubstepState(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscCall(VecCopy(saved_x_, x));
+  PetscCall(VecCopy(saved_v_, v));
+  PetscCall(VecCopy(saved_previous_x_, previous_x_));
+  PetscCall(VecCopy(saved_previous_v_, previous_v_));
+  PetscCall(VecCopy(saved_acceleration_, acceleration_));
+  previous_dt_ = saved_previous_dt_;
+  acceleration_valid_ = saved_acceleration_valid_;
+  elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated) {
+  PetscFunctionBeginUser;
+  // The velocity's first difference (backward Euler, schemes without history)
+  // or second difference (v1 - v0) - (h / h_prev) (v0 - v_prev).
+  const PetscReal h = dt_;
+  const bool second = options_.scheme != SCHEME_BE && saved_previous_dt_ > 0;
+  PetscCall(VecWAXPY(combined_velocity_, -1.0, saved_v_, v));
+  if (second) {
+    PetscCall(VecWAXPY(combined_position_, -1.0, saved_previous_v_, saved_v_));
+    PetscCall(VecAXPY(combined_velocity_, -h / saved_previous_dt_, combined_position_));
+  }
+  PetscReal difference, displacement, speed;
+  PetscCall(VecNorm(combined_velocity_, NORM_2, &difference));
+  PetscCall(VecWAXPY(combined_position_, -1.0, rest_, x));
+  PetscCall(VecNorm(combined_position_, NORM_2, &displacement));
+  PetscCall(VecNorm(v, NORM_2, &speed));
+  const PetscReal scale = displacement + h * speed;
+  *estimated = scale > 0;
+  *error = (second ? kSecondOrderErrorConstant : kFirstOrderErrorConstant) * h * difference /
+           (scale > 0 ? scale : 1);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  PetscReal elapsed = 0;
+  int rejections = 0;
+  while (interval_ - elapsed > kIntervalTolerance * interval_) {
+    // The substeps left, all of one size near the target (no new size: no refactorisation).
+    const PetscReal remaining = interval_ - elapsed;
+    dt_ = remaining / PetscMax(1.0, std::ceil(remaining / target_step_ - kIntervalTolerance));
+    PetscCall(SaveSubstepState(x, v));
+    PetscCall(PrepareStep());
+    PetscCall(TakeStep(x, v, nullptr));
+    PetscReal error;
+    bool estimated;
+    PetscCall(SubstepError(x, v, &error, &estimated));
+    const PetscReal order = options_.scheme != SCHEME_BE && saved_previous_dt_ > 0 ? 2 : 1;
+    const PetscReal factor = estimated && error > 0
+                                 ? kSafety * std::pow(options_.tolerance / error, 1 / (order + 1))
+                                 : kMaxGrowth;
+    if (estimated && error > options_.tolerance) {
+      PetscCall(RestoreSubstepState(x, v));
+      ++stats_.rejected_steps;
+      PetscCheck(++rejections <= kMaxRejections, PetscObjectComm((PetscObject)x),
+                 PETSC_ERR_NOT_CONVERGED,
+                 "option -tol: %d substeps in a row missed the local error %g (last %g at "
+                 "dt = %g s); the motion is not smooth enough for -dt_adapt",
+                 rejections, (double)options_.tolerance, (double)error, (double)dt_);
+      target_step_ = dt_ * PetscMax(kMaxShrink, PetscMin(factor, kSafety));
+      continue;
+    }
+    rejections = 0;
+    elapsed += dt_;
+    ++stats_.accepted_steps;
+    stats_.min_step = PetscMin(stats_.min_step, dt_);
+    stats_.max_step = PetscMax(stats_.max_step, dt_);
+    if (factor >= kGrowthThreshold)
+      target_step_ = PetscMin(interval_, dt_ * PetscMin(factor, kMaxGrowth));
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::TakeStep(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  // x, v to the scheme's x_b, u_b (backward Euler: x0, v0 as they are).
+  PetscCall(PrepareStep());
+  PetscCall(BeginSchemeStep(x, v));
+  PetscCall(LinearisedRightHandSide(x, v));
+  if (contact && contact->active()) {
     PetscCall(ContactStep(x, v, contact));
-  else if (options_.mode == MODE_COROTATIONAL)
-    PetscCall(CorotationalStep(x, v));
-  else
-    PetscCall(LinearStep(x, v));
+  } else {
+    if (options_.mode == MODE_COROTATIONAL)
+      PetscCall(CorotationalStep(x, v));
+    else
+      PetscCall(LinearStep(x, v));
+    PetscCall(FinishSchemeStep(x, v));
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
   PetscFunctionBeginUser;
-  const PetscReal a = options_.alpha, b = options_.beta, dt = dt_;
+  const PetscReal a = options_.alpha, dt = step_.force_step;
+  // The elastic and damping terms of h_f f_el(x_b + h_x u): E and Psi, per h_x of
+  // displacement, weigh h_f / h_x (1 for be, bdf2, newmark).
+  const PetscReal ratio = step_.force_step / step_.position_step, b = ratio * options_.beta;
   // g = M (v - v0) + a dt M v + dt f_el + b h - dt f_ext
   PetscCall(VecWAXPY(work_, -1.0, v_start_, v));  // v - v0
   PetscCall(VecPointwiseMult(g, mass_, work_));
@@ -666,8 +1041,8 @@ PetscErrorCode ImplicitEuler::Residual(Vec v, Vec g, PetscReal *merit) {
     PetscCall(VecDot(gravity_force_, v, &external));
   }
   // P = |v - v0|_M^2 / 2 + a dt |v|_M^2 / 2 + E + (b / dt) Psi - dt f_ext . v
-  *merit = 0.5 * inertia + 0.5 * a * dt * mass_damping + elastic_energy_ +
-           (b > 0 ? b / dt * damping_energy_ : 0) - dt * external;
+  *merit = 0.5 * inertia + 0.5 * a * dt * mass_damping + ratio * elastic_energy_ +
+           (b > 0 ? b / step_.position_step * damping_energy_ : 0) - dt * external;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -700,7 +1075,7 @@ PetscErrorCode ImplicitEuler::StepScales(Vec v, PetscReal *scale, PetscReal *sta
   PetscCall(VecDot(work_, v, &start_kinetic));
   PetscCall(VecNorm(elastic_force_, NORM_2, &force));
   if (gravity_force_) PetscCall(VecNorm(gravity_force_, NORM_2, &external));
-  *scale = momentum + dt_ * (force + external);
+  *scale = momentum + step_.force_step * (force + external);
   *start_energy = 0.5 * start_kinetic + elastic_energy_;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -730,7 +1105,7 @@ PetscErrorCode ImplicitEuler::LineSearch(Vec x, PetscReal slope, PetscReal scale
   PetscReal s = 1;
   for (int halvings = 0;; ++halvings) {
     PetscCall(VecWAXPY(iterate_, s, direction_, v_trial_base_));
-    PetscCall(VecWAXPY(x, dt_, iterate_, x_start_));
+    PetscCall(VecWAXPY(x, step_.position_step, iterate_, x_start_));
     elastic_state_current_ = false;
     PetscCall(UpdateElasticState(x));
     PetscCall(Residual(iterate_, rhs_, merit));
@@ -755,7 +1130,7 @@ PetscErrorCode ImplicitEuler::IterateEnergy(PetscReal *energy, PetscReal *work) 
   PetscCall(VecPointwiseMult(work_, mass_, iterate_));
   PetscCall(VecDot(work_, iterate_, &kinetic));
   if (gravity_force_) PetscCall(VecDot(gravity_force_, iterate_, work));
-  *energy = 0.5 * kinetic + elastic_energy_ - dt_ * *work;
+  *energy = 0.5 * kinetic + elastic_energy_ - step_.force_step * *work;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -807,10 +1182,13 @@ PetscErrorCode ImplicitEuler::CorotationalStep(Vec x, Vec v) {
                         (double)gain, (double)start_energy));
     if (residual <= tolerance) break;
     // The linearised step stands unless it gains energy (round-off allowed).
-    const PetscReal round_off =
-        kEnergyRoundOff * (start_energy + PetscAbsReal(energy) + dt_ * PetscAbsReal(work));
-    dissipative = gain <= round_off;
-    if (k == 0 && !options_.newton_always && dissipative) break;
+    const PetscReal round_off = kEnergyRoundOff * (start_energy + PetscAbsReal(energy) +
+                                                   step_.force_step * PetscAbsReal(work));
+    // The energy test is backward Euler's (its steps never gain energy); the
+    // other schemes' steps stand on |g| alone.
+    const bool backward_euler = step_.identity;
+    dissipative = !backward_euler || gain <= round_off;
+    if (k == 0 && backward_euler && !options_.newton_always && dissipative) break;
     // A dissipative iterate also stands once the iteration stalls (|g| falls by
     // less than a tenth: a kink of R at an inverted element, or the left-out
     // rotation derivative with lambda >> mu); counted as stopped short.
@@ -840,7 +1218,9 @@ PetscErrorCode ImplicitEuler::TimeAssembly(Vec x, PetscInt repeats, std::vector<
     PetscCallMPI(MPI_Barrier(PetscObjectComm((PetscObject)x)));
     PetscCall(PetscTime(&start));
     RowAssembler::FillTerms terms =
-        RowAssembler::FillTerms().Stiffness(b * dt_ + dt_ * dt_).Mass(mass_, 1.0 + a * dt_);
+        RowAssembler::FillTerms()
+            .Stiffness(b * system_force_step_ + system_force_step_ * system_position_step_)
+            .Mass(mass_, 1.0 + a * system_force_step_);
     if (rotated) terms.CorotatedAt(x).ElasticForce(elastic_force_).StrainEnergy(&elastic_energy_);
     PetscCall(assembler_.Fill(A_, terms));
     PetscCall(PetscTime(&end));

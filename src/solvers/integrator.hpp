@@ -2,9 +2,22 @@
 //
 //     M x'' + D x' + f_el(x) = f_ext,    D = a M + b K  (Rayleigh damping),
 //
-// with backward (implicit) Euler in velocity form, one linear solve per step:
+// by one of the schemes of -integrator (time_scheme.hpp: backward Euler, the
+// default; BDF2; implicit Newmark; generalized-alpha). Each scheme's step is one
+// solve for a velocity-like unknown u, in backward Euler's velocity form:
+//
+//     A u = M u_b - h_f f_el(x_b) + h_f f_ext,    x = x_b + h_x u,
+//     A = (1 + a h_f) M + (b h_f + h_f h_x) K,
+//
+// with the scheme's base point x_b, u_b and step sizes h_x, h_f (s); the new
+// positions and velocities are combinations of x, u and the old state (and, per
+// scheme, its history: previous positions and velocities, or accelerations).
+// Backward Euler: h_x = h_f = dt, x_b = x0, u_b = v0, x1 = x, v1 = u:
 //
 //     (M + dt D + dt^2 K) v1 = M v0 - dt f_el(x0) + dt f_ext,    x1 = x0 + dt v1.
+//
+// Below, "dt" in a formula of the step stands for h_f (forces, damping) or h_x
+// (positions), "x0, v0" for x_b, u_b and "v" for u.
 //
 // M is the lumped mass (kg, kept as a Vec), X the rest positions (m), x positions
 // (m), v velocities (m/s), dt in s, a in 1/s, b in s. D is never formed:
@@ -36,6 +49,9 @@
 //   |v0|_M^2 / 2 + E(x0)); such steps iterate until |g| <= -newton_rtol
 //   (|M v0| + dt |f_el(x0)| + dt |f_ext|) (-newton_always: every step does), or
 //   until the iteration stalls at an iterate that gains no energy (reported).
+//   The energy test is backward Euler's (its step never gains energy); the
+//   other schemes iterate every step until |g| <= -newton_rtol (scale) or the
+//   iteration stalls (reported as stopped short).
 //   With contact, the step is the single linearised solve (projected_solve.hpp).
 // Energies: kinetic v^T M v / 2; elastic (x - X)^T K (x - X) / 2 in linear mode
 // (summed element by element, each term non-negative),
@@ -45,6 +61,7 @@
 
 #include <petscksp.h>
 
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -52,6 +69,7 @@
 #include "fem/assembly.hpp"
 #include "fem/row_assembly.hpp"
 #include "solvers/projected_solve.hpp"
+#include "solvers/time_scheme.hpp"
 
 namespace softbody {
 
@@ -60,6 +78,17 @@ extern const char *const kElasticityModes[];
 
 struct IntegratorOptions {
   ElasticityMode mode = MODE_LINEAR;
+  TimeScheme scheme = SCHEME_BE;  // -integrator
+  // -alpha_rho_inf: generalized-alpha's spectral radius at dt*omega -> infinity.
+  // 0.9 damps an unresolved mode by 10 % per step while a mode resolved by 20
+  // steps per period loses only 0.05 % of its amplitude per period
+  // (docs/integrators.md); 1 is Newmark without dissipation, 0 the most.
+  PetscReal rho_inf = 0.9;
+  // -dt_adapt: each step of -dt (the interval between steps the time loop sees,
+  // frames and -dt_schedule) is taken in substeps whose size follows a local
+  // error estimate: relative error per substep at most -tol (see Step).
+  PetscBool adaptive = PETSC_FALSE;
+  PetscReal tolerance = 1e-4;
   PetscReal dt = 0.02;  // s
   // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
@@ -108,9 +137,13 @@ struct SolverStatistics {
   // corotational: dissipative steps that stalled above -newton_rtol
   PetscInt newton_stopped_short = 0;
   PetscInt fallback_solves = 0;  // solves repeated by the direct fallback after a breakdown
-  std::string choice;            // the default solver's choice and its reason (empty: none checked)
+  // -dt_adapt: accepted and rejected substeps, the accepted substeps' sizes (s).
+  PetscInt accepted_steps = 0, rejected_steps = 0;
+  PetscReal min_step = PETSC_MAX_REAL, max_step = 0;
+  std::string choice;  // the default solver's choice and its reason (empty: none checked)
 };
 
+// The integrator of every scheme (the class keeps backward Euler's name).
 class ImplicitEuler {
  public:
   ImplicitEuler() = default;
@@ -134,7 +167,13 @@ class ImplicitEuler {
   PetscErrorCode SetBodies(std::vector<int32_t> owned_body, int num_bodies);
   // Collective. New time step size (s); linear mode refills A and refactorises.
   PetscErrorCode SetTimeStep(PetscReal dt);
-  // Collective. Advances positions x and velocities v by one step; the external
+  // Collective. Advances positions x and velocities v by one step; with
+  // -dt_adapt, by substeps of the step: each is repeated with a smaller size
+  // while its local error estimate exceeds -tol (relative to |x - X| + h |v|:
+  // backward Euler h |v1 - v0| / 2, the second-order schemes
+  // h |v1 - v0 - (h / h_prev)(v0 - v_prev)| / 6, the velocity's second difference),
+  // and the next substeps' size follows the estimate (grown only beyond a
+  // factor, so that A is refactorised seldom); not with contact. The external
   // force is gravity, f_ext = M g (none when g = 0). With contact (may be null):
   // solve, constrain the vertices the step would take inside obstacles, solve
   // again with the constraints until no new one appears (contact.hpp), then the
@@ -146,8 +185,21 @@ class ImplicitEuler {
   // run (GAMG copies the near-null space at its first set-up and reuses the copy
   // at every later one, until PCReset). Nothing to do in linear mode.
   PetscErrorCode PrimeSolver(Vec x_first, PetscReal dt_first);
-  // Not collective. To be called after positions were changed outside Step.
-  void PositionsChanged() { elastic_state_current_ = false; }
+  // Not collective. To be called after positions were changed outside Step
+  // (-deform): the schemes' history restarts (bdf2 takes a backward Euler step,
+  // alpha takes the acceleration from the equation of motion).
+  void PositionsChanged() {
+    elastic_state_current_ = false;
+    previous_dt_ = 0;
+    acceleration_valid_ = false;
+  }
+  // Collective. The scheme's history for a checkpoint (vectors created on first
+  // use; after SetHistory they hold what a checkpoint stored).
+  PetscErrorCode GetHistory(SchemeHistory *history);
+  // Collective. After a restart: found tells whether the checkpoint held this
+  // scheme's history (its vectors, from GetHistory, now filled, and scalars);
+  // without it the history starts afresh as after PositionsChanged.
+  PetscErrorCode SetHistory(const std::vector<double> &scalars, bool found);
   // Collective. Kinetic, elastic and gravitational energy (J) of the state (x, v);
   // the gravitational energy is -sum_i m_i g . x_i (zero at the origin).
   PetscErrorCode Energies(Vec x, Vec v, EnergySample *energy);
@@ -164,7 +216,8 @@ class ImplicitEuler {
   Mat stiffness_matrix() const { return K_; }
   // Elements this rank's assembly computes (its own and those shared with a neighbour).
   size_t assembled_elements() const { return assembler_.num_elements(); }
-  PetscReal time_step() const { return dt_; }
+  PetscReal time_step() const { return interval_; }
+  TimeScheme scheme() const { return options_.scheme; }
   const SolverStatistics &statistics() const { return stats_; }
 
  private:
@@ -186,6 +239,25 @@ class ImplicitEuler {
   // Collective. A v = rhs again by the direct fallback (-fallback_direct) after
   // the solver broke down with `failed`; its reason in *reason.
   PetscErrorCode SolveDirectly(Vec v, KSPConvergedReason failed, KSPConvergedReason *reason);
+  // The scheme's step: its coefficients for the next step (A refilled, linear
+  // mode: refactorised, when its step sizes changed); x, v from x_n, v_n to
+  // x_b, u_b (the state kept); after the solve, x, v to x1, v1 and the history.
+  PetscErrorCode PrepareStep();
+  // One step of size dt_ (Step without -dt_adapt).
+  PetscErrorCode TakeStep(Vec x, Vec v, ContactSolver *contact);
+  // -dt_adapt: the substeps of one step; saving and restoring the state of a
+  // substep; its relative local error estimate (*estimated false: no history).
+  PetscErrorCode AdaptiveStep(Vec x, Vec v);
+  PetscErrorCode SaveSubstepState(Vec x, Vec v);
+  PetscErrorCode RestoreSubstepState(Vec x, Vec v);
+  PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);
+  PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
+  PetscErrorCode BeginSchemeStep(Vec x, Vec v);
+  PetscErrorCode FinishSchemeStep(Vec x, Vec v);
+  PetscErrorCode Combine(const Combination &c, Vec x, Vec v, Vec result);
+  // alpha without history: a = M^-1 (f_ext - D v - f_el(x)) at the state (x, v).
+  PetscErrorCode InitialAcceleration(Vec x, Vec v);
+  PetscErrorCode CreateHistoryVectors();
   // Linear mode: per body, the momentum and angular momentum about the rest
   // centre of mass of m_i w_i (+ dt f_ext,i when with_force).
   PetscErrorCode BodyMomenta(Vec w, bool with_force, std::vector<Eigen::Vector3d> *momenta);
@@ -197,6 +269,12 @@ class ImplicitEuler {
                                             const std::vector<Eigen::Vector3d> &solved, Vec v);
   // Step with contact: solve, constrain, solve again (Step).
   PetscErrorCode ContactStep(Vec x, Vec v, ContactSolver *contact);
+  // rhs = M u_b - h_f f_el(x_b) + h_f f_ext for the state x = x_b, v = u_b.
+  PetscErrorCode LinearisedRightHandSide(Vec x, Vec v);
+  // Corotational mode with contact but no constraint yet, schemes other than
+  // backward Euler: the corotational iteration; *constrain when it took a
+  // vertex into an obstacle (x, v and rhs are then back at x_b, u_b).
+  PetscErrorCode IterateBeforeContact(Vec x, Vec v, ContactSolver *contact, bool *constrain);
   // Corotational step without contact: the Newton-type iteration above, in its
   // steps: x0, v0 and the damping's start; g's scale and the start energy; the
   // direction A_k d = -g(v_k) and the slope g.d; the line search on the step
@@ -216,7 +294,25 @@ class ImplicitEuler {
 
   const LocalElements *elements_ = nullptr;
   IntegratorOptions options_;
-  PetscReal dt_ = 0;
+  PetscReal dt_ = 0;        // the size of the next (during Step: this) step or substep (s)
+  PetscReal interval_ = 0;  // the step the time loop asked for (s); dt_ without -dt_adapt
+  // -dt_adapt: the substep size the error estimate asks for (s); the state at the
+  // start of a substep (x, v, history) to restore after a rejection.
+  PetscReal target_step_ = 0, saved_previous_dt_ = 0;
+  bool saved_acceleration_valid_ = false;
+  Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
+      saved_previous_v_ = nullptr, saved_acceleration_ = nullptr;
+  // The next (during Step: this) step's coefficients; A's step sizes (h_f, h_x).
+  StepCoefficients step_;
+  PetscReal system_force_step_ = 0, system_position_step_ = 0;
+  // History: the last step's size (0: none, e.g. before the first step); x_n and
+  // v_n of the current step; bdf2's x_{n-1}, v_{n-1}; alpha's a_n and whether it
+  // holds the acceleration of the current state.
+  PetscReal previous_dt_ = 0;
+  Vec step_x_ = nullptr, step_v_ = nullptr, previous_x_ = nullptr, previous_v_ = nullptr,
+      acceleration_ = nullptr, end_acceleration_ = nullptr;
+  Vec combined_position_ = nullptr, combined_velocity_ = nullptr;  // work vectors of Combine
+  bool acceleration_valid_ = false;
   Vec rest_ = nullptr, mass_ = nullptr;  // not owned
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
