@@ -175,6 +175,10 @@ PetscErrorCode Simulation::ReadScene() {
 PetscErrorCode Simulation::DistributeMesh() {
   PetscFunctionBeginUser;
   PetscCall(BuildDofLayout(comm_, options_.partition, &share_, &layout_));
+  // Contact (which may run only with whole meshes) and -export_matrices still
+  // read the replicated numbering.
+  if (scene_.meshes_held || !options_.output.matrix_dir.empty())
+    PetscCall(ReplicateNumbering(comm_, share_, &layout_));
   PetscCall(MigrateTets(comm_, share_, layout_, &tets_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

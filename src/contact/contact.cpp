@@ -39,8 +39,11 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   DecideParts(scene, layout);
   PetscCall(distance_.Setup(comm, scene, options));
   if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
-  PetscCheck(scene.meshes_held, comm, PETSC_ERR_PLIB,
-             "contact needs every mesh on every rank (ContactMayNeedWholeMeshes)");
+  PetscCheck(scene.meshes_held &&
+                 static_cast<PetscInt>(layout.free_of_natural.size()) == scene.num_vertices(),
+             comm, PETSC_ERR_PLIB,
+             "contact needs every mesh and the replicated numbering on every rank "
+             "(ContactMayNeedWholeMeshes)");
 
   state_.SetupBodies(scene);
   SharpFeatures::Candidates candidates;

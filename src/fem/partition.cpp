@@ -225,25 +225,6 @@ PetscErrorCode SpreadNumbering(MPI_Comm comm, IS numbers, MeshShare *share, DofL
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Collective. The replicated numbering arrays (free_of_natural, natural_of_free,
-// petsc_of_free, O(N) on every rank) gathered from the slabs: contact and output
-// still read them (docs/design/scale-out.md).
-PetscErrorCode ReplicateNumbering(MPI_Comm comm, const MeshShare &share, DofLayout *layout) {
-  PetscFunctionBeginUser;
-  std::vector<PetscInt> naturals, petsc;
-  for (PetscInt i = 0; i < share.slab_size(); ++i)
-    if (share.free_index[i] >= 0) {
-      naturals.push_back(share.first_vertex + i);
-      petsc.push_back(share.petsc_vertex[i]);
-    }
-  PetscCall(AllGatherRecords(comm, naturals, &layout->natural_of_free));
-  PetscCall(AllGatherRecords(comm, petsc, &layout->petsc_of_free));
-  layout->free_of_natural.assign(share.num_vertices, -1);
-  for (PetscInt f = 0; f < layout->num_free(); ++f)
-    layout->free_of_natural[layout->natural_of_free[f]] = f;
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 }  // namespace
 
 PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, MeshShare *share,
@@ -269,7 +250,22 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, Me
   PetscCall(NumberByPart(comm, part, layout, &numbers));
   PetscCall(SpreadNumbering(comm, numbers, share, layout));
   PetscCall(ISDestroy(&numbers));
-  PetscCall(ReplicateNumbering(comm, *share, layout));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ReplicateNumbering(MPI_Comm comm, const MeshShare &share, DofLayout *layout) {
+  PetscFunctionBeginUser;
+  std::vector<PetscInt> naturals, petsc;
+  for (PetscInt i = 0; i < share.slab_size(); ++i)
+    if (share.free_index[i] >= 0) {
+      naturals.push_back(share.first_vertex + i);
+      petsc.push_back(share.petsc_vertex[i]);
+    }
+  PetscCall(AllGatherRecords(comm, naturals, &layout->natural_of_free));
+  PetscCall(AllGatherRecords(comm, petsc, &layout->petsc_of_free));
+  layout->free_of_natural.assign(share.num_vertices, -1);
+  for (PetscInt f = 0; f < layout->num_free(); ++f)
+    layout->free_of_natural[layout->natural_of_free[f]] = f;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -36,9 +36,9 @@ struct DofLayout {
   // This rank's share (O(local), what scalable code uses): the natural vertex of
   // each owned PETSc vertex, in PETSc order.
   std::vector<PetscInt> natural_of_owned;
-  // Replicated (O(N) on every rank), gathered for contact and output, which still
-  // read them (docs/design/scale-out.md); new code uses natural_of_owned or a
-  // MeshShare lookup (mesh_share.hpp).
+  // Replicated (O(N) on every rank; empty unless ReplicateNumbering ran): for
+  // contact and -export_matrices, which still read them (docs/design/scale-out.md);
+  // new code uses natural_of_owned or a MeshShare lookup (mesh_share.hpp).
   std::vector<PetscInt> free_of_natural;  // natural vertex -> free index, or -1
   std::vector<PetscInt> natural_of_free;  // free index -> natural vertex
   std::vector<PetscInt> petsc_of_free;    // free index -> PETSc vertex
@@ -77,6 +77,11 @@ struct DofLayout {
 // share->free_index and share->petsc_vertex for the slab, and the layout.
 PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, MeshShare *share,
                               DofLayout *layout);
+
+// Collective, after BuildDofLayout. The replicated arrays free_of_natural,
+// natural_of_free and petsc_of_free (O(N) on every rank), gathered from the slabs:
+// only for what still reads them, contact and -export_matrices.
+PetscErrorCode ReplicateNumbering(MPI_Comm comm, const MeshShare &share, DofLayout *layout);
 
 // Not collective. The body of a natural vertex (the last body starting at or before it).
 int32_t BodyOfNatural(const Scene &scene, PetscInt natural);

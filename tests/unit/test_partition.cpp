@@ -202,7 +202,9 @@ struct BuiltLayout {
   PetscErrorCode status;
   BuiltLayout(const Scene &scene, Partitioner partitioner)
       : share(ShareScene(scene, Rank(), Size())),
-        status(BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions{partitioner}, &share, &layout)) {}
+        status(BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions{partitioner}, &share, &layout)) {
+    if (status == 0) status = ReplicateNumbering(PETSC_COMM_WORLD, share, &layout);
+  }
 };
 
 TEST(DofLayout, NumberedPartByPartInNaturalOrder) {
