@@ -125,6 +125,10 @@ def parse_arguments(argv):
                default=[[10000, 100000]], help="tet counts of the beam (default 1e4,1e5; 1e6 on request)")
     add_option(parser, "bench_tetgen_tets", dest="tetgen_tets", metavar="N", nargs="+", type=comma_list(_count),
                default=[[20000, 100000, 500000]], help="tet counts of the TetGen meshes (default 2e4,1e5,5e5)")
+    add_option(parser, "bench_tetgen_volumes", dest="tetgen_volumes", metavar="A", nargs="+",
+               type=comma_list(float), default=[[]],
+               help="TetGen volume bounds a (m^3) in place of -bench_tetgen_tets: one mesh each, as "
+                    "`tetgen -pq1.414a<A>` (e.g. 0.034,0.0033 on the peers' ellipsoid.off, docs/peers.md)")
     add_option(parser, "bench_surface", dest="surface", metavar="FILE.off", default=None,
                help="closed OFF surface that TetGen meshes (default: an ellipsoid of semi-axes 2, 3, 5 m, "
                     "written into meshes/)")
@@ -148,6 +152,9 @@ def parse_arguments(argv):
     args.meshes = flatten(args.meshes)
     args.tets = flatten(args.tets)
     args.tetgen_tets = flatten(args.tetgen_tets)
+    args.tetgen_volumes = flatten(args.tetgen_volumes)
+    if any(not (a > 0 and math.isfinite(a)) for a in args.tetgen_volumes):
+        parser.error("-bench_tetgen_volumes must be positive")
     args.modes = flatten(args.modes)
     args.solvers = flatten(args.solvers)
     args.ranks = flatten(args.ranks)
@@ -340,16 +347,20 @@ def search_volume_bound(args, surface, target, out):
     return bound, mesh_surface(args, surface, bound, out)
 
 
-def write_tetgen(args, folder, surface, target_tets):
-    """Writes folder/NAME-N.h5 (the TetGen mesh of `surface` at about target_tets tets) and
-    folder/NAME-N.txt (the struck scene); reuses them when present. The scene's first
-    comment line records the switches and the count. Returns the scene path."""
+def write_tetgen(args, folder, surface, target_tets=None, bound=None):
+    """Writes folder/NAME-N.h5 (the TetGen mesh of `surface` at about target_tets tets, or
+    at the volume bound `bound`: NAME-aBOUND.h5) and the struck scene beside it (.txt);
+    reuses them when present. The scene's first comment line records the switches and the
+    count. Returns the scene path."""
     name = os.path.splitext(os.path.basename(surface))[0]
-    mesh_path = os.path.join(folder, f"{name}-{target_tets}.h5")
-    scene_path = os.path.join(folder, f"{name}-{target_tets}.txt")
+    stem = os.path.join(folder, f"{name}-{target_tets}" if bound is None else f"{name}-a{bound:g}")
+    mesh_path, scene_path = stem + ".h5", stem + ".txt"
     if os.path.exists(mesh_path) and os.path.exists(scene_path):
         return scene_path
-    bound, tets = search_volume_bound(args, surface, target_tets, mesh_path + ".part.h5")
+    if bound is None:
+        bound, tets = search_volume_bound(args, surface, target_tets, mesh_path + ".part.h5")
+    else:
+        tets = mesh_surface(args, surface, bound, mesh_path + ".part.h5")
     os.replace(mesh_path + ".part.h5", mesh_path)
     # softbody-convert puts the OFF vertices first, in file order: the strike is set on them.
     vertices, _ = read_off(surface)
@@ -388,17 +399,19 @@ def ladder(args, folder):
         rungs += [("beam", tets, write_beam(folder, tets)) for tets in args.tets]
     if "tetgen" in args.meshes:
         surface = args.surface
+        os.makedirs(folder, exist_ok=True)
         if surface is None:
-            os.makedirs(folder, exist_ok=True)
             surface = os.path.join(folder, "ellipsoid.off")
             if not os.path.exists(surface):
                 write_off(surface, *ellipsoid_surface())
-        for tets in args.tetgen_tets:
+        sizes = [(None, a) for a in args.tetgen_volumes] or [(tets, None) for tets in args.tetgen_tets]
+        for tets, bound in sizes:
             try:
-                rungs.append(("tetgen", tets, write_tetgen(args, folder, surface, tets)))
+                rungs.append(("tetgen", tets or 0, write_tetgen(args, folder, surface, tets, bound)))
             except (RuntimeError, subprocess.TimeoutExpired) as error:
-                rungs.append(("tetgen", tets, None))
-                print(f"bench: meshing {surface} at about {tets} tets failed: {error}", flush=True)
+                rungs.append(("tetgen", tets or 0, None))
+                what = f"about {tets} tets" if bound is None else f"volume bound {bound:g}"
+                print(f"bench: meshing {surface} at {what} failed: {error}", flush=True)
     return rungs
 
 
@@ -424,15 +437,15 @@ def time_step(args, mesh):
 
 
 def run_point(args, mesh, scene, tets, mode, solver, ranks):
-    name = f"{mesh}-{tets}-{mode}-{solver}-{ranks}"
-    command = [args.mpiexec, "-n", str(ranks), args.softbody, "-scene", os.path.abspath(scene), "-mode", mode,
-               "-options_file", os.path.join(CONFIG_DIR, solver + ".opts"), "-dt", repr(time_step(args, mesh)),
-               "-steps", str(args.steps), "-bench"] + list(args.extra)
     row = {"mesh": mesh, "tets": tets, "mode": mode, "solver": solver, "ranks": ranks, "status": "failed",
            "message": ""}
     if scene is None:
         row["message"] = "meshing failed"
         return row
+    name = f"{os.path.splitext(os.path.basename(scene))[0]}-{mode}-{solver}-{ranks}"
+    command = [args.mpiexec, "-n", str(ranks), args.softbody, "-scene", os.path.abspath(scene), "-mode", mode,
+               "-options_file", os.path.join(CONFIG_DIR, solver + ".opts"), "-dt", repr(time_step(args, mesh)),
+               "-steps", str(args.steps), "-bench"] + list(args.extra)
     try:
         proc = subprocess.run(command, capture_output=True, text=True, timeout=args.timeout,
                               env=mpi_environment(), cwd=ROOT)
@@ -638,9 +651,11 @@ def write_outputs(args, rows, started):
               f"{1e3 * VEGA_COROTATIONAL_STEP:.3g} ms per step on one core.")
     md.append("")
     surface = [] if args.surface is None else [" -bench_surface " + args.surface]
-    md.append("Reproduce: `./run bench -bench_meshes " + ",".join(args.meshes) + " -bench_tets "
-              + ",".join(str(t) for t in args.tets) + " -bench_tetgen_tets "
-              + ",".join(str(t) for t in args.tetgen_tets) + "".join(surface) + " -bench_modes "
+    sizes = (" -bench_tetgen_volumes " + ",".join(f"{a:g}" for a in args.tetgen_volumes) if args.tetgen_volumes
+             else " -bench_tetgen_tets " + ",".join(str(t) for t in args.tetgen_tets))
+    beam = " -bench_tets " + ",".join(str(t) for t in args.tets) if "beam" in args.meshes else ""
+    tetgen = sizes + "".join(surface) if "tetgen" in args.meshes else ""
+    md.append("Reproduce: `./run bench -bench_meshes " + ",".join(args.meshes) + beam + tetgen + " -bench_modes "
               + ",".join(args.modes) + " -bench_solvers " + ",".join(args.solvers) + " -bench_ranks "
               + ",".join(str(n) for n in args.ranks) + "`.")
     with open(os.path.join(args.study_dir, "bench.md"), "w") as f:
