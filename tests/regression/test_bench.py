@@ -80,7 +80,8 @@ def check_ellipsoid(checks):
             edge = (int(t[k]), int(t[(k + 1) % 3]))
             edges[edge] = edges.get(edge, 0) + 1
     closed = all(n == 1 and edges.get((j, i)) == 1 for (i, j), n in edges.items())
-    checks.check(closed and len(edges) == 2 * 480, "ellipsoid: closed, every edge in two triangles, consistently oriented")
+    checks.check(closed and len(edges) == 2 * 480,
+                 "ellipsoid: closed, every edge in two triangles, consistently oriented")
     X = vertices[triangles]
     volume = np.einsum("ij,ij->i", X[:, 0], np.cross(X[:, 1], X[:, 2])).sum() / 6
     exact = 4 / 3 * np.pi * a * b * c
