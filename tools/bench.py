@@ -7,13 +7,15 @@ Two families of meshes (-bench_meshes):
   struck at its end faces (x = 0 at +vz, x = 4 m at -vz: it spins about y and
   bends);
 - tetgen: TetGen meshes (softbody-convert, switches pq1.414 and a volume bound
-  a) of the closed surface -bench_surface at about each of -bench_tetgen_tets
-  tets, in TetGen's own vertex and tet order, like the meshes users bring. The
-  default surface is an ellipsoid of semi-axes 2, 3, 5 m (a frequency-4
-  geodesic icosahedron, 162 vertices, written here). The volume bound is found
-  by meshing until the count is within 10 % of the target. The struck vertices
-  are the surface's within 20 % of its length of either end of its longest
-  axis, at +-1 m/s along its second-longest axis.
+  a) of the closed surface -bench_surface, in TetGen's own vertex and tet order,
+  like the meshes users bring: one per bound of -bench_tetgen_volumes (default
+  0.034, 0.0033, 0.00055 m^3: about 2e4, 1e5 and 5e5 tets, the first two the
+  switches of the comparison with other codes, docs/peers.md), or one per count
+  of -bench_tetgen_tets, the bound then searched until the count is within 10 %.
+  The default surface is the comparison's ellipsoid of semi-axes 2, 3, 5 m (a
+  frequency-4 geodesic icosahedron, 162 vertices, written here). The struck
+  vertices are the surface's within 20 % of its length of either end of its
+  longest axis, at +-1 m/s along its second-longest axis.
 Each mesh runs over the grid
   modes    -bench_modes    linear, corotational
   solvers  -bench_solvers  presets config/NAME.opts (default: direct, cg-warp,
@@ -32,7 +34,7 @@ verdict each, the reference figures), meshes/ (the meshes and scenes, reused
 when present) and runs/ (one log per run).
 
 Usage (from the project root; ./run bench calls this with -softbody build/softbody):
-  ./run bench                                   # beams 1e4,1e5; TetGen meshes 2e4,1e5,5e5
+  ./run bench                                   # beams 1e4,1e5; TetGen meshes of 2e4,1e5,5e5 tets
   ./run bench -bench_meshes beam -bench_tets 1e6 -bench_ranks 2    # the million-tet rung
   ./run bench -bench_meshes tetgen -bench_surface ../shared/seed-data/cggs-cw2-2024/ellipsoid.off
   ./run bench -bench_tets 1e4 -study_dir /tmp/b -bench_solvers direct,cg-warp,cg-gamg
@@ -73,6 +75,10 @@ TETGEN_DT = 0.02  # s
 ELLIPSOID_SEMI_AXES = (2.0, 3.0, 5.0)  # m, the shape of the comparison's ellipsoid.off
 ELLIPSOID_FREQUENCY = 4  # edge divisions of the icosahedron: 162 vertices, 320 triangles
 TETGEN_SWITCHES = "pq1.414"  # boundary kept, radius-edge ratio <= 1.414: the comparison's switches
+# The default rungs' volume bounds (m^3): the comparison's two, 0.034 and 0.0033 (22 334 and
+# 104 101 tets on its ellipsoid.off; 22 582 and 103 827 on the surface written here), and
+# one of about 5e5 tets (482 624).
+DEFAULT_TETGEN_VOLUMES = (0.034, 0.0033, 0.00055)
 TETGEN_COUNT_TOLERANCE = 0.1  # a rung of "about N tets" is within 10 % of N
 TETGEN_MESHINGS = 6  # meshings tried per rung before the closest count is kept
 # d log(tets) / d log(1 / a) for the first correction: between 2/3 (the boundary's
@@ -123,12 +129,14 @@ def parse_arguments(argv):
                default=[list(MESHES)], help="mesh families (default beam,tetgen)")
     add_option(parser, "bench_tets", "--tets", dest="tets", metavar="N", nargs="+", type=comma_list(_count),
                default=[[10000, 100000]], help="tet counts of the beam (default 1e4,1e5; 1e6 on request)")
-    add_option(parser, "bench_tetgen_tets", dest="tetgen_tets", metavar="N", nargs="+", type=comma_list(_count),
-               default=[[20000, 100000, 500000]], help="tet counts of the TetGen meshes (default 2e4,1e5,5e5)")
     add_option(parser, "bench_tetgen_volumes", dest="tetgen_volumes", metavar="A", nargs="+",
                type=comma_list(float), default=[[]],
-               help="TetGen volume bounds a (m^3) in place of -bench_tetgen_tets: one mesh each, as "
-                    "`tetgen -pq1.414a<A>` (e.g. 0.034,0.0033 on the peers' ellipsoid.off, docs/peers.md)")
+               help="TetGen volume bounds a (m^3), one mesh each, as `tetgen -pq1.414a<A>` (default "
+                    + ",".join(f"{a:g}" for a in DEFAULT_TETGEN_VOLUMES) + ": about 2e4, 1e5 and 5e5 tets, the "
+                    "first two the peers' meshes, docs/peers.md)")
+    add_option(parser, "bench_tetgen_tets", dest="tetgen_tets", metavar="N", nargs="+", type=comma_list(_count),
+               default=[[]], help="tet counts of the TetGen meshes in place of volume bounds: the bound is "
+                                  "searched until the count is within 10 %% of N")
     add_option(parser, "bench_surface", dest="surface", metavar="FILE.off", default=None,
                help="closed OFF surface that TetGen meshes (default: an ellipsoid of semi-axes 2, 3, 5 m, "
                     "written into meshes/)")
@@ -155,6 +163,10 @@ def parse_arguments(argv):
     args.tetgen_volumes = flatten(args.tetgen_volumes)
     if any(not (a > 0 and math.isfinite(a)) for a in args.tetgen_volumes):
         parser.error("-bench_tetgen_volumes must be positive")
+    if args.tetgen_tets and args.tetgen_volumes:
+        parser.error("give -bench_tetgen_tets or -bench_tetgen_volumes, not both")
+    if not args.tetgen_tets and not args.tetgen_volumes:
+        args.tetgen_volumes = list(DEFAULT_TETGEN_VOLUMES)
     args.modes = flatten(args.modes)
     args.solvers = flatten(args.solvers)
     args.ranks = flatten(args.ranks)
@@ -233,37 +245,63 @@ def write_beam(folder, target_tets):
     return scene_path
 
 
-def ellipsoid_surface(semi_axes=ELLIPSOID_SEMI_AXES, frequency=ELLIPSOID_FREQUENCY):
-    """Vertices (V x 3, m) and outward triangles (F x 3, 0-based) of an ellipsoid: the
-    icosahedron's faces divided `frequency` times along each edge, the points pushed out to
-    the unit sphere, then scaled by the semi-axes: 10 f^2 + 2 vertices, 20 f^2 triangles."""
-    phi = (1 + 5 ** 0.5) / 2
-    corners = np.array([[-1, phi, 0], [1, phi, 0], [-1, -phi, 0], [1, -phi, 0], [0, -1, phi], [0, 1, phi],
-                        [0, -1, -phi], [0, 1, -phi], [phi, 0, -1], [phi, 0, 1], [-phi, 0, -1], [-phi, 0, 1]])
-    faces = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-             [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-             [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
-    points, index = [], {}
+# The icosahedron with vertices at the poles +-y and two rings of five at latitudes
+# +-atan(1/2), 72 degrees apart (the lower ring turned by 36): its faces, each
+# counter-clockwise seen from outside, and its edges, each with a direction along which
+# its points are numbered. This numbering gives the surface of the comparison's
+# ellipsoid.off (docs/peers.md), up to that file's rounding to 4 decimals.
+ICOSAHEDRON_FACES = [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [0, 5, 1], [1, 10, 6], [2, 6, 7], [3, 7, 8],
+                     [4, 8, 9], [5, 9, 10], [6, 2, 1], [7, 3, 2], [8, 4, 3], [9, 5, 4], [10, 1, 5], [11, 7, 6],
+                     [11, 8, 7], [11, 9, 8], [11, 10, 9], [11, 6, 10]]
+ICOSAHEDRON_EDGES = [(0, 1), (0, 2), (0, 3), (0, 4), (0, 5), (1, 2), (2, 3), (3, 4), (4, 5), (5, 1), (1, 6), (2, 7),
+                     (3, 8), (4, 9), (5, 10), (1, 10), (2, 6), (3, 7), (4, 8), (5, 9), (6, 7), (7, 8), (8, 9),
+                     (9, 10), (10, 6), (11, 6), (11, 7), (11, 8), (11, 9), (11, 10)]
 
-    def point(a, b, c, i, j):
-        # Grid point a + i/f (b - a) + j/f (c - a) of face (a, b, c), shared with the
-        # neighbouring faces through its key: its integer weights on the corners.
-        weights = ((a, frequency - i - j), (b, i), (c, j))
-        key = tuple(sorted(w for w in weights if w[1] > 0))
-        if key not in index:
-            x = sum(w * corners[corner] for corner, w in weights)
-            index[key] = len(points)
-            points.append(x / np.linalg.norm(x))
-        return index[key]
+
+def _slerp(a, b, t):
+    """The point a fraction t along the great-circle arc from unit vector a to unit vector b."""
+    angle = math.acos(float(np.clip(a @ b, -1, 1)))
+    return (math.sin((1 - t) * angle) * a + math.sin(t * angle) * b) / math.sin(angle)
+
+
+def ellipsoid_surface(semi_axes=ELLIPSOID_SEMI_AXES, frequency=ELLIPSOID_FREQUENCY):
+    """Vertices (V x 3, m) and outward triangles (F x 3, 0-based) of a geodesic ellipsoid:
+    the icosahedron's 12 vertices, then `frequency` - 1 points along each edge at equal
+    angles, then each face's interior points row by row (equal angles along each row),
+    all on the unit sphere, scaled by the semi-axes: 10 f^2 + 2 vertices, 20 f^2 triangles."""
+    ring = math.atan(0.5)
+    corners = [np.array([0.0, 1.0, 0.0])]
+    for shift, height in ((0.0, math.sin(ring)), (-math.pi / 5, -math.sin(ring))):
+        for k in range(5):
+            angle = -2 * math.pi * k / 5 + shift
+            corners.append(np.array([math.cos(ring) * math.cos(angle), height, math.cos(ring) * math.sin(angle)]))
+    corners.append(np.array([0.0, -1.0, 0.0]))
+    points = list(corners)
+    edge_start = {}
+    for a, b in ICOSAHEDRON_EDGES:
+        edge_start[a, b] = len(points)
+        points += [_slerp(corners[a], corners[b], s / frequency) for s in range(1, frequency)]
+
+    def on_edge(a, b, s):  # point s of `frequency` steps from corner a towards corner b
+        if s in (0, frequency):
+            return a if s == 0 else b
+        return edge_start[a, b] + s - 1 if (a, b) in edge_start else edge_start[b, a] + frequency - s - 1
 
     triangles = []
-    for a, b, c in faces:
-        for i in range(frequency):
-            for j in range(frequency - i):
-                triangles.append([point(a, b, c, i, j), point(a, b, c, i + 1, j), point(a, b, c, i, j + 1)])
-                if i + j + 1 < frequency:
-                    triangles.append([point(a, b, c, i + 1, j), point(a, b, c, i + 1, j + 1),
-                                      point(a, b, c, i, j + 1)])
+    for a, b, c in ICOSAHEDRON_FACES:
+        row = [[a]]
+        for r in range(1, frequency + 1):
+            ends = on_edge(a, b, r), on_edge(a, c, r)
+            if r == frequency:
+                inside = [on_edge(b, c, k) for k in range(1, r)]
+            else:
+                inside = list(range(len(points), len(points) + r - 1))
+                points += [_slerp(points[ends[0]], points[ends[1]], k / r) for k in range(1, r)]
+            row.append([ends[0]] + inside + [ends[1]])
+            for k in range(r):
+                triangles.append([row[r - 1][k], row[r][k], row[r][k + 1]])
+                if k < r - 1:
+                    triangles.append([row[r - 1][k], row[r][k + 1], row[r - 1][k + 1]])
     return np.array(points) * np.array(semi_axes), np.array(triangles)
 
 
