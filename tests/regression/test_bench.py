@@ -12,16 +12,20 @@
    ellipsoid x^2/4 + y^2/9 + z^2/25 = 1 (to 1e-12), 320 triangles, every edge
    shared by two of them in opposite directions, enclosing a positive volume
    within 4 % of the ellipsoid's 40 pi m^3 (inscribed polyhedron).
-3. The quick ladder (beam 1e4, TetGen 5e3) runs in both modes, with the direct,
-   warp and GAMG presets, on 1 and 2 ranks, and writes bench.csv (one row per
-   run, every run ok, every measured column positive) and bench.md (the table,
-   the reference figures and the command that reproduces it). The TetGen rows
-   have a mesh of 4 500-5 500 tets and 3-7 tets per vertex; that mesh, read back
-   from its .h5, has positively oriented tets whose volumes sum to the volume
-   the OFF surface encloses (TetGen keeps the boundary, -p), and its scene
-   strikes OFF vertices near both ends of the long axis with no net velocity.
+3. Asked for 8 000 tets, the search for TetGen's volume bound meshes the
+   ellipsoid with a count within 10 % of it.
+4. The quick ladder (beam 1e4, TetGen volume bound 0.8 m^3) runs in both modes,
+   with the direct, warp and GAMG presets, on 1 and 2 ranks, and writes
+   bench.csv (one row per run, every run ok, every measured column positive)
+   and bench.md (the table, the switches, the reference figures and the command
+   that reproduces it). The TetGen rows have a mesh of 4 500-5 500 tets and 3-7
+   tets per vertex; that mesh, read back from its .h5, has positively oriented
+   tets whose volumes sum to the volume the OFF surface encloses (TetGen keeps
+   the boundary, -p), and its scene strikes OFF vertices near both ends of the
+   long axis with no net velocity.
 No timing is asserted: the machine is shared.
 """
+import argparse
 import csv
 import os
 import subprocess
@@ -92,18 +96,18 @@ def check_ellipsoid(checks):
 def check_tetgen_files(checks, study, surface_volume):
     import h5py
     folder = os.path.join(study, "meshes")
-    scene = os.path.join(folder, "ellipsoid-5000.txt")
-    mesh = os.path.join(folder, "ellipsoid-5000.h5")
-    if not checks.check(os.path.isfile(scene) and os.path.isfile(mesh), "meshes/ellipsoid-5000.{h5,txt} written"):
+    scene = os.path.join(folder, "ellipsoid-a0.8.txt")
+    mesh = os.path.join(folder, "ellipsoid-a0.8.h5")
+    if not checks.check(os.path.isfile(scene) and os.path.isfile(mesh), "meshes/ellipsoid-a0.8.{h5,txt} written"):
         return
     with h5py.File(mesh, "r") as f:
         vertices, tets = f["vertices"][...], f["tets"][...]
     X = vertices[tets]
     det = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0])
     checks.check(det.min() > 0 and abs(det.sum() / 6 - surface_volume) <= 1e-9 * surface_volume,
-                 f"ellipsoid-5000.h5: {len(tets)} positive tets, volume {det.sum() / 6:.12g} m^3 = the surface's")
+                 f"ellipsoid-a0.8.h5: {len(tets)} positive tets, volume {det.sum() / 6:.12g} m^3 = the surface's")
     surface, _ = bench.ellipsoid_surface()
-    checks.check(np.array_equal(vertices[:len(surface)], surface), "ellipsoid-5000.h5: the OFF vertices come first")
+    checks.check(np.array_equal(vertices[:len(surface)], surface), "ellipsoid-a0.8.h5: the OFF vertices come first")
     lines = [line.split() for line in open(scene) if line.strip() and not line.startswith("#")]
     count = int(lines[2][0])
     indices = np.array([int(line[1]) for line in lines[3:3 + count]])
@@ -113,6 +117,17 @@ def check_tetgen_files(checks, study, surface_volume):
     checks.check(count > 0 and bool(ends.all()) and abs(velocities.sum(axis=0)).max() < 1e-12
                  and np.allclose(np.abs(velocities[:, 1]), bench.STRIKE_SPEED),
                  f"scene strikes {count} surface vertices near the ends of z along y, no net velocity")
+
+
+def check_search(checks, args, folder):
+    os.makedirs(folder, exist_ok=True)
+    surface = os.path.join(folder, "ellipsoid.off")
+    bench.write_off(surface, *bench.ellipsoid_surface())
+    options = argparse.Namespace(convert=os.path.join(os.path.dirname(os.path.abspath(args.softbody)),
+                                                      "softbody-convert"), timeout=120)
+    target = 8000
+    bound, tets = bench.search_volume_bound(options, surface, target, os.path.join(folder, "search.h5"))
+    checks.check(abs(tets / target - 1) <= 0.1, f"volume bound {bound:g} m^3 gives {tets} tets for {target}")
 
 
 def main():
@@ -141,15 +156,16 @@ def main():
     checks.check(abs(velocities.sum(axis=0)).max() < 1e-12, "the strike carries no net momentum (equal end faces)")
 
     surface_volume = check_ellipsoid(checks)
+    check_search(checks, args, os.path.join(args.work, "search"))
 
     study = os.path.join(args.work, "bench")
     command = [sys.executable, os.path.join(TOOLS, "bench.py"), "-softbody", args.softbody, "-mpiexec",
-               args.mpiexec, "-bench_tets", "1e4", "-bench_tetgen_tets", "5e3", "-study_dir", study]
+               args.mpiexec, "-bench_tets", "1e4", "-bench_tetgen_volumes", "0.8", "-study_dir", study]
     result = subprocess.run(command, capture_output=True, text=True, timeout=540)
     print(result.stdout)
     if result.returncode != 0:
         print(result.stderr)
-    checks.check(result.returncode == 0, "tools/bench.py -bench_tets 1e4 -bench_tetgen_tets 5e3 exits 0")
+    checks.check(result.returncode == 0, "tools/bench.py -bench_tets 1e4 -bench_tetgen_volumes 0.8 exits 0")
     check_tetgen_files(checks, study, surface_volume)
     rows = []
     csv_path = os.path.join(study, "bench.csv")
@@ -182,7 +198,7 @@ def main():
     md_path = os.path.join(study, "bench.md")
     text = open(md_path).read() if os.path.isfile(md_path) else ""
     checks.check("| mesh | tets | vertices | mode | solver | ranks |" in text and "Vega" in text
-                 and "./run bench" in text and "| tetgen |" in text and "tetgen -pq1.414a" in text,
+                 and "./run bench" in text and "| tetgen |" in text and "tetgen -pq1.414a0.8 " in text,
                  "bench.md holds the table with the TetGen rows, their switches, the reference figures and the command")
     checks.exit()
 
