@@ -93,8 +93,10 @@ TIME = "/usr/bin/time"
 QUICK = {"tets": 6000, "tets_per_rank": 3000, "ranks": [1, 2, 3], "steps": 2, "modes": ["linear"]}
 FULL = {"tets": 1000000, "tets_per_rank": 100000, "ranks": [1, 2, 4, 8, 16], "steps": 3, "modes": list(MODES)}
 # Until three points of a mode are measured, a rank's peak memory is guessed as
-# this constant, plus this much per tet of the whole mesh (what every rank holds:
-# the scene and the numbering), plus this much per tet of its share (matrix,
+# this constant, plus this much per tet of the whole mesh (what every rank held
+# before the meshes went into slabs, and still holds with contact: the scene and
+# the numbering; an over-estimate without contact, which only makes the guard
+# careful), plus this much per tet of its share (matrix,
 # preconditioner, vectors): the 1e6-tet strong series with CG + GAMG measured
 # 1495 MB on 1 rank and 256 MB per rank on 16, i.e. about 173 MB held by every rank
 # and 1322 MB shared. A direct factor needs more: the running guard (stop when the
