@@ -54,9 +54,20 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   obstacles_.SetupGround(scene, state_, ground_, options.ground_y);
   if (body_obstacles_) SetupBodyObstacles(candidates);
   CollectCheckedVertices();
-  constraints_.Setup(scene, layout, state_, obstacles_, features_);
+  constraints_.Setup(scene, layout, state_, obstacles_, features_, options.gap);
   friction_.Setup(options.friction);
   response_.Setup(comm, scene, layout, state_, obstacles_, options);
+  if (guard_on_) PetscCall(SetupGuard(lumped_mass));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::SetupGuard(Vec lumped_mass) {
+  PetscFunctionBeginUser;
+  double min_edge = kUnbounded;
+  for (size_t b = 0; b < scene_->bodies.size(); ++b)
+    if (!scene_->bodies[b].fixed) min_edge = std::min(min_edge, state_.edge(b));
+  PetscCall(guard_.Setup(comm_, *scene_, *layout_, lumped_mass, options_,
+                         options_.self_contact, min_edge));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -67,6 +78,9 @@ void ContactSolver::DecideParts(const Scene &scene, const DofLayout &layout) {
   body_obstacles_ =
       free_bodies >= 1 && (fixed_bodies >= 1 || free_bodies >= 2) && layout.num_free() > 0;
   free_obstacles_ = body_obstacles_ && free_bodies >= 2;
+  const bool lone_self_contact = options_.self_contact_set && options_.self_contact;
+  guard_on_ = options_.guard && layout.num_free() > 0 &&
+              (ground_ || body_obstacles_ || lone_self_contact);
 }
 
 void ContactSolver::SetupBodyObstacles(const SharpFeatures::Candidates &candidates) {
@@ -95,6 +109,7 @@ std::string ContactSolver::Description() const {
   if (!features_.empty())
     add(std::to_string(features_.size()) + " points on fixed bodies' sharp edges");
   if (!distance_.empty()) add(std::to_string(distance_.size()) + " distance constraints");
+  if (guard_on_) add(guard_.Description());
   if (active() && options_.impulse_spreading) add("impulse spreading");
   if (active() && (ground_ || body_obstacles_)) {
     std::snprintf(buffer, sizeof(buffer), "restitution %g, friction %g", options_.restitution,
@@ -269,8 +284,8 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions,
-                                      bool *changed) {
+PetscErrorCode ContactSolver::EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
+                                      const std::vector<PetscReal> &reactions, bool *changed) {
   PetscFunctionBeginUser;
   Timing timing(this);
   *changed = false;
@@ -279,6 +294,11 @@ PetscErrorCode ContactSolver::EndStep(Vec x, Vec v, const std::vector<PetscReal>
   if (!distance_.empty()) {
     PetscCall(ResolveDistanceConstraints(x, v));
     *changed = true;
+  }
+  if (guard_on_) {
+    bool guarded;
+    PetscCall(guard_.Apply(x0, x, v, dt, &guarded));
+    *changed = *changed || guarded;
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }

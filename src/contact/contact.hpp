@@ -35,6 +35,7 @@
 #include <utility>
 #include <vector>
 
+#include "contact/collision_guard.hpp"
 #include "contact/contact_constraints.hpp"
 #include "contact/contact_options.hpp"
 #include "contact/distance_constraints.hpp"
@@ -72,7 +73,7 @@ class ContactSolver {
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
                        const ContactOptions &options);
   // Anything to resolve at all.
-  bool active() const { return ground_ || body_obstacles_ || !distance_.empty(); }
+  bool active() const { return ground_ || body_obstacles_ || !distance_.empty() || guard_on_; }
 
   // The step's contact protocol (collective calls):
   // 1. BeginStep: the resting contacts of the last step, re-aimed at the surface
@@ -96,8 +97,11 @@ class ContactSolver {
   PetscErrorCode ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released);
   // 3. After x1 = x0 + dt v1 with the constraints' reactions: velocity response,
   //    impulse spreading, resting contacts for the next step, last-resort
-  //    projection, distance constraints. *changed: x or v modified here.
-  PetscErrorCode EndStep(Vec x, Vec v, const std::vector<PetscReal> &reactions, bool *changed);
+  //    projection, distance constraints, and last the collision guard
+  //    (collision_guard.hpp) on the motion from x0 to x. *changed: x or v
+  //    modified here.
+  PetscErrorCode EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
+                         const std::vector<PetscReal> &reactions, bool *changed);
 
   // Checkpoints: the resting contacts carried into the next step, as (natural
   // vertex, obstacle: body, -1 the ground, -2 - f sharp-edge point f). Gather: collective, every
@@ -108,6 +112,10 @@ class ContactSolver {
   void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all);
 
   const ContactStatistics &statistics() const { return stats_; }
+  // The guard's figures (null when it does not run).
+  const GuardStatistics *guard_statistics() const {
+    return guard_on_ ? &guard_.statistics() : nullptr;
+  }
   // Not collective. How often this rank built the free bodies' grids (only
   // when a vertex came within another free body's box or a fixed body's sharp
   // edge within a free body's).
@@ -120,6 +128,8 @@ class ContactSolver {
  private:
   // Which parts the scene and options need.
   void DecideParts(const Scene &scene, const DofLayout &layout);
+  // Collective. The guard over every body's surface.
+  PetscErrorCode SetupGuard(Vec lumped_mass);
   // Collective. The obstacle bodies, their grids and the sharp features kept.
   void SetupBodyObstacles(const SharpFeatures::Candidates &candidates);
   // The (local, natural) vertices checked against obstacles.
@@ -164,6 +174,7 @@ class ContactSolver {
   bool ground_ = false;          // the ground is an obstacle
   bool body_obstacles_ = false;  // bodies are obstacles (a free body meets another body)
   bool free_obstacles_ = false;  // free bodies are obstacles to each other
+  bool guard_on_ = false;        // the collision guard runs after each step
   bool track_free_ = false;      // the free bodies' grids are needed (free or feature obstacles)
   bool gather_always_ = false;   // every call gathers (free obstacles, constraints, spreading)
   bool features_near_ = false;   // this call's sharp-edge contacts need the free state
@@ -177,6 +188,7 @@ class ContactSolver {
   VelocityResponse response_;
   RestingContacts resting_;
   DistanceConstraints distance_;
+  CollisionGuard guard_;
   ContactStatistics stats_;
 };
 

@@ -22,7 +22,9 @@ constexpr double kFeatureInsideMargin = 1e-6;
 }  // namespace
 
 void ContactConstraints::Setup(const Scene &scene, const DofLayout &layout, const FreeState &state,
-                               const Obstacles &obstacles, const SharpFeatures &features) {
+                               const Obstacles &obstacles, const SharpFeatures &features,
+                               double gap) {
+  gap_ = gap;
   scene_ = &scene;
   layout_ = &layout;
   state_ = &state;
@@ -72,7 +74,8 @@ void ContactConstraints::Constrain(PetscInt local, int32_t natural, const Point 
   const Point &n = hit.normal;
   const double w = state_->inverse_mass(natural), w_obstacle = hit.inverse_mass;
   const double share = w / (w + w_obstacle);  // 1 against a fixed obstacle
-  const Point target = predicted + share * (hit.point - predicted);
+  const Point outside = hit.point + gap_ * state_->edge(state_->body_of(natural)) * n;
+  const Point target = predicted + share * (outside - predicted);
   const double approach = n.dot(velocity - hit.velocity);  // < 0: closing
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
   const double normal_velocity = RecoveryVelocity(natural, x0, target, dt, hit);
@@ -123,7 +126,7 @@ PetscInt ContactConstraints::ConstrainFeature(int32_t feature, const SurfaceHit 
   const Point m = -hit.normal;
   const auto &triangle = obstacles_->free_triangle(hit.triangle);
   const int32_t obstacle = features_->body_of(feature);
-  double depth = m.dot(features_->point(feature) - hit.point);
+  double depth = m.dot(features_->point(feature) - hit.point) + gap_ * state_->edge(triangle[3]);
   if (limit) depth = std::min(depth, kMaxRecoveryPerStep * state_->edge(triangle[3]));
   const std::array<bool, 3> moves = MovingVertices(triangle, hit, m);
   double squares = 0;

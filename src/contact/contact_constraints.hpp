@@ -57,8 +57,10 @@ struct Contact {
 
 class ContactConstraints {
  public:
+  // gap: contacts end this fraction of the vertex's body's mean boundary edge
+  // outside the obstacle (a feature point that far inside the face).
   void Setup(const Scene &scene, const DofLayout &layout, const FreeState &state,
-             const Obstacles &obstacles, const SharpFeatures &features);
+             const Obstacles &obstacles, const SharpFeatures &features, double gap);
   // A new step: no constraints; impacts closing slower than bounce_speed (m/s)
   // do not bounce.
   void Clear(PetscReal bounce_speed);
@@ -118,6 +120,7 @@ class ContactConstraints {
   const Obstacles *obstacles_ = nullptr;
   const SharpFeatures *features_ = nullptr;
   double bounce_speed_ = 0;                  // slower impacts do not bounce (m/s)
+  double gap_ = 0;                           // contacts end this many edge lengths outside
   std::vector<VelocityConstraint> normals_;  // parallel to contacts_
   std::vector<Contact> contacts_;
   std::vector<VertexObstacles> constrained_;  // per local vertex

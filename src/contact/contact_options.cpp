@@ -14,6 +14,8 @@ PetscErrorCode CheckContactOptions(MPI_Comm comm, const PetscReal bounds[2], Pet
              "option -friction: must be >= 0 (got %g)", (double)o->friction);
   PetscCheck(o->restitution >= 0 && o->restitution <= 1, comm, PETSC_ERR_USER_INPUT,
              "option -restitution: must lie in [0, 1] (got %g)", (double)o->restitution);
+  PetscCheck(o->gap > 0 && o->gap < 0.1, comm, PETSC_ERR_USER_INPUT,
+             "option -contact_gap: must lie in (0, 0.1) edge lengths (got %g)", (double)o->gap);
   if (o->edge_bounds) {
     PetscCheck(nbounds == 2, comm, PETSC_ERR_USER_INPUT, "option -edge_bounds: expected lo,hi");
     o->edge_lower = bounds[0];
@@ -34,6 +36,9 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                                      {OptionSyntax::kReal, "-friction"},
                                      {OptionSyntax::kBool, "-sharp_edges"},
                                      {OptionSyntax::kBool, "-impulse_spreading"},
+                                     {OptionSyntax::kBool, "-contact_guard"},
+                                     {OptionSyntax::kReal, "-contact_gap"},
+                                     {OptionSyntax::kBool, "-self_contact"},
                                      {OptionSyntax::kRealList, "-edge_bounds"}}));
   char path[PETSC_MAX_PATH_LEN] = "";
   PetscReal bounds[2] = {o->edge_lower, o->edge_upper};
@@ -68,6 +73,18 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                             "Keep every boundary edge of the free bodies within lo,hi x its rest "
                             "length (off if unset)",
                             nullptr, bounds, &nbounds, &o->edge_bounds));
+  PetscCall(PetscOptionsBool("-contact_guard",
+                             "Continuous collision guard: no surface face, edge or vertex crosses "
+                             "another's (or its own body's) during a step",
+                             nullptr, o->guard, &o->guard, nullptr));
+  PetscCall(PetscOptionsReal("-contact_gap",
+                             "Contacts end this fraction of the body's mean boundary edge apart; "
+                             "the guard keeps every surface pair at least half of it apart",
+                             nullptr, o->gap, &o->gap, nullptr));
+  PetscCall(PetscOptionsBool("-self_contact",
+                             "Guard each body's surface against itself (default: with any other "
+                             "contact; 1 also for a lone body)",
+                             nullptr, o->self_contact, &o->self_contact, &o->self_contact_set));
   PetscOptionsEnd();
   o->constraints_path = path;
   PetscCall(CheckContactOptions(comm, bounds, nbounds, o));

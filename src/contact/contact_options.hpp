@@ -18,18 +18,28 @@ struct ContactOptions {
   std::string constraints_path;        // "" = none
   PetscBool edge_bounds = PETSC_FALSE;
   PetscReal edge_lower = 1, edge_upper = 1;  // x rest length
+  // The collision guard (collision_guard.hpp): contacts end this fraction of the
+  // body's mean boundary edge outside the obstacle, and no surface pair comes
+  // closer than half of it.
+  PetscBool guard = PETSC_TRUE;
+  PetscReal gap = 1e-3;
+  // A body's surface against its own (non-adjacent) faces and edges: on with any
+  // other contact unless -self_contact 0; -self_contact 1 also guards a lone body.
+  PetscBool self_contact = PETSC_TRUE;
+  PetscBool self_contact_set = PETSC_FALSE;
 };
 
 // Collective. Reads -ground -restitution -friction -sharp_edges -impulse_spreading -constraints
-// -edge_bounds.
+// -edge_bounds -contact_guard -contact_gap -self_contact.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
 // Not collective. Whether contact may need the bodies' whole meshes on every
 // rank (ContactSolver reads them when it is active): with a ground, distance
-// constraints or edge bounds, or with more than one body (obstacles).
+// constraints or edge bounds, with more than one body (obstacles), or with
+// -self_contact 1.
 inline bool ContactMayNeedWholeMeshes(const ContactOptions &options, size_t num_bodies) {
   return options.ground || !options.constraints_path.empty() || options.edge_bounds ||
-         num_bodies > 1;
+         num_bodies > 1 || (options.self_contact_set && options.self_contact && options.guard);
 }
 
 }  // namespace softbody

@@ -11,9 +11,6 @@ namespace {
 // length to the surface ended the step on it (its constraint held, up to
 // round-off): no projection.
 constexpr double kOnSurface = 1e-6;
-// A projected vertex is put this fraction of its body's mean edge length
-// outside the surface, so that the next step finds it outside.
-constexpr double kProjectionClearance = 1e-9;
 // Numbers per collision when collisions travel between ranks: vertex, body,
 // position (3), dv (3).
 constexpr size_t kPackedCollision = 8;
@@ -89,7 +86,7 @@ PetscInt VelocityResponse::ProjectRemaining(
     const Point velocity(&v[3 * local]);
     const double approach = hit.normal.dot(velocity - hit.velocity);
     const Point target =
-        hit.point + kProjectionClearance * state_->edge(state_->body_of(natural)) * hit.normal;
+        hit.point + options_.gap * state_->edge(state_->body_of(natural)) * hit.normal;
     for (int c = 0; c < 3; ++c) x[3 * local + c] = target[c];
     if (approach < 0)
       collisions->push_back({natural, state_->body_of(natural), target,

@@ -858,7 +858,7 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
   bool changed;
   {
     StageScope stage(Stages().contact);
-    PetscCall(contact->EndStep(x, v, reactions_, &changed));
+    PetscCall(contact->EndStep(x_start_, x, v, step_.position_step, reactions_, &changed));
   }
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -1,0 +1,94 @@
+// The collision guard: after everything else in a step, no surface primitive
+// crosses another during the step (the straight motion from the step's start
+// to its end positions), so no surface ends the step crossing another or its
+// own, at any speed.
+//
+// Each round finds the pairs that would come closer than the separation
+// (surface_collisions.hpp: vertex-triangle and edge-edge of two bodies or,
+// with self-contact, of one body; vertices against the ground) and merges
+// their vertices into rigid impact zones (impact_zones.hpp) that move rigidly
+// or, touching something immobile, stay where they started; rounds repeat on
+// the pairs the zones moved until none collides. Every round merges zones or
+// freezes one, so the loop ends; a pair that started the step apart ends it
+// at least `separation` apart. Pairs already closer than that at the start
+// (bodies placed touching or overlapping) are counted and left to the contact
+// constraints until they part.
+//
+// The separation is half of -contact_gap times the smallest free body's mean
+// boundary edge: contact constraints end contacts a full gap apart, so resting
+// contacts sit outside the guard's reach.
+//
+// Parallel model: the surface vertices' start and end positions are gathered
+// on every rank (a scatter of the free surface vertices only), every rank runs
+// the same detection and zones in the same order (results do not depend on the
+// rank count), and each writes its own vertices: a vertex a zone moved gets
+// x = its zone position and v = (x - x0) / dt.
+#pragma once
+
+#include <petscvec.h>
+
+#include <string>
+#include <vector>
+
+#include "contact/contact_options.hpp"
+#include "contact/contact_surface.hpp"
+#include "contact/impact_zones.hpp"
+#include "contact/surface_collisions.hpp"
+#include "fem/partition.hpp"
+#include "io/scene.hpp"
+
+namespace softbody {
+
+struct GuardStatistics {
+  PetscInt steps_guarded = 0;       // steps in which some pair collided
+  PetscInt collisions = 0;          // colliding pairs found, all rounds and steps
+  PetscInt rounds = 0, max_rounds = 0;  // detection rounds with collisions
+  PetscInt zone_vertices = 0;       // surface vertices the zones moved, all steps
+  PetscInt frozen_vertices = 0;     // of them, in immobile zones
+  PetscInt close_pairs = 0;         // pairs closer than the separation at a step's start
+  PetscInt candidates = 0;          // pairs tested by CCD
+  PetscLogDouble seconds = 0;
+};
+
+class CollisionGuard {
+ public:
+  CollisionGuard() = default;
+  CollisionGuard(const CollisionGuard &) = delete;
+  CollisionGuard &operator=(const CollisionGuard &) = delete;
+  ~CollisionGuard();
+
+  // Collective. scene (whole meshes) and layout (replicated numbering) must
+  // outlive the guard; lumped_mass per DOF (kg), PETSc order; min_edge: the
+  // smallest free body's mean boundary edge (m).
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                       Vec lumped_mass, const ContactOptions &options, bool self_contact,
+                       double min_edge);
+  // Collective. x0: the step's start positions; x, v: its end positions and
+  // velocities (PETSc order), changed where zones moved; *changed: on any rank.
+  PetscErrorCode Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
+
+  const GuardStatistics &statistics() const { return stats_; }
+  double separation() const { return query_.tolerance.separation; }
+  std::string Description() const;
+
+ private:
+  PetscErrorCode Fetch(Vec from, std::vector<Point> *to);
+  // Detection and zones until no pair collides; returns the vertices moved.
+  std::vector<char> Resolve();
+  PetscErrorCode WriteBack(const std::vector<char> &moved, Vec x, Vec v, PetscReal dt);
+
+  MPI_Comm comm_ = MPI_COMM_NULL;
+  const DofLayout *layout_ = nullptr;
+  ContactSurface surface_;
+  std::vector<int32_t> free_vertices_;  // surface vertices that move, surface order
+  std::vector<char> moving_;            // per surface vertex
+  std::vector<double> mass_;            // per surface vertex (kg; 0 when it does not move)
+  std::vector<Point> rest_, start_, end_;
+  CollisionQuery query_;
+  ImpactZones zones_;
+  VecScatter gather_ = nullptr;  // free surface vertices' DOFs to every rank
+  Vec gathered_ = nullptr;
+  GuardStatistics stats_;
+};
+
+}  // namespace softbody

@@ -1,0 +1,36 @@
+#include "contact/contact_surface.hpp"
+
+#include <algorithm>
+
+#include "fem/mesh.hpp"
+
+namespace softbody {
+
+void ContactSurface::Build(const Scene &scene) {
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const Body &body = scene.bodies[b];
+    const auto faces = BoundaryTriangles(body.mesh);
+    std::vector<int32_t> surface_of(body.mesh.num_vertices(), -1);
+    auto surface_vertex = [&](int32_t local) {
+      if (surface_of[local] < 0) {
+        surface_of[local] = num_vertices();
+        natural.push_back(body.first_vertex + local);
+        this->body.push_back(static_cast<int32_t>(b));
+      }
+      return surface_of[local];
+    };
+    std::vector<std::array<int32_t, 2>> body_edges;
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+      const std::array<int32_t, 3> t = {surface_vertex(faces(f, 0)), surface_vertex(faces(f, 1)),
+                                        surface_vertex(faces(f, 2))};
+      triangles.push_back(t);
+      for (int k = 0; k < 3; ++k)
+        body_edges.push_back({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
+    }
+    std::sort(body_edges.begin(), body_edges.end());
+    body_edges.erase(std::unique(body_edges.begin(), body_edges.end()), body_edges.end());
+    edges.insert(edges.end(), body_edges.begin(), body_edges.end());
+  }
+}
+
+}  // namespace softbody

@@ -1,0 +1,25 @@
+// The bodies' boundary surfaces as the collision guard sees them: the surface
+// vertices of every body (fixed ones too), their triangles and their edges,
+// numbered by surface vertex. Built from the whole meshes (Scene::meshes_held).
+// Not collective.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "io/scene.hpp"
+
+namespace softbody {
+
+struct ContactSurface {
+  std::vector<int32_t> natural;                   // surface vertex -> natural vertex
+  std::vector<int32_t> body;                      // surface vertex -> body
+  std::vector<std::array<int32_t, 3>> triangles;  // surface vertices, outward orientation
+  std::vector<std::array<int32_t, 2>> edges;      // surface vertices, each edge once
+
+  void Build(const Scene &scene);
+  int32_t num_vertices() const { return static_cast<int32_t>(natural.size()); }
+};
+
+}  // namespace softbody

@@ -1,0 +1,49 @@
+// The collision guard's detection: every pair of surface primitives that comes
+// too close during a step, found by continuous collision detection (ccd.hpp)
+// on the candidates of a uniform grid over the primitives' swept boxes.
+//
+// Pairs: a surface vertex against a triangle, an edge against an edge, of two
+// bodies (free-free, free-fixed) or, with self-contact, of one body when they
+// share no vertex; a free surface vertex against the ground plane y = y0.
+// Pairs with no vertex that moves (both sides fixed or at rest) are skipped.
+// Positions are per surface vertex (contact_surface.hpp); lengths in metres.
+// Not collective.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "contact/ccd.hpp"
+#include "contact/contact_surface.hpp"
+
+namespace softbody {
+
+struct SurfaceCollision {
+  std::array<int32_t, 4> vertices;  // surface vertices; count of them used
+  int count;                        // 4: vertex-triangle or edge-edge; 1: vertex-ground
+};
+
+struct CollisionQuery {
+  const ContactSurface *surface = nullptr;
+  const std::vector<Point> *start = nullptr, *end = nullptr;  // per surface vertex
+  const std::vector<char> *moving = nullptr;  // per surface vertex: a free vertex
+  CcdTolerance tolerance;
+  bool self_contact = false;
+  bool ground = false;
+  double ground_y = 0;
+  // Only pairs with a vertex marked here (null: all pairs).
+  const std::vector<char> *changed = nullptr;
+};
+
+struct CollisionCount {
+  int64_t candidates = 0;  // pairs tested by CCD
+  int64_t close = 0;       // pairs already closer than the separation at the start (not guarded)
+};
+
+// The colliding pairs, in a fixed order (vertex-ground, vertex-triangle,
+// edge-edge, each by primitive index): the same on every rank.
+std::vector<SurfaceCollision> FindSurfaceCollisions(const CollisionQuery &query,
+                                                    CollisionCount *count);
+
+}  // namespace softbody
