@@ -108,6 +108,22 @@ PetscErrorCode PrintModel(MPI_Comm comm, const IntegratorOptions &o, const Solve
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Collective. "  guard ..." line: what the collision guard did (the same on every rank).
+PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g) {
+  PetscFunctionBeginUser;
+  if (!g) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCall(PetscPrintf(comm,
+                        "  guard        %" PetscInt_FMT
+                        " steps with colliding surface pairs (%" PetscInt_FMT
+                        " pairs, %" PetscInt_FMT " rounds, at most %" PetscInt_FMT
+                        " in a step); zones moved %" PetscInt_FMT " vertices (%" PetscInt_FMT
+                        " frozen); %" PetscInt_FMT " pairs tested; %" PetscInt_FMT
+                        " pairs closer than the separation at a step's start; %.3f s\n",
+                        g->steps_guarded, g->collisions, g->rounds, g->max_rounds, g->zone_vertices,
+                        g->frozen_vertices, g->candidates, g->close_pairs, (double)g->seconds));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // Collective. "  contact ..." line, when the scene has collisions or constraints.
 PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
   PetscFunctionBeginUser;
@@ -132,6 +148,7 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
                           c.constraint_sweeps, c.max_constraint_sweeps,
                           (double)c.max_constraint_violation));
   PetscCall(PetscPrintf(comm, "\n"));
+  PetscCall(PrintGuard(comm, contact.guard_statistics()));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

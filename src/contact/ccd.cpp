@@ -29,8 +29,7 @@ double PointSegmentDistanceSquared(const Point &p, const Point &a, const Point &
 }
 
 // The segments' closest interior points when they are not parallel, else +inf.
-double InteriorDistanceSquared(const Point &a0, const Point &a1, const Point &b0,
-                               const Point &b1) {
+double InteriorDistanceSquared(const Point &a0, const Point &a1, const Point &b0, const Point &b1) {
   const Point d1 = a1 - a0, d2 = b1 - b0, r = a0 - b0;
   const double a = d1.squaredNorm(), b = d1.dot(d2), e = d2.squaredNorm();
   const double c = d1.dot(r), f = d2.dot(r);
@@ -86,8 +85,10 @@ Approach Advance(const MovingPair &pair, int first, const CcdTolerance &toleranc
 
 }  // namespace
 
-double PointTriangleDistanceSquared(const Point &p, const Point &a, const Point &b, const Point &c) {
-  const double longest = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+double PointTriangleDistanceSquared(const Point &p, const Point &a, const Point &b,
+                                    const Point &c) {
+  const double longest =
+      std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
   if ((b - a).cross(c - a).squaredNorm() <= kDegenerateTriangle * longest * longest)
     return std::min({PointSegmentDistanceSquared(p, a, b), PointSegmentDistanceSquared(p, b, c),
                      PointSegmentDistanceSquared(p, c, a)});

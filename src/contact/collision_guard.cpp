@@ -59,10 +59,11 @@ PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const Do
   mass_.assign(n, 0.0);
   for (const int32_t v : free_vertices_) mass_[v] = mass[v][0];
   start_ = end_ = rest_;
-  query_ = {&surface_, &start_, &end_, &moving_, {}, self_contact, bool(options.ground),
+  query_ = {&surface_,        &start_, &end_, &moving_, {}, self_contact, bool(options.ground),
             options.ground_y, nullptr};
   query_.tolerance.separation = kSeparationOfGap * options.gap * min_edge;
   query_.tolerance.band = kBand * query_.tolerance.separation;
+  finder_.Setup(query_);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -100,7 +101,7 @@ std::vector<char> CollisionGuard::Resolve() {
   PetscInt rounds = 0;
   for (;; ++rounds) {
     CollisionCount count;
-    const std::vector<SurfaceCollision> collisions = FindSurfaceCollisions(query_, &count);
+    const std::vector<SurfaceCollision> collisions = finder_.Find(query_, &count);
     stats_.candidates += count.candidates;
     if (rounds == 0) stats_.close_pairs += count.close;
     if (collisions.empty()) break;

@@ -40,13 +40,13 @@
 namespace softbody {
 
 struct GuardStatistics {
-  PetscInt steps_guarded = 0;       // steps in which some pair collided
-  PetscInt collisions = 0;          // colliding pairs found, all rounds and steps
+  PetscInt steps_guarded = 0;           // steps in which some pair collided
+  PetscInt collisions = 0;              // colliding pairs found, all rounds and steps
   PetscInt rounds = 0, max_rounds = 0;  // detection rounds with collisions
-  PetscInt zone_vertices = 0;       // surface vertices the zones moved, all steps
-  PetscInt frozen_vertices = 0;     // of them, in immobile zones
-  PetscInt close_pairs = 0;         // pairs closer than the separation at a step's start
-  PetscInt candidates = 0;          // pairs tested by CCD
+  PetscInt zone_vertices = 0;           // surface vertices the zones moved, all steps
+  PetscInt frozen_vertices = 0;         // of them, in immobile zones
+  PetscInt close_pairs = 0;             // pairs closer than the separation at a step's start
+  PetscInt candidates = 0;              // pairs tested by CCD
   PetscLogDouble seconds = 0;
 };
 
@@ -60,9 +60,8 @@ class CollisionGuard {
   // Collective. scene (whole meshes) and layout (replicated numbering) must
   // outlive the guard; lumped_mass per DOF (kg), PETSc order; min_edge: the
   // smallest free body's mean boundary edge (m).
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                       Vec lumped_mass, const ContactOptions &options, bool self_contact,
-                       double min_edge);
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
+                       const ContactOptions &options, bool self_contact, double min_edge);
   // Collective. x0: the step's start positions; x, v: its end positions and
   // velocities (PETSc order), changed where zones moved; *changed: on any rank.
   PetscErrorCode Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
@@ -85,6 +84,7 @@ class CollisionGuard {
   std::vector<double> mass_;            // per surface vertex (kg; 0 when it does not move)
   std::vector<Point> rest_, start_, end_;
   CollisionQuery query_;
+  SurfaceCollisionFinder finder_;
   ImpactZones zones_;
   VecScatter gather_ = nullptr;  // free surface vertices' DOFs to every rank
   Vec gathered_ = nullptr;

@@ -66,8 +66,8 @@ PetscErrorCode ContactSolver::SetupGuard(Vec lumped_mass) {
   double min_edge = kUnbounded;
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (!scene_->bodies[b].fixed) min_edge = std::min(min_edge, state_.edge(b));
-  PetscCall(guard_.Setup(comm_, *scene_, *layout_, lumped_mass, options_,
-                         options_.self_contact, min_edge));
+  PetscCall(guard_.Setup(comm_, *scene_, *layout_, lumped_mass, options_, options_.self_contact,
+                         min_edge));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -79,8 +79,8 @@ void ContactSolver::DecideParts(const Scene &scene, const DofLayout &layout) {
       free_bodies >= 1 && (fixed_bodies >= 1 || free_bodies >= 2) && layout.num_free() > 0;
   free_obstacles_ = body_obstacles_ && free_bodies >= 2;
   const bool lone_self_contact = options_.self_contact_set && options_.self_contact;
-  guard_on_ = options_.guard && layout.num_free() > 0 &&
-              (ground_ || body_obstacles_ || lone_self_contact);
+  guard_on_ =
+      options_.guard && layout.num_free() > 0 && (ground_ || body_obstacles_ || lone_self_contact);
 }
 
 void ContactSolver::SetupBodyObstacles(const SharpFeatures::Candidates &candidates) {

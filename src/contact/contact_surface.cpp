@@ -30,6 +30,9 @@ void ContactSurface::Build(const Scene &scene) {
     std::sort(body_edges.begin(), body_edges.end());
     body_edges.erase(std::unique(body_edges.begin(), body_edges.end()), body_edges.end());
     edges.insert(edges.end(), body_edges.begin(), body_edges.end());
+    vertex_start.push_back(num_vertices());
+    triangle_start.push_back(static_cast<int32_t>(triangles.size()));
+    edge_start.push_back(static_cast<int32_t>(edges.size()));
   }
 }
 

@@ -17,9 +17,13 @@ struct ContactSurface {
   std::vector<int32_t> body;                      // surface vertex -> body
   std::vector<std::array<int32_t, 3>> triangles;  // surface vertices, outward orientation
   std::vector<std::array<int32_t, 2>> edges;      // surface vertices, each edge once
+  // Per body b, its vertices, triangles and edges are the ranges
+  // [x_start[b], x_start[b + 1]) of the lists above (size bodies + 1).
+  std::vector<int32_t> vertex_start = {0}, triangle_start = {0}, edge_start = {0};
 
   void Build(const Scene &scene);
   int32_t num_vertices() const { return static_cast<int32_t>(natural.size()); }
+  size_t num_bodies() const { return vertex_start.size() - 1; }
 };
 
 }  // namespace softbody

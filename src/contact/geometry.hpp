@@ -80,6 +80,18 @@ class UniformGrid {
           for (int64_t n = cell_start_[cell]; n < cell_start_[cell + 1]; ++n) visit(items_[n]);
         }
   }
+  // Items whose cells overlap the box (each once per cell, as ForEachNear).
+  template <typename Visit>
+  void ForEachInBox(const Box &box, Visit visit) const {
+    if (empty() || !bounds_.Overlaps(box)) return;
+    const Eigen::Array3i lo = CellOf(box.lower.array()), hi = CellOf(box.upper.array());
+    for (int k = lo[2]; k <= hi[2]; ++k)
+      for (int j = lo[1]; j <= hi[1]; ++j)
+        for (int i = lo[0]; i <= hi[0]; ++i) {
+          const int64_t cell = Index(i, j, k);
+          for (int64_t n = cell_start_[cell]; n < cell_start_[cell + 1]; ++n) visit(items_[n]);
+        }
+  }
   double cell_size() const { return h_; }
   const Box &bounds() const { return bounds_; }
 

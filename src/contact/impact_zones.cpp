@@ -106,9 +106,9 @@ void ImpactZones::MoveRigidly(const std::vector<int32_t> &members, const std::ve
   }
   const Point theta = PseudoSolve(inertia, momentum);
   const double angle = theta.norm();
-  const Eigen::Matrix3d rotation =
-      angle > 0 ? Eigen::AngleAxisd(angle, theta / angle).toRotationMatrix()
-                : Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d rotation = angle > 0
+                                       ? Eigen::AngleAxisd(angle, theta / angle).toRotationMatrix()
+                                       : Eigen::Matrix3d::Identity();
   for (const int32_t v : members) (*end)[v] = c1 + rotation * (start[v] - c0);
 }
 

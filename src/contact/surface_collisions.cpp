@@ -6,14 +6,17 @@ namespace softbody {
 
 namespace {
 
-// A primitive's box over the step (start and end of its vertices), grown by
-// the distance CCD reports within.
+// A primitive's box over the step (start and end of its vertices, the end
+// shifted by `shift`), grown by the distance CCD reports within. In the pass
+// of one body every position is shifted alike (its mean displacement), so two
+// primitives that come close meet in these boxes as in world ones, and a
+// falling body's boxes stay small.
 template <size_t N>
-Box SweptBox(const CollisionQuery &q, const std::array<int32_t, N> &vertices) {
+Box SweptBox(const CollisionQuery &q, const std::array<int32_t, N> &vertices, const Point &shift) {
   Box box;
   for (const int32_t v : vertices) {
     box.Extend((*q.start)[v]);
-    box.Extend((*q.end)[v]);
+    box.Extend((*q.end)[v] - shift);
   }
   const double grow = q.tolerance.separation + q.tolerance.band;
   box.lower.array() -= grow;
@@ -21,51 +24,116 @@ Box SweptBox(const CollisionQuery &q, const std::array<int32_t, N> &vertices) {
   return box;
 }
 
+// The boxes of the listed primitives.
+struct Boxes {
+  std::vector<Box> vertices, triangles, edges;
+};
+Boxes BoxesOf(const CollisionQuery &q, const std::vector<int32_t> &vertices,
+              const std::vector<int32_t> &triangles, const std::vector<int32_t> &edges,
+              const Point &shift) {
+  Boxes boxes;
+  for (const int32_t v : vertices)
+    boxes.vertices.push_back(SweptBox(q, std::array<int32_t, 1>{v}, shift));
+  for (const int32_t t : triangles)
+    boxes.triangles.push_back(SweptBox(q, q.surface->triangles[t], shift));
+  for (const int32_t e : edges) boxes.edges.push_back(SweptBox(q, q.surface->edges[e], shift));
+  return boxes;
+}
+
 bool Shares(const std::array<int32_t, 4> &v) {
   return v[0] == v[2] || v[0] == v[3] || v[1] == v[2] || v[1] == v[3];
 }
 
-// Whether the pair is guarded at all: something moves, the bodies differ (or
-// self-contact), and (self-contact) no vertex is shared.
-bool Wanted(const CollisionQuery &q, const std::array<int32_t, 4> &v, bool vertex_triangle) {
+// Whether a pair is guarded in a pass: something moves, a vertex changed
+// (later rounds), the bodies are the same in a self pass and differ otherwise,
+// and within a body no vertex is shared.
+bool Wanted(const CollisionQuery &q, bool same_body, const std::array<int32_t, 4> &v,
+            bool vertex_triangle) {
   const auto &moving = *q.moving;
   if (!(moving[v[0]] || moving[v[1]] || moving[v[2]] || moving[v[3]])) return false;
-  if (q.changed && !((*q.changed)[v[0]] || (*q.changed)[v[1]] || (*q.changed)[v[2]] ||
-                     (*q.changed)[v[3]]))
+  if (q.changed &&
+      !((*q.changed)[v[0]] || (*q.changed)[v[1]] || (*q.changed)[v[2]] || (*q.changed)[v[3]]))
     return false;
   const auto &body = q.surface->body;
-  if (body[v[0]] != body[v[2]]) return true;
-  if (!q.self_contact) return false;
+  if ((body[v[0]] == body[v[2]]) != same_body) return false;
+  if (!same_body) return true;
   return vertex_triangle ? (v[0] != v[1] && v[0] != v[2] && v[0] != v[3]) : !Shares(v);
 }
 
-MovingPair PairOf(const CollisionQuery &q, const std::array<int32_t, 4> &v) {
+void Test(const CollisionQuery &q, bool same_body, const std::array<int32_t, 4> &v,
+          bool vertex_triangle, std::vector<SurfaceCollision> *out, CollisionCount *count) {
+  if (!Wanted(q, same_body, v, vertex_triangle)) return;
+  ++count->candidates;
   MovingPair pair;
   for (int k = 0; k < 4; ++k) {
     pair.start[k] = (*q.start)[v[k]];
     pair.end[k] = (*q.end)[v[k]];
   }
-  return pair;
+  const Approach approach =
+      vertex_triangle ? PointTriangleCcd(pair, q.tolerance) : EdgeEdgeCcd(pair, q.tolerance);
+  if (approach == Approach::kCollides) out->push_back({v, 4});
+  if (approach == Approach::kCloseAtStart) ++count->close;
 }
 
-// Runs visit(a, b) once for each pair of a's primitives and b's whose swept
-// boxes' cubes meet (b's binned in a grid; `upper_only` with a == b: a < b).
+// Runs visit(i, j) once for each of a's boxes i and b's boxes j (binned in
+// grid) that meet; `upper_only` when a and b are one list: i < j.
 template <typename Visit>
-void ForEachCandidate(const std::vector<Box> &a, const std::vector<Box> &b, bool upper_only,
-                      Visit visit) {
-  UniformGrid grid;
-  grid.Build(b);
+void ForEachCandidate(const std::vector<Box> &a, const UniformGrid &grid, const std::vector<Box> &b,
+                      bool upper_only, Visit visit) {
   std::vector<int32_t> seen(b.size(), -1);
-  for (size_t i = 0; i < a.size(); ++i) {
-    const Point centre = (a[i].lower + a[i].upper) / 2;
-    const double radius = (a[i].upper - a[i].lower).maxCoeff() / 2;
-    grid.ForEachNear(centre, radius, [&](int32_t j) {
+  for (size_t i = 0; i < a.size(); ++i)
+    grid.ForEachInBox(a[i], [&](int32_t j) {
       if (seen[j] == static_cast<int32_t>(i) || (upper_only && j <= static_cast<int32_t>(i)))
         return;
       seen[j] = static_cast<int32_t>(i);
       if (a[i].Overlaps(b[j])) visit(static_cast<int32_t>(i), j);
     });
-  }
+}
+
+UniformGrid GridOf(const std::vector<Box> &boxes) {
+  UniformGrid grid;
+  grid.Build(boxes);
+  return grid;
+}
+
+// Primitives a (ids, boxes) against primitives b (ids, boxes, grid): vertices
+// against triangles, triangles against vertices (a_is_triangle), or edges
+// against edges.
+struct Side {
+  const std::vector<int32_t> &ids;
+  const std::vector<Box> &boxes;
+};
+enum class Kind { kVertexTriangle, kTriangleVertex, kEdgeEdge };
+
+void Pairs(const CollisionQuery &q, Kind kind, const Side &a, const Side &b,
+           const UniformGrid &grid, bool same_body, bool upper_only,
+           std::vector<SurfaceCollision> *out, CollisionCount *count) {
+  const ContactSurface &s = *q.surface;
+  ForEachCandidate(a.boxes, grid, b.boxes, upper_only, [&](int32_t i, int32_t j) {
+    const int32_t x = a.ids[i], y = b.ids[j];
+    if (kind == Kind::kVertexTriangle) {
+      const auto &t = s.triangles[y];
+      Test(q, same_body, {x, t[0], t[1], t[2]}, true, out, count);
+    } else if (kind == Kind::kTriangleVertex) {
+      const auto &t = s.triangles[x];
+      Test(q, same_body, {y, t[0], t[1], t[2]}, true, out, count);
+    } else {
+      Test(q, same_body, {s.edges[x][0], s.edges[x][1], s.edges[y][0], s.edges[y][1]}, false, out,
+           count);
+    }
+  });
+}
+
+// One list of primitives against itself: vertex-triangle and edge-edge pairs.
+void Within(const CollisionQuery &q, const std::vector<int32_t> &vertices,
+            const std::vector<int32_t> &triangles, const std::vector<int32_t> &edges,
+            const Point &shift, bool same_body, std::vector<SurfaceCollision> *out,
+            CollisionCount *count) {
+  const Boxes boxes = BoxesOf(q, vertices, triangles, edges, shift);
+  Pairs(q, Kind::kVertexTriangle, {vertices, boxes.vertices}, {triangles, boxes.triangles},
+        GridOf(boxes.triangles), same_body, false, out, count);
+  Pairs(q, Kind::kEdgeEdge, {edges, boxes.edges}, {edges, boxes.edges}, GridOf(boxes.edges),
+        same_body, true, out, count);
 }
 
 void GroundCollisions(const CollisionQuery &q, std::vector<SurfaceCollision> *out,
@@ -81,38 +149,69 @@ void GroundCollisions(const CollisionQuery &q, std::vector<SurfaceCollision> *ou
   }
 }
 
-void Test(const CollisionQuery &q, const std::array<int32_t, 4> &v, bool vertex_triangle,
-          std::vector<SurfaceCollision> *out, CollisionCount *count) {
-  if (!Wanted(q, v, vertex_triangle)) return;
-  ++count->candidates;
-  const MovingPair pair = PairOf(q, v);
-  const Approach approach =
-      vertex_triangle ? PointTriangleCcd(pair, q.tolerance) : EdgeEdgeCcd(pair, q.tolerance);
-  if (approach == Approach::kCollides) out->push_back({v, 4});
-  if (approach == Approach::kCloseAtStart) ++count->close;
+template <size_t N>
+bool AnyMoving(const CollisionQuery &q, const std::array<int32_t, N> &vertices) {
+  return std::any_of(vertices.begin(), vertices.end(), [&](int32_t v) { return (*q.moving)[v]; });
+}
+
+std::vector<int32_t> Range(int32_t begin, int32_t end) {
+  std::vector<int32_t> range(end - begin);
+  for (int32_t i = begin; i < end; ++i) range[i - begin] = i;
+  return range;
 }
 
 }  // namespace
 
-std::vector<SurfaceCollision> FindSurfaceCollisions(const CollisionQuery &q,
-                                                    CollisionCount *count) {
+void SurfaceCollisionFinder::Setup(const CollisionQuery &q) {
+  const ContactSurface &s = *q.surface;
+  for (int32_t v = 0; v < s.num_vertices(); ++v)
+    ((*q.moving)[v] ? moving_vertices_ : static_.vertices).push_back(v);
+  for (int32_t t = 0; t < static_cast<int32_t>(s.triangles.size()); ++t)
+    (AnyMoving(q, s.triangles[t]) ? moving_triangles_ : static_.triangles).push_back(t);
+  for (int32_t e = 0; e < static_cast<int32_t>(s.edges.size()); ++e)
+    (AnyMoving(q, s.edges[e]) ? moving_edges_ : static_.edges).push_back(e);
+  for (size_t b = 0; b < s.num_bodies(); ++b)
+    if (s.vertex_start[b] < s.vertex_start[b + 1] && (*q.moving)[s.vertex_start[b]])
+      moving_bodies_.push_back(b);
+  const Boxes boxes = BoxesOf(q, static_.vertices, static_.triangles, static_.edges, Point::Zero());
+  static_.vertex_boxes = boxes.vertices;
+  static_.triangle_boxes = boxes.triangles;
+  static_.edge_boxes = boxes.edges;
+  static_.vertex_grid.Build(static_.vertex_boxes);
+  static_.triangle_grid.Build(static_.triangle_boxes);
+  static_.edge_grid.Build(static_.edge_boxes);
+}
+
+std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery &q,
+                                                           CollisionCount *count) const {
   std::vector<SurfaceCollision> out;
   const ContactSurface &s = *q.surface;
   if (q.ground) GroundCollisions(q, &out, count);
-  std::vector<Box> vertex_boxes, triangle_boxes, edge_boxes;
-  for (int32_t v = 0; v < s.num_vertices(); ++v)
-    vertex_boxes.push_back(SweptBox<1>(q, std::array<int32_t, 1>{v}));
-  for (const auto &t : s.triangles) triangle_boxes.push_back(SweptBox(q, t));
-  for (const auto &e : s.edges) edge_boxes.push_back(SweptBox(q, e));
-  ForEachCandidate(vertex_boxes, triangle_boxes, false, [&](int32_t v, int32_t t) {
-    const auto &tri = s.triangles[t];
-    Test(q, {v, tri[0], tri[1], tri[2]}, true, &out, count);
-  });
-  ForEachCandidate(edge_boxes, edge_boxes, true, [&](int32_t i, int32_t j) {
-    Test(q, {s.edges[i][0], s.edges[i][1], s.edges[j][0], s.edges[j][1]}, false, &out, count);
-  });
+  // The moving primitives against the static ones, in the world frame.
+  const Boxes moving =
+      BoxesOf(q, moving_vertices_, moving_triangles_, moving_edges_, Point::Zero());
+  Pairs(q, Kind::kVertexTriangle, {moving_vertices_, moving.vertices},
+        {static_.triangles, static_.triangle_boxes}, static_.triangle_grid, false, false, &out,
+        count);
+  Pairs(q, Kind::kTriangleVertex, {moving_triangles_, moving.triangles},
+        {static_.vertices, static_.vertex_boxes}, static_.vertex_grid, false, false, &out, count);
+  Pairs(q, Kind::kEdgeEdge, {moving_edges_, moving.edges}, {static_.edges, static_.edge_boxes},
+        static_.edge_grid, false, false, &out, count);
+  // Moving bodies against each other, in the world frame.
+  if (moving_bodies_.size() > 1)
+    Within(q, moving_vertices_, moving_triangles_, moving_edges_, Point::Zero(), false, &out,
+           count);
+  // Each moving body against itself, in the frame of its mean displacement.
+  if (q.self_contact)
+    for (const size_t b : moving_bodies_) {
+      const std::vector<int32_t> vertices = Range(s.vertex_start[b], s.vertex_start[b + 1]);
+      Point shift = Point::Zero();
+      for (const int32_t v : vertices) shift += (*q.end)[v] - (*q.start)[v];
+      shift /= static_cast<double>(vertices.size());
+      Within(q, vertices, Range(s.triangle_start[b], s.triangle_start[b + 1]),
+             Range(s.edge_start[b], s.edge_start[b + 1]), shift, true, &out, count);
+    }
   return out;
 }
 
 }  // namespace softbody
-

@@ -14,6 +14,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "contact/geometry.hpp"
+
 #include "contact/ccd.hpp"
 #include "contact/contact_surface.hpp"
 
@@ -27,7 +29,7 @@ struct SurfaceCollision {
 struct CollisionQuery {
   const ContactSurface *surface = nullptr;
   const std::vector<Point> *start = nullptr, *end = nullptr;  // per surface vertex
-  const std::vector<char> *moving = nullptr;  // per surface vertex: a free vertex
+  const std::vector<char> *moving = nullptr;                  // per surface vertex: a free vertex
   CcdTolerance tolerance;
   bool self_contact = false;
   bool ground = false;
@@ -41,9 +43,27 @@ struct CollisionCount {
   int64_t close = 0;       // pairs already closer than the separation at the start (not guarded)
 };
 
-// The colliding pairs, in a fixed order (vertex-ground, vertex-triangle,
-// edge-edge, each by primitive index): the same on every rank.
-std::vector<SurfaceCollision> FindSurfaceCollisions(const CollisionQuery &query,
-                                                    CollisionCount *count);
+// Finds the colliding pairs. The primitives that never move (fixed bodies,
+// bodies at rest) are binned once; each call bins the moving ones: in the
+// world frame against the static ones and other moving bodies, and each
+// moving body in the frame of its mean displacement for self-contact.
+class SurfaceCollisionFinder {
+ public:
+  // query.start must hold the static vertices' positions.
+  void Setup(const CollisionQuery &query);
+  // The colliding pairs, in a fixed order (vertex-ground, then by pass and
+  // primitive index): the same on every rank.
+  std::vector<SurfaceCollision> Find(const CollisionQuery &query, CollisionCount *count) const;
+
+ private:
+  struct Binned {
+    std::vector<int32_t> vertices, triangles, edges;  // surface indices
+    std::vector<Box> vertex_boxes, triangle_boxes, edge_boxes;
+    UniformGrid vertex_grid, triangle_grid, edge_grid;
+  };
+  std::vector<int32_t> moving_vertices_, moving_triangles_, moving_edges_;
+  std::vector<size_t> moving_bodies_;
+  Binned static_;
+};
 
 }  // namespace softbody

@@ -68,8 +68,8 @@ TEST(Distances, MatchABruteForceMinimum) {
 
 TEST(Distances, ParallelAndDegenerateEdges) {
   // Parallel segments overlapping in x, 0.25 apart in z: distance 0.25.
-  EXPECT_NEAR(std::sqrt(EdgeEdgeDistanceSquared(Point(0, 0, 0), Point(1, 0, 0),
-                                                Point(0.5, 0, 0.25), Point(2, 0, 0.25))),
+  EXPECT_NEAR(std::sqrt(EdgeEdgeDistanceSquared(Point(0, 0, 0), Point(1, 0, 0), Point(0.5, 0, 0.25),
+                                                Point(2, 0, 0.25))),
               0.25, 1e-15);
   // Collinear, disjoint: end to end, 0.5.
   EXPECT_NEAR(std::sqrt(EdgeEdgeDistanceSquared(Point(0, 0, 0), Point(1, 0, 0), Point(1.5, 0, 0),
@@ -120,12 +120,13 @@ TEST(Ccd, AgreesWithDenseSampling) {
   for (int trial = 0; trial < 400; ++trial) {
     MovingPair pair;
     for (int k = 0; k < 4; ++k) {
-      pair.start[k] = RandomPoint(rng, 1) + (k == 0 || (trial % 2 && k == 1) ? Point(0, 0, 1.2) : Point::Zero());
+      pair.start[k] = RandomPoint(rng, 1) +
+                      (k == 0 || (trial % 2 && k == 1) ? Point(0, 0, 1.2) : Point::Zero());
       pair.end[k] = pair.start[k] + RandomPoint(rng, 1.5);
     }
     const bool vertex_triangle = trial % 2 == 0;
-    const Approach approach = vertex_triangle ? PointTriangleCcd(pair, tolerance)
-                                              : EdgeEdgeCcd(pair, tolerance);
+    const Approach approach =
+        vertex_triangle ? PointTriangleCcd(pair, tolerance) : EdgeEdgeCcd(pair, tolerance);
     const double sampled = vertex_triangle ? SampledMinimum(pair, PointTriangleAt, kSamples)
                                            : SampledMinimum(pair, EdgeEdgeAt, kSamples);
     const double start = vertex_triangle ? PointTriangleAt(pair.start) : EdgeEdgeAt(pair.start);
@@ -227,8 +228,7 @@ TEST(ImpactZones, MobileZonesMoveRigidlyAndConserveMomentum) {
   EXPECT_LT((after.angular - before.angular).norm(), 0.05 * before.angular.norm() + 1e-3);
   EXPECT_LE(after.kinetic, before.kinetic * (1 + 1e-12));
   for (int a : zone)
-    for (int b : zone)
-      EXPECT_NEAR((end[a] - end[b]).norm(), (start[a] - start[b]).norm(), 1e-14);
+    for (int b : zone) EXPECT_NEAR((end[a] - end[b]).norm(), (start[a] - start[b]).norm(), 1e-14);
   EXPECT_EQ(end[4], untouched[0]);
   EXPECT_EQ(end[5], untouched[1]);
 }
