@@ -79,18 +79,44 @@ PetscErrorCode CollisionGuard::Fetch(Vec from, std::vector<Point> *to) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode CollisionGuard::Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed) {
+PetscErrorCode CollisionGuard::Probe(Vec x0, Vec x, bool *moved) {
   PetscFunctionBeginUser;
   PetscLogDouble begin, finish;
   PetscCall(PetscTime(&begin));
   PetscCall(Fetch(x0, &start_));
   PetscCall(Fetch(x, &end_));
-  const std::vector<char> moved = Resolve();
-  *changed = std::find(moved.begin(), moved.end(), 1) != moved.end();
-  if (*changed) PetscCall(WriteBack(moved, x, v, dt));
+  moved_ = Resolve();
+  *moved = std::find(moved_.begin(), moved_.end(), 1) != moved_.end();
   PetscCall(PetscTime(&finish));
   stats_.seconds += finish - begin;
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+std::vector<std::pair<PetscInt, int32_t>> CollisionGuard::OwnedMoved() const {
+  std::vector<std::pair<PetscInt, int32_t>> owned;
+  for (const int32_t s : free_vertices_) {
+    const PetscInt local = layout_->LocalOfNatural(surface_.natural[s]);
+    if (moved_[s] && local >= 0) owned.push_back({local, s});
+  }
+  return owned;
+}
+
+std::vector<std::pair<PetscInt, Point>> CollisionGuard::MovedVelocities(PetscReal dt) const {
+  std::vector<std::pair<PetscInt, Point>> moved;
+  for (const auto &[local, s] : OwnedMoved()) moved.push_back({local, (end_[s] - start_[s]) / dt});
+  return moved;
+}
+
+PetscErrorCode CollisionGuard::Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed) {
+  PetscFunctionBeginUser;
+  PetscCall(Probe(x0, x, changed));
+  if (*changed) PetscCall(WriteBack(x, v, dt));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void CollisionGuard::MarkMoved(std::vector<char> *marked) const {
+  for (size_t s = 0; s < moved_.size(); ++s)
+    if (moved_[s]) (*marked)[surface_.natural[s]] = 1;
 }
 
 std::vector<char> CollisionGuard::Resolve() {
@@ -110,11 +136,17 @@ std::vector<char> CollisionGuard::Resolve() {
       for (const int32_t v : free_vertices_) end_[v] = start_[v], moved[v] = 1;
       break;
     }
-    for (const SurfaceCollision &c : collisions) {
-      bool immobile = c.count == 1;
-      for (int k = 0; k < c.count; ++k) immobile = immobile || !moving_[c.vertices[k]];
-      zones_.Merge(c.vertices.data(), c.count, immobile);
+    // Which pairs freeze, decided on the zones as the last round left them:
+    // pairs of this round share vertices, and merging one must not make the next
+    // look like a zone colliding with itself.
+    std::vector<char> immobile(collisions.size(), 0);
+    for (size_t i = 0; i < collisions.size(); ++i) {
+      const SurfaceCollision &c = collisions[i];
+      immobile[i] = c.count == 1 || zones_.InOneMobileZone(c.vertices.data(), c.count);
+      for (int k = 0; k < c.count; ++k) immobile[i] = immobile[i] || !moving_[c.vertices[k]];
     }
+    for (size_t i = 0; i < collisions.size(); ++i)
+      zones_.Merge(collisions[i].vertices.data(), collisions[i].count, immobile[i]);
     changed.assign(n, 0);
     for (const int32_t v : zones_.Move(start_, mass_, &end_)) changed[v] = moved[v] = 1;
     query_.changed = &changed;
@@ -132,20 +164,16 @@ std::vector<char> CollisionGuard::Resolve() {
 }
 
 // This rank's moved vertices: x = the zone's end position, v = (x - x0) / dt.
-PetscErrorCode CollisionGuard::WriteBack(const std::vector<char> &moved, Vec x, Vec v,
-                                         PetscReal dt) {
+PetscErrorCode CollisionGuard::WriteBack(Vec x, Vec v, PetscReal dt) {
   PetscFunctionBeginUser;
   PetscScalar *lx, *lv;
   PetscCall(VecGetArray(x, &lx));
   PetscCall(VecGetArray(v, &lv));
-  for (const int32_t s : free_vertices_) {
-    const PetscInt local = layout_->LocalOfNatural(surface_.natural[s]);
-    if (!moved[s] || local < 0) continue;
+  for (const auto &[local, s] : OwnedMoved())
     for (int c = 0; c < 3; ++c) {
       lx[3 * local + c] = end_[s][c];
       lv[3 * local + c] = (end_[s][c] - start_[s][c]) / dt;
     }
-  }
   PetscCall(VecRestoreArray(x, &lx));
   PetscCall(VecRestoreArray(v, &lv));
   PetscFunctionReturn(PETSC_SUCCESS);

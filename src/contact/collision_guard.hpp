@@ -28,6 +28,7 @@
 #include <petscvec.h>
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "contact/contact_options.hpp"
@@ -62,9 +63,19 @@ class CollisionGuard {
   // smallest free body's mean boundary edge (m).
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
                        const ContactOptions &options, bool self_contact, double min_edge);
-  // Collective. x0: the step's start positions; x, v: its end positions and
-  // velocities (PETSc order), changed where zones moved; *changed: on any rank.
+  // Collective. Detection and zones on the motion from x0 (the step's start
+  // positions) to x (its end positions), PETSc order; nothing written.
+  // *moved: zones moved vertices (the same on every rank).
+  PetscErrorCode Probe(Vec x0, Vec x, bool *moved);
+  // Not collective. After Probe: this rank's vertices the zones moved, as
+  // (local vertex, velocity (end - start) / dt).
+  std::vector<std::pair<PetscInt, Point>> MovedVelocities(PetscReal dt) const;
+  // Collective. Probe, then the moved vertices written: x = the zone's end
+  // position, v = (x - x0) / dt; *changed as Probe's *moved.
   PetscErrorCode Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
+
+  // Not collective. Marks (natural vertex) the vertices the last Apply moved.
+  void MarkMoved(std::vector<char> *marked) const;
 
   const GuardStatistics &statistics() const { return stats_; }
   double separation() const { return query_.tolerance.separation; }
@@ -74,7 +85,9 @@ class CollisionGuard {
   PetscErrorCode Fetch(Vec from, std::vector<Point> *to);
   // Detection and zones until no pair collides; returns the vertices moved.
   std::vector<char> Resolve();
-  PetscErrorCode WriteBack(const std::vector<char> &moved, Vec x, Vec v, PetscReal dt);
+  // This rank's vertices the last Probe moved: (local vertex, surface vertex).
+  std::vector<std::pair<PetscInt, int32_t>> OwnedMoved() const;
+  PetscErrorCode WriteBack(Vec x, Vec v, PetscReal dt);
 
   MPI_Comm comm_ = MPI_COMM_NULL;
   const DofLayout *layout_ = nullptr;
@@ -83,6 +96,7 @@ class CollisionGuard {
   std::vector<char> moving_;            // per surface vertex
   std::vector<double> mass_;            // per surface vertex (kg; 0 when it does not move)
   std::vector<Point> rest_, start_, end_;
+  std::vector<char> moved_;  // per surface vertex: moved by the last Apply
   CollisionQuery query_;
   SurfaceCollisionFinder finder_;
   ImpactZones zones_;

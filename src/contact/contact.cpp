@@ -11,6 +11,10 @@ namespace {
 // do not bounce: a resting body approaches by about what gravity adds in one
 // step, |g| dt; twice that separates impacts from resting contact with margin.
 constexpr double kBounceSpeedInGravitySteps = 2;
+// Rounds of distance constraints (with the vertices the guard moved pinned)
+// and guard after the first guard of a step: each round pins more vertices, so
+// the constraints' violation shrinks; the guard always ends the step.
+constexpr int kMaxGuardConstraintRounds = 4;
 
 }  // namespace
 
@@ -174,6 +178,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   Timing timing(this);
   friction_.Clear();
   constraints_.Clear(kBounceSpeedInGravitySteps * options_.gravity * dt);
+  holding_ = false;
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
   // Obstacles where they will be if they keep their velocity.
   PetscCall(Refresh(x0, v0, dt, true));
@@ -284,6 +289,28 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode ContactSolver::HoldGuardedVertices(Vec x0, Vec x, PetscReal dt,
+                                                  const std::vector<PetscReal> &reactions,
+                                                  bool *held) {
+  PetscFunctionBeginUser;
+  Timing timing(this);
+  *held = false;
+  if (!guard_on_) PetscFunctionReturn(PETSC_SUCCESS);
+  bool moved;
+  PetscCall(guard_.Probe(x0, x, &moved));
+  if (moved) {
+    for (const auto &[local, velocity] : guard_.MovedVelocities(dt))
+      constraints_.Hold(local, velocity);
+    holding_ = true;
+  }
+  // Once vertices are held, contacts aimed at the first prediction may pull.
+  PetscInt released = holding_ ? constraints_.ReleasePulling(reactions) : 0;
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &released, 1, MPIU_INT, MPI_SUM, comm_));
+  *held = moved || released > 0;
+  if (*held) PetscCall(constraints_.Combine(comm_, friction_.tangents()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode ContactSolver::EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
                                       const std::vector<PetscReal> &reactions, bool *changed) {
   PetscFunctionBeginUser;
@@ -292,13 +319,24 @@ PetscErrorCode ContactSolver::EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
   if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
   if (ground_ || body_obstacles_) PetscCall(RespondToContacts(x, v, reactions, changed));
   if (!distance_.empty()) {
-    PetscCall(ResolveDistanceConstraints(x, v));
+    PetscCall(ResolveDistanceConstraints(x, v, nullptr));
     *changed = true;
   }
-  if (guard_on_) {
-    bool guarded;
+  if (guard_on_) PetscCall(Guard(x0, x, v, dt, changed));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::Guard(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed) {
+  PetscFunctionBeginUser;
+  bool guarded;
+  PetscCall(guard_.Apply(x0, x, v, dt, &guarded));
+  *changed = *changed || guarded;
+  std::vector<char> pinned;
+  if (guarded && !distance_.empty()) pinned.assign(scene_->num_vertices(), 0);
+  for (int round = 0; guarded && !distance_.empty() && round < kMaxGuardConstraintRounds; ++round) {
+    guard_.MarkMoved(&pinned);
+    PetscCall(ResolveDistanceConstraints(x, v, &pinned));
     PetscCall(guard_.Apply(x0, x, v, dt, &guarded));
-    *changed = *changed || guarded;
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -327,10 +365,11 @@ PetscErrorCode ContactSolver::RespondToContacts(Vec x, Vec v,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::ResolveDistanceConstraints(Vec x, Vec v) {
+PetscErrorCode ContactSolver::ResolveDistanceConstraints(Vec x, Vec v,
+                                                         const std::vector<char> *pinned) {
   PetscFunctionBeginUser;
   PetscCall(GatherFreeState(x, v, 0.0));
-  const DistanceConstraints::Resolution resolution = distance_.Resolve(&state_);
+  const DistanceConstraints::Resolution resolution = distance_.Resolve(&state_, pinned);
   stats_.constraint_sweeps += resolution.sweeps;
   stats_.max_constraint_sweeps =
       std::max<PetscInt>(stats_.max_constraint_sweeps, resolution.sweeps);

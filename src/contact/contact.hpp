@@ -95,6 +95,13 @@ class ContactSolver {
   //    is dropped and the Coulomb impulse mu lambda_n along the reaction goes
   //    into rhs (owned entries) for the next solve; *released tells any rank did.
   PetscErrorCode ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released);
+  // 2c. After the solves, on x = x0 + dt v: when the collision guard would move
+  //    vertices (collision_guard.hpp), their velocities are prescribed for the
+  //    rest of the step, contacts that pull (reactions from the last solve)
+  //    are released, and *held tells the step to solve again, so the body
+  //    answers them; the guard after the step (EndStep) has the last word.
+  PetscErrorCode HoldGuardedVertices(Vec x0, Vec x, PetscReal dt,
+                                     const std::vector<PetscReal> &reactions, bool *held);
   // 3. After x1 = x0 + dt v1 with the constraints' reactions: velocity response,
   //    impulse spreading, resting contacts for the next step, last-resort
   //    projection, distance constraints, and last the collision guard
@@ -154,7 +161,10 @@ class ContactSolver {
   // EndStep's parts.
   PetscErrorCode RespondToContacts(Vec x, Vec v, const std::vector<PetscReal> &reactions,
                                    bool *changed);
-  PetscErrorCode ResolveDistanceConstraints(Vec x, Vec v);
+  PetscErrorCode ResolveDistanceConstraints(Vec x, Vec v, const std::vector<char> *pinned);
+  // The guard, and with distance constraints, the constraints again with the
+  // vertices it moved pinned, then the guard again (it has the last word).
+  PetscErrorCode Guard(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
 
   // Times a public method: the "Contact" event of -log_view and stats_.seconds.
   class Timing {
@@ -175,6 +185,7 @@ class ContactSolver {
   bool body_obstacles_ = false;  // bodies are obstacles (a free body meets another body)
   bool free_obstacles_ = false;  // free bodies are obstacles to each other
   bool guard_on_ = false;        // the collision guard runs after each step
+  bool holding_ = false;         // this step's solves hold vertices for the guard
   bool track_free_ = false;      // the free bodies' grids are needed (free or feature obstacles)
   bool gather_always_ = false;   // every call gathers (free obstacles, constraints, spreading)
   bool features_near_ = false;   // this call's sharp-edge contacts need the free state

@@ -39,6 +39,8 @@ void ContactConstraints::Clear(PetscReal bounce_speed) {
   constrained_.assign(state_->local_count(), VertexObstacles());
   feature_held_.assign(features_->size(), 0);
   feature_contact_.assign(state_->local_count(), -1);
+  held_.clear();
+  held_slot_.assign(state_->local_count(), -1);
   global_count_ = 0;
   bounce_speed_ = bounce_speed;
 }
@@ -201,11 +203,31 @@ PetscInt ContactConstraints::AddFeaturePenetrationsOf(size_t f, size_t b, PetscR
   return found;
 }
 
+void ContactConstraints::Hold(PetscInt local, const Point &velocity) {
+  ptrdiff_t &slot = held_slot_[local];
+  if (slot < 0) {
+    slot = static_cast<ptrdiff_t>(held_.size());
+    held_.resize(held_.size() + 3);
+  }
+  for (int k = 0; k < 3; ++k) held_[slot + k] = {local, Point::Unit(k), velocity[k], true, true};
+}
+
+PetscInt ContactConstraints::ReleasePulling(const std::vector<PetscReal> &reactions) {
+  PetscInt released = 0;
+  for (size_t i = 0; i < normals_.size() && i < reactions.size(); ++i)
+    if (!normals_[i].released && reactions[i] < 0) {
+      normals_[i].released = true;
+      ++released;
+    }
+  return released;
+}
+
 PetscErrorCode ContactConstraints::Combine(MPI_Comm comm,
                                            const std::vector<VelocityConstraint> &tangents) {
   PetscFunctionBeginUser;
   solve_constraints_ = normals_;
   solve_constraints_.insert(solve_constraints_.end(), tangents.begin(), tangents.end());
+  solve_constraints_.insert(solve_constraints_.end(), held_.begin(), held_.end());
   const PetscInt local = static_cast<PetscInt>(solve_constraints_.size());
   PetscCallMPI(MPIU_Allreduce(&local, &global_count_, 1, MPIU_INT, MPI_SUM, comm));
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -92,7 +92,17 @@ class ContactConstraints {
   const std::vector<VelocityConstraint> &normals() const { return normals_; }
   const VertexObstacles &obstacles_of(PetscInt local) const { return constrained_[local]; }
 
-  // Collective. The solve's constraints: the normals, then `tangents`.
+  // Prescribes owned vertex `local`'s whole velocity (m/s) for the rest of the
+  // step (the collision guard's zones), overriding its other constraints;
+  // a later call for the same vertex replaces the prescription.
+  void Hold(PetscInt local, const Point &velocity);
+  // Leaves out of the solve the normal constraints whose reaction (the last
+  // solve's, solve order) pulls the vertex into its obstacle (lambda < 0): once
+  // the guard holds vertices, a contact aimed at the step's first prediction may
+  // drag its vertex after them. Returns how many this rank released.
+  PetscInt ReleasePulling(const std::vector<PetscReal> &reactions);
+  // Collective. The solve's constraints: the normals, then `tangents`, then the
+  // held vertices' (three each).
   PetscErrorCode Combine(MPI_Comm comm, const std::vector<VelocityConstraint> &tangents);
   const std::vector<VelocityConstraint> &solve_constraints() const { return solve_constraints_; }
   PetscInt global_count() const { return global_count_; }
@@ -126,7 +136,9 @@ class ContactConstraints {
   std::vector<VertexObstacles> constrained_;  // per local vertex
   std::vector<char> feature_held_;            // per feature point: constrained this step
   std::vector<ptrdiff_t> feature_contact_;    // per local vertex: its feature contact (-1: none)
-  std::vector<VelocityConstraint> solve_constraints_;  // normals, then tangents
+  std::vector<VelocityConstraint> held_;      // the held vertices' three axis constraints
+  std::vector<ptrdiff_t> held_slot_;          // per local vertex: its first in held_ (-1: none)
+  std::vector<VelocityConstraint> solve_constraints_;  // normals, tangents, held
   PetscInt global_count_ = 0;
 };
 

@@ -81,20 +81,22 @@ PetscErrorCode DistanceConstraints::Setup(MPI_Comm comm, const Scene &scene,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-DistanceConstraints::Resolution DistanceConstraints::Resolve(FreeState *state) const {
+DistanceConstraints::Resolution DistanceConstraints::Resolve(
+    FreeState *state, const std::vector<char> *pinned) const {
   double violation = 0;
   PetscInt sweep = 0;
   for (; sweep < kMaxConstraintSweeps; ++sweep) {
-    violation = Sweep(state);
+    violation = Sweep(state, pinned);
     if (violation < kConstraintTolerance) break;
   }
   return {sweep + 1, violation};
 }
 
-double DistanceConstraints::Sweep(FreeState *state) const {
+double DistanceConstraints::Sweep(FreeState *state, const std::vector<char> *pinned) const {
   double violation = 0;
+  auto weight = [&](int32_t n) { return pinned && (*pinned)[n] ? 0.0 : state->inverse_mass(n); };
   for (const DistanceConstraint &c : constraints_) {
-    const double wa = state->inverse_mass(c.a), wb = state->inverse_mass(c.b), w = wa + wb;
+    const double wa = weight(c.a), wb = weight(c.b), w = wa + wb;
     Eigen::Map<Point> xa = state->position_ref(c.a), xb = state->position_ref(c.b);
     const Point d = xb - xa;
     const double length = d.norm();

@@ -50,11 +50,12 @@ class DistanceConstraints {
   bool empty() const { return constraints_.empty(); }
   size_t size() const { return constraints_.size(); }
   // Not collective; every rank must call it on the same gathered state.
-  Resolution Resolve(FreeState *state) const;
+  // pinned (natural vertex; null: none): vertices that do not move, as if fixed.
+  Resolution Resolve(FreeState *state, const std::vector<char> *pinned = nullptr) const;
 
  private:
   // One Gauss-Seidel sweep; returns the largest relative violation met.
-  double Sweep(FreeState *state) const;
+  double Sweep(FreeState *state, const std::vector<char> *pinned) const;
 
   std::vector<DistanceConstraint> constraints_;
 };

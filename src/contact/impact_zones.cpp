@@ -40,11 +40,16 @@ int32_t ImpactZones::Find(int32_t vertex) {
   return vertex;
 }
 
+bool ImpactZones::InOneMobileZone(const int32_t *vertices, int count) {
+  const int32_t root = Find(vertices[0]);
+  if (members_[root].empty() || immobile_[root]) return false;
+  for (int k = 1; k < count; ++k)
+    if (Find(vertices[k]) != root) return false;
+  return true;
+}
+
 void ImpactZones::Merge(const int32_t *vertices, int count, bool immobile) {
   int32_t root = Find(vertices[0]);
-  bool same_zone = true;
-  for (int k = 1; k < count; ++k) same_zone = same_zone && Find(vertices[k]) == root;
-  immobile = immobile || same_zone;
   for (int k = 0; k < count; ++k) {
     int32_t other = Find(vertices[k]);
     if (members_[root].empty()) members_[root] = {root};

@@ -30,10 +30,11 @@ class ImpactZones {
  public:
   // Every vertex its own zone, mobile.
   void Reset(int32_t num_vertices);
+  // Whether the vertices share one mobile zone: a pair found colliding while
+  // it moves rigidly (only round-off can do that); the caller freezes it.
+  bool InOneMobileZone(const int32_t *vertices, int count);
   // Merges the zones of a colliding pair's vertices. The merged zone is
-  // immobile when `immobile`, when any of the zones was, or when the vertices
-  // already shared one zone (it collided with itself: only round-off can do
-  // that, and freezing ends it).
+  // immobile when `immobile` or when any of the zones was.
   void Merge(const int32_t *vertices, int count, bool immobile);
   // Moves every zone merged since the last call: end[v] for its vertices from
   // start and mass (kg; only read for mobile zones). Returns the vertices whose

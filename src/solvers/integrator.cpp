@@ -20,6 +20,10 @@ constexpr PetscReal kScheduleTimeTolerance = 1e-9;
 // slipping contacts"; a last solve follows when the rounds run out. Twenty
 // rounds is well above what settling contacts take.
 constexpr int kMaxContactRounds = 20;
+// Solves with the collision guard's zone velocities prescribed (each round
+// holds the vertices the guard would still move); the guard after the step
+// resolves what is left.
+constexpr int kMaxGuardSolves = 10;
 
 // Corotational iteration (CorotationalStep):
 // Sufficient decrease of the line search (Armijo's c1, the customary 1e-4): P
@@ -853,7 +857,7 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
     again = added || released;
   }
   if (again) PetscCall(Solve(v, contact));
-  PetscCall(VecWAXPY(x, step_.position_step, v, x_start_));  // x1 = x0 + dt v1
+  PetscCall(SolveWithGuardedVertices(x, v, contact));
   PetscCall(FinishSchemeStep(x, v));  // the response acts on the scheme's x1, v1
   bool changed;
   {
@@ -861,6 +865,22 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
     PetscCall(contact->EndStep(x_start_, x, v, step_.position_step, reactions_, &changed));
   }
   elastic_state_current_ = false;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SolveWithGuardedVertices(Vec x, Vec v, ContactSolver *contact) {
+  PetscFunctionBeginUser;
+  for (int round = 0;; ++round) {
+    PetscCall(VecWAXPY(x, step_.position_step, v, x_start_));  // x1 = x0 + dt v1
+    if (round == kMaxGuardSolves) break;
+    bool held;
+    {
+      StageScope stage(Stages().contact);
+      PetscCall(contact->HoldGuardedVertices(x_start_, x, step_.position_step, reactions_, &held));
+    }
+    if (!held) break;
+    PetscCall(Solve(v, contact));
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -269,6 +269,9 @@ class ImplicitEuler {
                                             const std::vector<Eigen::Vector3d> &solved, Vec v);
   // Step with contact: solve, constrain, solve again (Step).
   PetscErrorCode ContactStep(Vec x, Vec v, ContactSolver *contact);
+  // x = x0 + dt v, solved again (at most kMaxGuardSolves times) while the
+  // collision guard would move vertices, with their zone velocities prescribed.
+  PetscErrorCode SolveWithGuardedVertices(Vec x, Vec v, ContactSolver *contact);
   // rhs = M u_b - h_f f_el(x_b) + h_f f_ext for the state x = x_b, v = u_b.
   PetscErrorCode LinearisedRightHandSide(Vec x, Vec v);
   // Corotational mode with contact but no constraint yet, schemes other than

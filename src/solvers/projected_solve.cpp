@@ -66,7 +66,8 @@ ProjectedSolver::~ProjectedSolver() {
 
 void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &constraints) {
   std::map<PetscInt, std::vector<const VelocityConstraint *>> by_vertex;
-  for (const VelocityConstraint &c : constraints) by_vertex[c.vertex].push_back(&c);
+  for (const VelocityConstraint &c : constraints)
+    if (!c.released) by_vertex[c.vertex].push_back(&c);
   vertices_.clear();
   for (const auto &[vertex, list] : by_vertex) {
     std::vector<VelocityConstraint> own;
@@ -77,6 +78,13 @@ void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &const
 
 ConstrainedVertex CombineConstraints(PetscInt vertex,
                                      const std::vector<VelocityConstraint> &constraints) {
+  if (std::any_of(constraints.begin(), constraints.end(),
+                  [](const VelocityConstraint &c) { return c.prescribes_all; })) {
+    ConstrainedVertex held{vertex, Eigen::Matrix3d::Identity(), 3, Eigen::Vector3d::Zero()};
+    for (const VelocityConstraint &c : constraints)
+      if (c.prescribes_all) held.prescribed += c.velocity * c.normal;
+    return held;
+  }
   const int k = static_cast<int>(
       std::min<size_t>(constraints.size(), static_cast<size_t>(kMaxConstraintsPerVertex)));
   // Candidate active sets S (bit masks), each solved exactly: p = least-norm

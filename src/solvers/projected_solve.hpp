@@ -28,6 +28,11 @@ struct VelocityConstraint {
   Eigen::Vector3d normal;  // unit direction n
   PetscReal velocity;      // prescribed n . v (m/s)
   bool immobile = false;   // from an obstacle that cannot yield (ground, fixed body)
+  // One of three orthonormal constraints that prescribe the whole velocity (the
+  // collision guard's): they override every other constraint of the vertex.
+  bool prescribes_all = false;
+  // Left out of the solve (a contact that pulled; its reaction is still reported).
+  bool released = false;
 };
 // The constraints of one vertex: an orthonormal basis of their directions and
 // the velocity component in its span that satisfies them all.
@@ -48,7 +53,8 @@ struct ConstrainedVertex {
 // one with more constraints from immobile obstacles (a left-out direction holds
 // only up to the free velocity's component along it), then the smallest |p|.
 // Pure; the first six constraints are considered (a contact with its two
-// friction tangents and the normals of up to three obstacles).
+// friction tangents and the normals of up to three obstacles). Constraints that
+// prescribe_all override the rest: the vertex's velocity is sum_k c_k n_k of them.
 constexpr double kMinSeparation = 0.1;
 ConstrainedVertex CombineConstraints(PetscInt vertex,
                                      const std::vector<VelocityConstraint> &constraints);

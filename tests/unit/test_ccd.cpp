@@ -252,7 +252,9 @@ TEST(ImpactZones, ImmobileAndSelfCollidingZonesStayPut) {
   zones.Merge(b, 2, false);
   zones.Move(start, mass, &end);
   EXPECT_FALSE(zones.immobile(1));
-  zones.Merge(b, 2, false);
+  ASSERT_TRUE(zones.InOneMobileZone(b, 2));
+  EXPECT_FALSE(zones.InOneMobileZone(a, 2));
+  zones.Merge(b, 2, true);
   zones.Move(start, mass, &end);
   EXPECT_TRUE(zones.immobile(2));
   EXPECT_EQ(end[2], start[2]);
