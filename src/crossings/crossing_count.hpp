@@ -19,6 +19,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -43,16 +44,27 @@ struct CrossingCounts {
 
 class CrossingCounter {
  public:
-  // Not collective. Keeps a reference to `surface`, which must outlive the counter.
-  explicit CrossingCounter(const ResultSurface &surface);
-  // Not collective. `positions` [V][3] flattened (m); no ground count without `ground`.
+  // Not collective. Keeps a reference to `surface`, which must outlive the
+  // counter. The fixed bodies' triangles, boxes and shapes are made once, from
+  // `fixed_positions` ([V][3] flattened, m; only the fixed bodies' rows are read):
+  // fixed bodies never move.
+  CrossingCounter(const ResultSurface &surface, const std::vector<double> &fixed_positions);
+  ~CrossingCounter();
+  CrossingCounter(const CrossingCounter &) = delete;
+  CrossingCounter &operator=(const CrossingCounter &) = delete;
+  // Not collective. `positions` [V][3] flattened (m; only the free bodies' rows
+  // are read); no ground count without `ground`.
   CrossingCounts Count(const std::vector<double> &positions,
                        const std::optional<GroundPlane> &ground) const;
 
  private:
+  struct Fixed;  // the fixed triangles' shapes and boxes (CGAL types)
+
   const ResultSurface &surface_;
-  std::vector<uint32_t> free_triangles_, fixed_triangles_;
+  std::vector<uint32_t> free_triangles_;
+  std::vector<uint32_t> slot_;  // triangle -> its index among the free or the fixed ones
   std::vector<int32_t> free_surface_vertices_;  // vertices of the free bodies' triangles
+  std::unique_ptr<Fixed> fixed_;
 };
 
 }  // namespace softbody

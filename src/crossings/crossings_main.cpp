@@ -98,7 +98,8 @@ PetscErrorCode ProcessFileName(MPI_Comm comm, int argc, char **argv, CrossingsOp
 }
 
 // Collective. Counts this rank's share of the checked frames; rank 0 receives
-// every frame's counts (the others' `counts` are left partial).
+// every frame's counts (the others' `counts` are left partial). The fixed
+// bodies are read from frame 0 only, the free ones from every checked frame.
 PetscErrorCode CountFrames(MPI_Comm comm, const ResultFile &file,
                            const std::optional<GroundPlane> &ground,
                            const std::vector<int64_t> &frames,
@@ -107,17 +108,20 @@ PetscErrorCode CountFrames(MPI_Comm comm, const ResultFile &file,
   PetscMPIInt rank = 0, size = 1;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   PetscCallMPI(MPI_Comm_size(comm, &size));
-  const CrossingCounter counter(file.surface());
   counts->assign(frames.size(), CrossingCounts());
   std::vector<double> positions;
+  std::unique_ptr<CrossingCounter> counter;
   std::string error;
-  for (size_t i = rank; i < frames.size() && error.empty(); i += size) {
-    try {
-      file.ReadPositions(frames[i], &positions);
-      (*counts)[i] = counter.Count(positions, ground);
-    } catch (const InputError &input_error) {
-      error = input_error.what();
+  try {
+    if (!frames.empty()) file.ReadPositions(0, file.AllVertices(), &positions);
+    counter = std::make_unique<CrossingCounter>(file.surface(), positions);
+    const std::vector<ResultFile::VertexRange> moving = file.FreeVertices();
+    for (size_t i = rank; i < frames.size(); i += size) {
+      file.ReadPositions(frames[i], moving, &positions);
+      (*counts)[i] = counter->Count(positions, ground);
     }
+  } catch (const InputError &input_error) {
+    error = input_error.what();
   }
   PetscCall(AgreeOnAllRanks(comm, error.empty(),
                             error.empty() ? file.path() + ": a frame could not be read" : error));

@@ -98,19 +98,36 @@ ResultFile::~ResultFile() {
   if (file_ >= 0) H5Fclose(file_);
 }
 
-void ResultFile::ReadPositions(int64_t frame, std::vector<double> *positions) const {
-  const hsize_t V = static_cast<hsize_t>(surface_.num_vertices());
-  positions->resize(3 * V);
-  const hsize_t start[3] = {static_cast<hsize_t>(frame), 0, 0}, count[3] = {1, V, 3};
+void ResultFile::ReadPositions(int64_t frame, const std::vector<VertexRange> &rows,
+                               std::vector<double> *positions) const {
+  positions->resize(3 * static_cast<size_t>(surface_.num_vertices()));
   const hid_t file_space = H5Dget_space(positions_);
-  const hid_t memory_space = H5Screate_simple(3, count, nullptr);
-  bool ok = file_space >= 0 && memory_space >= 0 &&
-            H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start, nullptr, count, nullptr) >= 0;
-  ok = ok && H5Dread(positions_, H5T_NATIVE_DOUBLE, memory_space, file_space, H5P_DEFAULT,
-                     positions->data()) >= 0;
-  if (memory_space >= 0) H5Sclose(memory_space);
+  bool ok = file_space >= 0;
+  for (const auto &[begin, end] : rows) {
+    if (!ok || end <= begin) continue;
+    const hsize_t start[3] = {static_cast<hsize_t>(frame), static_cast<hsize_t>(begin), 0};
+    const hsize_t count[3] = {1, static_cast<hsize_t>(end - begin), 3};
+    const hid_t memory_space = H5Screate_simple(3, count, nullptr);
+    ok = memory_space >= 0 &&
+         H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start, nullptr, count, nullptr) >= 0 &&
+         H5Dread(positions_, H5T_NATIVE_DOUBLE, memory_space, file_space, H5P_DEFAULT,
+                 positions->data() + 3 * static_cast<size_t>(begin)) >= 0;
+    if (memory_space >= 0) H5Sclose(memory_space);
+  }
   if (file_space >= 0) H5Sclose(file_space);
   if (!ok) throw InputError(path_ + ": cannot read /positions of frame " + std::to_string(frame));
+}
+
+std::vector<ResultFile::VertexRange> ResultFile::FreeVertices() const {
+  std::vector<VertexRange> ranges;
+  for (int32_t v = 0; v < surface_.num_vertices(); ++v) {
+    if (surface_.fixed(surface_.vertex_body[v])) continue;
+    if (!ranges.empty() && ranges.back().second == v)
+      ++ranges.back().second;
+    else
+      ranges.push_back({v, v + 1});
+  }
+  return ranges;
 }
 
 }  // namespace softbody

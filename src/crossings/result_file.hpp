@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace softbody {
@@ -45,8 +46,15 @@ class ResultFile {
   double time(int64_t frame) const { return times_[frame]; }
   // The root attribute "ground_y" (m) when the run had a ground plane.
   const std::optional<double> &ground_y() const { return ground_y_; }
-  // Positions of every vertex at `frame`, [V][3] flattened (m). Throws InputError on a read error.
-  void ReadPositions(int64_t frame, std::vector<double> *positions) const;
+  // Positions at `frame` of the vertices in `rows` (ranges [begin, end) of
+  // vertices) into `positions` [V][3] flattened (m; resized to V rows, the
+  // other rows left as they were). Throws InputError on a read error.
+  using VertexRange = std::pair<int32_t, int32_t>;
+  void ReadPositions(int64_t frame, const std::vector<VertexRange> &rows,
+                     std::vector<double> *positions) const;
+  // All vertices, and the vertices of the free bodies (fixed bodies never move), as ranges.
+  std::vector<VertexRange> AllVertices() const { return {{0, surface_.num_vertices()}}; }
+  std::vector<VertexRange> FreeVertices() const;
 
  private:
   void Load();
