@@ -21,7 +21,7 @@ FILTER = 1e-14  # relative error bound under which a float orientation is recomp
 
 
 def _sign(value):
-    return (value > 0) - (value < 0)
+    return int(value > 0) - int(value < 0)
 
 
 def orient3d(a, b, c, d):
@@ -97,7 +97,8 @@ def segment_meets_triangle(p, q, a, b, c):
 
 
 def triangles_meet(s, t):
-    """Closed triangles s and t (three 3-tuples each) intersect."""
+    """Closed triangles s and t (three points each) intersect."""
+    s, t = ([tuple(float(x) for x in point) for point in triangle] for triangle in (s, t))
     for u, v in ((s, t), (t, s)):
         for i in range(3):
             if segment_meets_triangle(u[i], u[(i + 1) % 3], *v):
