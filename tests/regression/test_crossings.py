@@ -21,6 +21,8 @@ Synthetic result files written with h5py, whose counts are known by construction
 (e) A real run (scenes/contact/head-on-scene.txt, 2 ranks): every frame's counts
     equal the independent exact count, and the checker on 2 ranks reports what it
     reports on 1.
+(f) The meshes of scenes/contact are what its README's commands write, and its
+    scenes load.
 Skipped when softbody-crossings was not built (no CGAL).
 """
 import json
@@ -229,9 +231,26 @@ def case_e():
                  f"pairs): the counts equal the independent exact count {differing[:2]}")
 
 
+def case_f():
+    contact = os.path.join(ROOT, "scenes", "contact")
+    for name, size, cells in (("cube", (1, 1, 1), (6, 6, 6)), ("block", (1, 1, 1), (4, 4, 4)),
+                              ("sheet", (3, 0.05, 1), (30, 1, 10)), ("bar", (0.1, 0.1, 1.4), (1, 1, 7))):
+        path = os.path.join(args.work, name + ".mesh")
+        subprocess.run([sys.executable, os.path.join(ROOT, "tools", "box_mesh.py"), path, "-box_size",
+                        *map(str, size), "-box_cells", *map(str, cells)], check=True, capture_output=True)
+        with open(path, "rb") as a, open(os.path.join(contact, name + ".mesh"), "rb") as b:
+            checks.check(a.read() == b.read(), f"(f) scenes/contact/{name}.mesh is what its README's "
+                         "box_mesh.py command writes, byte for byte")
+    for scene in ("head-on", "wedge", "sheet", "stack"):
+        run = harness.run(args, 1, ["-scene", os.path.join(contact, scene + "-scene.txt"), "-steps", "0"],
+                          check=False)
+        checks.check(run.returncode == 0, f"(f) scenes/contact/{scene}-scene.txt loads (-steps 0)")
+
+
 case_a()
 case_b()
 case_c()
 case_d()
 case_e()
+case_f()
 checks.exit()
