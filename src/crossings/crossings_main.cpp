@@ -97,6 +97,24 @@ PetscErrorCode ProcessFileName(MPI_Comm comm, int argc, char **argv, CrossingsOp
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Not collective. Throws InputError unless the fixed bodies' vertices are where
+// they were in frame 0 (`first`) at `frame`: the checker reads them from frame 0 only.
+void CheckFixedBodiesStill(const ResultFile &file, const std::vector<double> &first,
+                           int64_t frame) {
+  std::vector<double> last;
+  file.ReadPositions(frame, file.AllVertices(), &last);
+  const ResultSurface &surface = file.surface();
+  for (int32_t v = 0; v < surface.num_vertices(); ++v) {
+    const int32_t body = surface.vertex_body[v];
+    if (!surface.fixed(body)) continue;
+    for (int c = 0; c < 3; ++c)
+      if (last[3 * v + c] != first[3 * v + c])
+        throw InputError(file.path() + ": fixed body " + std::to_string(body) + " moves (vertex " +
+                         std::to_string(v) + " between frames 0 and " + std::to_string(frame) +
+                         "), but fixed bodies are read from frame 0 only");
+  }
+}
+
 // Collective. Counts this rank's share of the checked frames; rank 0 receives
 // every frame's counts (the others' `counts` are left partial). The fixed
 // bodies are read from frame 0 only, the free ones from every checked frame.
@@ -114,6 +132,7 @@ PetscErrorCode CountFrames(MPI_Comm comm, const ResultFile &file,
   std::string error;
   try {
     if (!frames.empty()) file.ReadPositions(0, file.AllVertices(), &positions);
+    if (rank == 0 && frames.size() > 1) CheckFixedBodiesStill(file, positions, frames.back());
     counter = std::make_unique<CrossingCounter>(file.surface(), positions);
     const std::vector<ResultFile::VertexRange> moving = file.FreeVertices();
     for (size_t i = rank; i < frames.size(); i += size) {
