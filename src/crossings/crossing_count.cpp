@@ -5,6 +5,7 @@
 #include <CGAL/intersections.h>
 
 #include <algorithm>
+#include <cmath>
 #include <variant>
 
 namespace softbody {
@@ -39,6 +40,13 @@ Shape MakeShape(const std::array<int32_t, 3> &corners, const std::vector<double>
       [](const Point &p, const Point &q) { return CGAL::lexicographically_xyz_smaller(p, q); });
   if (*low == *high) return *low;
   return Segment(*low, *high);
+}
+
+bool Finite(const std::array<int32_t, 3> &corners, const std::vector<double> &positions) {
+  for (const int32_t v : corners)
+    for (int c = 0; c < 3; ++c)
+      if (!std::isfinite(positions[3 * v + c])) return false;
+  return true;
 }
 
 // The closed bounding box of a triangle (exact: min and max of its corners).
@@ -112,8 +120,14 @@ CrossingCounts CrossingCounter::Count(const std::vector<double> &positions,
   std::vector<Box> boxes;
   CGAL::Bbox_3 region;  // around every free triangle
   for (const uint32_t t : free_triangles_) {
-    shapes.push_back(MakeShape(surface_.triangles[t], positions, &counts.degenerate));
-    boxes.push_back(BoxOf(surface_.triangles[t], positions, t));
+    const auto &corners = surface_.triangles[t];
+    if (!Finite(corners, positions)) {
+      ++counts.nonfinite;
+      shapes.push_back(Point(0, 0, 0));  // keeps the slots; the triangle gets no box
+      continue;
+    }
+    shapes.push_back(MakeShape(corners, positions, &counts.degenerate));
+    boxes.push_back(BoxOf(corners, positions, t));
     region += boxes.back().bbox();
   }
   // Free against free: pairs between two bodies, and self pairs sharing no vertex.

@@ -14,7 +14,8 @@
 //               never counted);
 // fixed bodies never move, so pairs of two fixed triangles are not counted.
 // A triangle whose corners are collinear (exactly) is tested as the segment
-// between its extreme corners, or as a point when they coincide.
+// between its extreme corners, or as a point when they coincide. A free triangle
+// with a non-finite corner (a run that blew up) is counted apart and not tested.
 // Ground: the free bodies' surface vertices strictly below y = y0 - tolerance.
 #pragma once
 
@@ -39,7 +40,11 @@ struct CrossingCounts {
   int64_t below_ground = 0;  // free bodies' surface vertices with y < y0 - tolerance
   double ground_depth = 0;   // the deepest of them below the ground (m; 0 when none)
   int64_t degenerate = 0;    // triangles with collinear corners (tested as segments or points)
-  bool any() const { return free_free > 0 || free_fixed > 0 || self > 0 || below_ground > 0; }
+  int64_t nonfinite = 0;     // free triangles with a NaN or infinite corner (not tested)
+  // A crossing of any kind, or a frame that could not be checked whole.
+  bool any() const {
+    return free_free > 0 || free_fixed > 0 || self > 0 || below_ground > 0 || nonfinite > 0;
+  }
 };
 
 class CrossingCounter {

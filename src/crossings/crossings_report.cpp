@@ -31,7 +31,8 @@ struct Summary {
   KindSummary kinds[kKinds];
   int64_t frames_with_crossings = 0;
   int64_t first_crossing = -1, first_clean = -1, clean_from = -1;
-  double max_ground_depth = 0;  // m
+  double max_ground_depth = 0;                         // m
+  int64_t nonfinite_frames = 0, first_nonfinite = -1;  // frames with non-finite positions
 };
 
 Summary Summarise(const CrossingsReport &report) {
@@ -47,6 +48,7 @@ Summary Summarise(const CrossingsReport &report) {
       if (value > kind.max) kind.max = value, kind.max_frame = frame;
     }
     summary.max_ground_depth = std::max(summary.max_ground_depth, counts.ground_depth);
+    if (counts.nonfinite > 0 && summary.nonfinite_frames++ == 0) summary.first_nonfinite = frame;
     if (counts.any()) {
       ++summary.frames_with_crossings;
       if (summary.first_crossing < 0) summary.first_crossing = frame;
@@ -71,6 +73,8 @@ std::string FrameLine(int64_t frame, double time, const CrossingCounts &counts) 
         std::string(k ? ", " : " ") + kKindNames[k] + " " + std::to_string(KindCount(counts, k));
   if (counts.below_ground > 0) line += " (deepest " + FormatNumber(counts.ground_depth, 3) + " m)";
   if (counts.degenerate > 0) line += ", degenerate triangles " + std::to_string(counts.degenerate);
+  if (counts.nonfinite > 0)
+    line += ", triangles with non-finite corners (not checked) " + std::to_string(counts.nonfinite);
   return line + "\n";
 }
 
@@ -101,6 +105,9 @@ std::string SummaryLine(const CrossingsReport &report, const Summary &summary) {
     if (ground && kind.frames > 0)
       line += ", deepest " + FormatNumber(summary.max_ground_depth, 3) + " m";
   }
+  if (summary.nonfinite_frames > 0)
+    line += "; non-finite positions in " + std::to_string(summary.nonfinite_frames) +
+            " frames (first " + std::to_string(summary.first_nonfinite) + ")";
   return line + "; " + FormatNumber(report.seconds, 3) + " s\n";
 }
 
@@ -121,11 +128,12 @@ void WriteJsonFrames(std::FILE *out, const CrossingsReport &report) {
     std::fprintf(out,
                  "%s\n    {\"frame\": %lld, \"time\": %.17g, \"free_free\": %lld, "
                  "\"free_fixed\": %lld, \"self\": %lld, \"below_ground\": %lld, "
-                 "\"ground_depth\": %.17g, \"degenerate\": %lld}",
+                 "\"ground_depth\": %.17g, \"degenerate\": %lld, \"nonfinite\": %lld}",
                  i ? "," : "", static_cast<long long>(report.frames[i]), report.times[i],
                  static_cast<long long>(c.free_free), static_cast<long long>(c.free_fixed),
                  static_cast<long long>(c.self), static_cast<long long>(c.below_ground),
-                 c.ground_depth, static_cast<long long>(c.degenerate));
+                 c.ground_depth, static_cast<long long>(c.degenerate),
+                 static_cast<long long>(c.nonfinite));
   }
   std::fprintf(out, "\n  ]\n}\n");
 }
@@ -152,7 +160,8 @@ bool WriteJson(const std::string &path, const CrossingsReport &report, const Sum
                  k ? "," : "", kKindKeys[k], static_cast<long long>(summary.kinds[k].frames),
                  static_cast<long long>(summary.kinds[k].max),
                  static_cast<long long>(summary.kinds[k].max_frame));
-  std::fprintf(out, "\n  },\n  \"max_ground_depth\": %.17g,\n", summary.max_ground_depth);
+  std::fprintf(out, "\n  },\n  \"max_ground_depth\": %.17g,\n  \"nonfinite_frames\": %lld,\n",
+               summary.max_ground_depth, static_cast<long long>(summary.nonfinite_frames));
   WriteJsonFrames(out, report);
   return std::fclose(out) == 0;
 }
@@ -163,13 +172,14 @@ PetscErrorCode GatherCounts(MPI_Comm comm, std::vector<CrossingCounts> *counts) 
   PetscFunctionBeginUser;
   PetscMPIInt rank = 0;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  constexpr int kSums = 5;  // the integer fields of CrossingCounts
+  constexpr int kSums = 6;  // the integer fields of CrossingCounts
   const size_t n = counts->size();
   std::vector<int64_t> sums(kSums * n);
   std::vector<double> depths(n);
   for (size_t i = 0; i < n; ++i) {
     const CrossingCounts &c = (*counts)[i];
-    const int64_t fields[kSums] = {c.free_free, c.free_fixed, c.self, c.below_ground, c.degenerate};
+    const int64_t fields[kSums] = {c.free_free,    c.free_fixed, c.self,
+                                   c.below_ground, c.degenerate, c.nonfinite};
     std::copy(fields, fields + kSums, sums.begin() + kSums * i);
     depths[i] = c.ground_depth;
   }
@@ -180,7 +190,7 @@ PetscErrorCode GatherCounts(MPI_Comm comm, std::vector<CrossingCounts> *counts) 
   if (rank != 0) PetscFunctionReturn(PETSC_SUCCESS);
   for (size_t i = 0; i < n; ++i) {
     const int64_t *s = &sums[kSums * i];
-    (*counts)[i] = {s[0], s[1], s[2], s[3], depths[i], s[4]};
+    (*counts)[i] = {s[0], s[1], s[2], s[3], depths[i], s[4], s[5]};
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }

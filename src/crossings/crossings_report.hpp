@@ -2,9 +2,9 @@
 // summary, and optionally a JSON file with every checked frame's counts.
 //
 // Summary figures (over the checked frames): frames with a crossing (any kind:
-// a triangle pair or a vertex below the ground), the largest count of each kind
-// and the frame where it first occurs, the first frame with a crossing, the
-// first clean frame, and the frame from which every checked frame is clean
+// a triangle pair or a vertex below the ground; or a non-finite position), the largest count of
+// each kind and the frame where it first occurs, the first frame with a crossing, the first clean
+// frame, and the frame from which every checked frame is clean
 // ("clean from"; none when the last checked frame has a crossing).
 //
 // JSON (keys fixed; frames are frame indices of the file, -1 for none):
@@ -13,9 +13,9 @@
 //    "clean_from_frame", "seconds",
 //    "kinds": {KIND: {"frames": frames with it, "max": largest count, "max_frame"}}
 //             for KIND in free_free, free_fixed, self, below_ground,
-//    "max_ground_depth" (m),
+//    "max_ground_depth" (m), "nonfinite_frames" (frames with a NaN or infinite position),
 //    "frames": [{"frame", "time", "free_free", "free_fixed", "self", "below_ground",
-//                "ground_depth", "degenerate"}, ...]}
+//                "ground_depth", "degenerate", "nonfinite"}, ...]}
 #pragma once
 
 #include <petscsys.h>

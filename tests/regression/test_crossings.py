@@ -8,7 +8,8 @@ Synthetic result files written with h5py, whose counts are known by construction
     origin: exactly 9 pairs (the 3 faces of each tet through the origin), because
     triangles are closed (touching is crossing). With A fixed (fixed bodies never
     move: the checker reads them from frame 0) the same counts are free-fixed; with both fixed nothing is counted; with A and B one body the same
-    pairs are self pairs (they share no vertex index).
+    pairs are self pairs (they share no vertex index). A NaN vertex (a run that
+    blew up): its triangles are counted apart and its frame is reported.
 (b) A folded strip of 4 triangles whose last one pierces the first: exactly 1 self
     pair (the neighbours sharing a vertex or an edge are never counted); the fold
     opened: 0. A fan whose two faces share a vertex and cross elsewhere: 0 (faces
@@ -111,6 +112,13 @@ def case_a():
     both = check_file(write_result("a_both_fixed", frames[:1], triangles, vertex_body, [1, 1]))
     checks.check(both and both["frames_with_crossings"] == 0,
                  "(a) both fixed, interpenetrating: nothing counted")
+    blown_up = [frame.copy() for frame in frames]
+    blown_up[1][4] = np.nan  # B's vertex 0: its 3 faces cannot be tested
+    nan = check_file(write_result("a_nan", blown_up, triangles, vertex_body, [0, 0]))
+    checks.check(nan and [f["nonfinite"] for f in nan["frames"]] == [0, 3, 0]
+                 and frame_counts(nan, "free_free") == expected and nan["nonfinite_frames"] == 1
+                 and nan["frames_with_crossings"] == 3,
+                 "(a) a NaN vertex: its 3 triangles counted apart, the frame reported, the rest checked")
     frames, triangles, vertex_body = two_tets(b_bodies=(0, 0))
     one = check_file(write_result("a_one_body", frames, triangles, vertex_body, [0]))
     checks.check(frame_counts(one, "self") == expected and frame_counts(one, "free_free") == [0] * 3,
