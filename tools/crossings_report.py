@@ -96,7 +96,8 @@ def run_case(args, name, mode):
     for key in ("loop_seconds", "contact_seconds"):
         times = [r[key] for r in rows if r.get(key) is not None]
         row[key] = min(times) if times else None
-    counts = {json.dumps(r["report"]["frames"]) for r in rows if "report" in r}
+    counts = {json.dumps([[frame[k] for k in KINDS] for frame in r["report"]["frames"]])
+              for r in rows if "report" in r}
     if len(counts) > 1:
         row["note"] = f"the counts differ between the {len(rows)} runs"
     return row
