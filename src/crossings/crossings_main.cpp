@@ -131,7 +131,8 @@ PetscErrorCode CountFrames(MPI_Comm comm, const ResultFile &file,
   std::unique_ptr<CrossingCounter> counter;
   std::string error;
   try {
-    if (!frames.empty()) file.ReadPositions(0, file.AllVertices(), &positions);
+    if (frames.empty()) throw InputError(file.path() + ": the file holds no frame");
+    file.ReadPositions(0, file.AllVertices(), &positions);
     if (rank == 0 && frames.size() > 1) CheckFixedBodiesStill(file, positions, frames.back());
     counter = std::make_unique<CrossingCounter>(file.surface(), positions);
     const std::vector<ResultFile::VertexRange> moving = file.FreeVertices();

@@ -17,7 +17,7 @@ Synthetic result files written with h5py, whose counts are known by construction
 (c) Ground: the file's ground_y, -ground overriding it, -ground_tolerance, fixed
     bodies' vertices below the ground not counted, no ground_y: not checked.
 (d) Bad input: a missing file, a text file, an HDF5 file that is not a result, a
-    result without /positions, a triangle index out of range, a fixed body that
+    result without /positions or without frames, a triangle index out of range, a fixed body that
     moves (the checker reads fixed bodies from frame 0), bad options: one line
     naming the file or option, non-zero exit (also on 2 ranks).
 (e) A real run (scenes/contact/head-on-scene.txt, 2 ranks): every frame's counts
@@ -203,6 +203,7 @@ def case_d():
         del f["positions"]
     bad_index = write_result("bad_index", frames, [[0, 1, 99]], vertex_body, [0, 0])
     good = write_result("good", frames, triangles, vertex_body, [0, 0])
+    empty = write_result("no_frames", np.zeros((0, 8, 3)), triangles, vertex_body, [1, 0])
     moving_fixed = write_result("moving_fixed", frames, triangles, vertex_body, [0, 1])
     for ranks in (1, 2):
         expect_error([checker, missing], f"{missing}: cannot read", "a missing file", ranks)
@@ -212,6 +213,7 @@ def case_d():
     expect_error([checker, bad_index], "index 99", "a triangle index out of range")
     expect_error([checker, moving_fixed], "fixed body 1 moves", "a fixed body that moves")
     expect_error([checker, moving_fixed], "fixed body 1 moves", "a fixed body that moves", ranks=2)
+    expect_error([checker, empty], "holds no frame", "a result without frames")
     expect_error([checker], "usage: softbody-crossings", "no file name")
     expect_error([checker, good, "-every", "0"], "option -every", "-every 0")
     expect_error([checker, good, "-ground", "abc"], "option -ground", "-ground abc")
