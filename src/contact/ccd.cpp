@@ -64,7 +64,10 @@ template <typename Distance>
 Approach Advance(const MovingPair &pair, int first, const CcdTolerance &tolerance,
                  Distance distance) {
   double d = distance(pair.start);
-  if (d <= tolerance.separation + tolerance.band) return Approach::kCloseAtStart;
+  if (d <= tolerance.separation) return Approach::kCloseAtStart;
+  // A pair that starts within the band is reported once it closes half its gap.
+  const double reported =
+      tolerance.separation + std::min(tolerance.band, (d - tolerance.separation) / 2);
   const std::array<Point, 4> p = RelativeDisplacements(pair);
   double max_a = 0, max_b = 0;
   for (int i = 0; i < 4; ++i) {
@@ -78,7 +81,7 @@ Approach Advance(const MovingPair &pair, int first, const CcdTolerance &toleranc
     t += kAdvanceFraction * (d - tolerance.separation) / bound;
     if (t >= 1) return Approach::kApart;
     d = distance(At(pair, t));
-    if (d <= tolerance.separation + tolerance.band) return Approach::kCollides;
+    if (d <= reported) return Approach::kCollides;
   }
   return Approach::kCollides;
 }

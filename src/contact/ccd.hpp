@@ -9,10 +9,11 @@
 // displacement of one side plus that of the other; so from a time t with
 // distance d, the pair stays farther apart than `separation` until
 // t + (d - separation) / l_p. Advancing by a fraction of that bound either
-// passes t = 1 (the pair stayed apart: never closer than `separation`) or
-// creeps up to the first time the distance comes within `band` of
-// `separation` (reported as a collision). It never misses a collision, at any
-// speed; it may report a pair that only came within the band.
+// passes t = 1 (the pair stayed apart: never closer than `separation`, so it
+// starts the next step guarded) or creeps up to the first time the distance
+// comes within `band` of `separation` (reported as a collision; a pair that
+// starts within the band, once it closes half of its gap). It never misses a
+// collision, at any speed; it may report a pair that only came within the band.
 //
 // Lengths in metres; t is the fraction of the step. Not collective.
 #pragma once
@@ -33,7 +34,7 @@ double EdgeEdgeDistanceSquared(const Point &a0, const Point &a1, const Point &b0
 enum class Approach {
   kApart,         // farther than `separation` throughout the step
   kCollides,      // comes within separation + band at some time in [0, 1]
-  kCloseAtStart,  // within separation + band already at t = 0: cannot be guarded
+  kCloseAtStart,  // within separation already at t = 0: cannot be guarded
 };
 
 // A primitive pair's vertices at the start and the end of the step: for a

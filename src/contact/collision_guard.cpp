@@ -8,9 +8,9 @@ namespace softbody {
 namespace {
 
 // The guard's separation as a fraction of the contact gap: contacts end a gap
-// apart, the guard acts below half of it, so round-off in a resting contact
-// never triggers it.
-constexpr double kSeparationOfGap = 0.5;
+// apart and come back to it once within half of it of the ground, the guard
+// acts below a quarter of it, so resting contacts never trigger it.
+constexpr double kSeparationOfGap = 0.25;
 // CCD reports pairs that come within separation (1 + kBand): the margin that
 // lets conservative advancement stop (ccd.hpp).
 constexpr double kBand = 0.1;
@@ -152,7 +152,7 @@ std::vector<char> CollisionGuard::Resolve() {
     query_.changed = &changed;
   }
   query_.changed = nullptr;
-  if (rounds > 0) ++stats_.steps_guarded;
+  if (rounds > 0) ++stats_.passes_guarded;
   stats_.rounds += rounds;
   stats_.max_rounds = std::max(stats_.max_rounds, rounds);
   for (int32_t v = 0; v < n; ++v)

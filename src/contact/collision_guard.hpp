@@ -14,9 +14,9 @@
 // (bodies placed touching or overlapping) are counted and left to the contact
 // constraints until they part.
 //
-// The separation is half of -contact_gap times the smallest free body's mean
-// boundary edge: contact constraints end contacts a full gap apart, so resting
-// contacts sit outside the guard's reach.
+// The separation is a quarter of -contact_gap times the smallest free body's
+// mean boundary edge: contact constraints end contacts a full gap apart, so
+// resting contacts sit outside the guard's reach.
 //
 // Parallel model: the surface vertices' start and end positions are gathered
 // on every rank (a scatter of the free surface vertices only), every rank runs

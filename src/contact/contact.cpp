@@ -15,6 +15,10 @@ constexpr double kBounceSpeedInGravitySteps = 2;
 // and guard after the first guard of a step: each round pins more vertices, so
 // the constraints' violation shrinks; the guard always ends the step.
 constexpr int kMaxGuardConstraintRounds = 4;
+// A vertex within this fraction of the contact gap above the ground is
+// constrained back to the gap: resting contacts stay between half the gap and
+// the gap, above the guard's separation (a quarter of it).
+constexpr double kGroundMarginOfGap = 0.5;
 
 }  // namespace
 
@@ -55,7 +59,9 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   track_free_ = free_obstacles_ || !candidates.empty();
   gather_always_ = free_obstacles_ || !distance_.empty() || options.impulse_spreading;
   PetscCall(state_.SetupMasses(comm, layout, lumped_mass, gather_always_ || track_free_));
-  obstacles_.SetupGround(scene, state_, ground_, options.ground_y);
+  // Vertices come back to the contact gap once within half of it of the ground.
+  obstacles_.SetupGround(scene, state_, ground_, options.ground_y,
+                         kGroundMarginOfGap * options.gap);
   if (body_obstacles_) SetupBodyObstacles(candidates);
   CollectCheckedVertices();
   constraints_.Setup(scene, layout, state_, obstacles_, features_, options.gap);

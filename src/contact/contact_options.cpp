@@ -79,7 +79,7 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                              nullptr, o->guard, &o->guard, nullptr));
   PetscCall(PetscOptionsReal("-contact_gap",
                              "Contacts end this fraction of the body's mean boundary edge apart; "
-                             "the guard keeps every surface pair at least half of it apart",
+                             "the guard keeps every surface pair at least a quarter of it apart",
                              nullptr, o->gap, &o->gap, nullptr));
   PetscCall(PetscOptionsBool("-self_contact",
                              "Guard each body's surface against itself (default: with any other "

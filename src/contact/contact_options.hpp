@@ -20,7 +20,7 @@ struct ContactOptions {
   PetscReal edge_lower = 1, edge_upper = 1;  // x rest length
   // The collision guard (collision_guard.hpp): contacts end this fraction of the
   // body's mean boundary edge outside the obstacle, and no surface pair comes
-  // closer than half of it.
+  // closer than a quarter of it.
   PetscBool guard = PETSC_TRUE;
   PetscReal gap = 1e-3;
   // A body's surface against its own (non-adjacent) faces and edges: on with any

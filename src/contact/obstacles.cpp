@@ -19,11 +19,12 @@ constexpr double kNoCrossing = 2;
 }  // namespace
 
 void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool ground,
-                            double ground_y) {
+                            double ground_y, double ground_margin) {
   scene_ = &scene;
   state_ = &state;
   ground_ = ground;
   ground_y_ = ground_y;
+  ground_margin_ = ground_margin;
 }
 
 void Obstacles::SetupBodies(bool track_free) {
@@ -195,7 +196,8 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
 
 bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
                                 SurfaceHit *hit) const {
-  if (ground_ && p[1] < ground_y_ && !skip.Has(-1)) return ClosestOnBody(p, -1, hit);
+  if (ground_ && p[1] < ground_y_ + ground_margin_ * state_->edge(body) && !skip.Has(-1))
+    return ClosestOnBody(p, -1, hit);
   // Broad phase: only bodies whose box holds p.
   bool near_fixed = false, near_free = false;
   for (size_t b = 0; b < body_box_.size(); ++b)

@@ -45,8 +45,10 @@ struct VertexObstacles {
 class Obstacles {
  public:
   // First: the scene, the state the queries read, and the ground (an obstacle
-  // when `ground`, at height ground_y in m).
-  void SetupGround(const Scene &scene, const FreeState &state, bool ground, double ground_y);
+  // when `ground`, at height ground_y in m; a point less than ground_margin of
+  // its body's mean boundary edge above it counts as inside).
+  void SetupGround(const Scene &scene, const FreeState &state, bool ground, double ground_y,
+                   double ground_margin);
   // The bodies: fixed ones always, free ones when `track_free` (they are
   // obstacles to each other or meet sharp edges); builds the fixed grids.
   void SetupBodies(bool track_free);
@@ -56,7 +58,8 @@ class Obstacles {
   void MoveFreeBodies();
 
   // The first obstacle other than `body` and those in `skip` that contains p
-  // (the ground when p lies below it), with its closest surface point.
+  // (the ground when p lies below it or within its margin), with its closest
+  // surface point.
   bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
                        SurfaceHit *hit) const;
   // The closest point to p on the obstacle's surface (-1: the ground).
@@ -102,6 +105,7 @@ class Obstacles {
   const FreeState *state_ = nullptr;
   bool ground_ = false;
   double ground_y_ = 0;
+  double ground_margin_ = 0;  // in mean boundary edges of the point's body
   std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
   std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
   UniformGrid fixed_tet_grid_, fixed_triangle_grid_;

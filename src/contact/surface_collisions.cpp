@@ -138,13 +138,16 @@ void Within(const CollisionQuery &q, const std::vector<int32_t> &vertices,
 
 void GroundCollisions(const CollisionQuery &q, std::vector<SurfaceCollision> *out,
                       CollisionCount *count) {
-  const double near = q.ground_y + q.tolerance.separation + q.tolerance.band;
+  // As ccd.hpp: the height is linear in t, so the end is the step's lowest point.
+  const double separation = q.ground_y + q.tolerance.separation;
   for (int32_t v = 0; v < q.surface->num_vertices(); ++v) {
-    if (!(*q.moving)[v] || (q.changed && !(*q.changed)[v]) || (*q.end)[v][1] > near) continue;
-    // The height is linear in t: the end is the lowest point of the step.
-    if ((*q.start)[v][1] <= near)
-      ++count->close;
-    else
+    if (!(*q.moving)[v] || (q.changed && !(*q.changed)[v])) continue;
+    const double start = (*q.start)[v][1], end = (*q.end)[v][1];
+    if (start <= separation) {
+      if (end < start) ++count->close;
+      continue;
+    }
+    if (end <= separation + std::min(q.tolerance.band, (start - separation) / 2))
       out->push_back({{v, v, v, v}, 1});
   }
 }
