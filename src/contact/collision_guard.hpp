@@ -41,8 +41,8 @@
 namespace softbody {
 
 struct GuardStatistics {
-  PetscInt steps_guarded = 0;           // steps in which some pair collided
-  PetscInt collisions = 0;              // colliding pairs found, all rounds and steps
+  PetscInt passes_guarded = 0;  // detection passes (several per step) in which some pair collided
+  PetscInt collisions = 0;      // colliding pairs found, all rounds and steps
   PetscInt rounds = 0, max_rounds = 0;  // detection rounds with collisions
   PetscInt zone_vertices = 0;           // surface vertices the zones moved, all steps
   PetscInt frozen_vertices = 0;         // of them, in immobile zones
