@@ -114,7 +114,7 @@ PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g) {
   if (!g) PetscFunctionReturn(PETSC_SUCCESS);
   PetscCall(PetscPrintf(
       comm,
-      "  guard        %" PetscInt_FMT " steps with colliding surface pairs (%" PetscInt_FMT
+      "  guard        %" PetscInt_FMT " passes with colliding surface pairs (%" PetscInt_FMT
       " pairs, %" PetscInt_FMT " rounds, at most %" PetscInt_FMT
       " in a step); zones moved %" PetscInt_FMT " vertices (%" PetscInt_FMT
       " frozen); %" PetscInt_FMT " pairs tested; %" PetscInt_FMT
