@@ -64,6 +64,9 @@ PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const Do
   query_.tolerance.separation = kSeparationOfGap * options.gap * min_edge;
   query_.tolerance.band = kBand * query_.tolerance.separation;
   finder_.Setup(query_);
+  CollisionCount count;
+  finder_.Find(query_, &count);  // start = end = rest: which pairs start too close
+  stats_.initial_close_pairs = static_cast<PetscInt>(count.close);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

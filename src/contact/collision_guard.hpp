@@ -47,7 +47,9 @@ struct GuardStatistics {
   PetscInt zone_vertices = 0;           // surface vertices the zones moved, all steps
   PetscInt frozen_vertices = 0;         // of them, in immobile zones
   PetscInt close_pairs = 0;             // pairs closer than the separation at a step's start
-  PetscInt candidates = 0;              // pairs tested by CCD
+  PetscInt initial_close_pairs =
+      0;                    // of them, at the scene's start (placed touching or overlapping)
+  PetscInt candidates = 0;  // pairs tested by CCD
   PetscLogDouble seconds = 0;
 };
 

@@ -78,6 +78,15 @@ PetscErrorCode ContactSolver::SetupGuard(Vec lumped_mass) {
     if (!scene_->bodies[b].fixed) min_edge = std::min(min_edge, state_.edge(b));
   PetscCall(guard_.Setup(comm_, *scene_, *layout_, lumped_mass, options_, options_.self_contact,
                          min_edge));
+  const PetscInt close = guard_.statistics().initial_close_pairs;
+  if (close > 0)
+    PetscCall(PetscPrintf(comm_,
+                          "softbody: warning: %" PetscInt_FMT
+                          " surface pairs start closer than the contact separation %.3g m "
+                          "(bodies placed touching or overlapping): the collision guard leaves "
+                          "them to the contact constraints until they part, and does not untangle "
+                          "surfaces that start crossing\n",
+                          close, guard_.separation()));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
