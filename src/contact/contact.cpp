@@ -248,6 +248,7 @@ PetscErrorCode ContactSolver::AddVertexPenetrations(Vec x0, Vec v, PetscReal dt,
     if (constraints_.AddVertexPenetration(local, natural, Point(&x[3 * local]),
                                           Point(&lv[3 * local]), dt))
       ++*found;
+  if (options_.friction > 0) friction_.Observe(constraints_.normals(), constraints_.contacts(), lv);
   PetscCall(VecRestoreArrayRead(x0, &x));
   PetscCall(VecRestoreArrayRead(v, &lv));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -257,10 +258,12 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
                                               bool *released) {
   PetscFunctionBeginUser;
   Timing timing(this);
+  // With friction, pulling contacts leave the solve: friction needs the true normal load.
+  const std::vector<PetscReal> by_contact = constraints_.ByContact(reactions);
+  PetscInt local_released = options_.friction > 0 ? constraints_.ReleasePulling(by_contact) : 0;
   PetscScalar *b;
   PetscCall(VecGetArray(rhs, &b));
-  const PetscInt local_released =
-      friction_.ReleaseSlipping(reactions, constraints_.contacts().size(), b);
+  local_released += friction_.Update(by_contact, constraints_.contacts().size(), b);
   PetscCall(VecRestoreArray(rhs, &b));
   PetscInt all_released;
   PetscCallMPI(MPIU_Allreduce(&local_released, &all_released, 1, MPIU_INT, MPI_SUM, comm_));
@@ -292,15 +295,16 @@ PetscErrorCode ContactSolver::RespondToContacts(Vec x, Vec v,
   PetscCall(VecGetArray(x, &lx));
   PetscCall(VecGetArray(v, &lv));
   resting_.Clear();
+  const std::vector<PetscReal> by_contact = constraints_.ByContact(reactions);
   std::vector<Collision> collisions =
-      response_.Respond(constraints_, friction_, reactions, lx, lv, &resting_);
+      response_.Respond(constraints_, friction_, by_contact, lx, lv, &resting_);
   stats_.projections +=
       response_.ProjectRemaining(checked_vertices_, constraints_, lx, lv, &collisions);
   if (!options_.impulse_spreading) response_.Apply(collisions, lv);
   PetscCall(VecRestoreArray(x, &lx));
   PetscCall(VecRestoreArray(v, &lv));
   if (options_.impulse_spreading) PetscCall(response_.SpreadImpulses(collisions, v));
-  if (options_.restitution > 0) PetscCall(response_.Bounce(constraints_, reactions, v));
+  if (options_.restitution > 0) PetscCall(response_.Bounce(constraints_, by_contact, v));
   PetscInt local_changes = static_cast<PetscInt>(collisions.size()), changes;
   PetscCallMPI(MPIU_Allreduce(&local_changes, &changes, 1, MPIU_INT, MPI_SUM, comm_));
   *changed = changes > 0;

@@ -20,8 +20,9 @@ constexpr double kSlipUpdate = 1e-6;
 void Friction::Clear() {
   tangents_.clear();
   sticking_contact_.clear();
-  in_solve_.clear();
   slips_.clear();
+  mode_.clear();
+  observed_.clear();
 }
 
 void Friction::Stick(PetscInt local, const Point &velocity, const SurfaceHit &hit, size_t contact) {
@@ -33,14 +34,48 @@ void Friction::Stick(PetscInt local, const Point &velocity, const SurfaceHit &hi
   tangents_.push_back({local, t1, t1.dot(hit.velocity), hit.inverse_mass == 0});
   tangents_.push_back({local, t2, t2.dot(hit.velocity), hit.inverse_mass == 0});
   sticking_contact_.push_back(contact);
+  if (mode_.size() <= contact) mode_.resize(contact + 1, kUndecided);
+  mode_[contact] = kSticking;
+}
+
+void Friction::Observe(const std::vector<VelocityConstraint> &normals,
+                       const std::vector<Contact> &contacts, const PetscScalar *v) {
+  observed_.resize(contacts.size());
+  for (size_t i = 0; i < contacts.size(); ++i) {
+    const VelocityConstraint &normal = normals[i];
+    const Point velocity(&v[3 * normal.vertex]), &n = normal.normal;
+    const Point relative = velocity - contacts[i].obstacle_velocity;
+    observed_[i] = {normal.vertex,
+                    n,
+                    contacts[i].obstacle_velocity,
+                    relative - n.dot(relative) * n,
+                    velocity.norm() + contacts[i].obstacle_velocity.norm(),
+                    normal.immobile};
+  }
 }
 
 std::vector<char> Friction::InSolve(size_t num_contacts) const {
   std::vector<char> in_solve(num_contacts, 0);
-  for (const size_t contact : sticking_contact_) in_solve[contact] = 1;
-  for (size_t i = 0; i < std::min(num_contacts, in_solve_.size()); ++i)
-    if (in_solve_[i]) in_solve[i] = 1;
+  for (size_t i = 0; i < std::min(num_contacts, mode_.size()); ++i)
+    in_solve[i] = mode_[i] != kUndecided;
   return in_solve;
+}
+
+void Friction::AddTangents(size_t contact) {
+  const Observed &o = observed_[contact];
+  const Point t1 = o.normal.unitOrthogonal(), t2 = o.normal.cross(t1);
+  tangents_.push_back({o.vertex, t1, t1.dot(o.obstacle_velocity), o.immobile});
+  tangents_.push_back({o.vertex, t2, t2.dot(o.obstacle_velocity), o.immobile});
+  sticking_contact_.push_back(contact);
+  mode_[contact] = kSticking;
+}
+
+void Friction::AddSlip(size_t contact, const Point &direction, double magnitude, Mode mode,
+                       PetscScalar *rhs) {
+  const PetscInt vertex = observed_[contact].vertex;
+  for (int c = 0; c < 3; ++c) rhs[3 * vertex + c] += magnitude * direction[c];
+  slips_.push_back({contact, vertex, direction, magnitude});
+  mode_[contact] = mode;
 }
 
 PetscInt Friction::FollowSlips(const std::vector<PetscReal> &reactions, PetscScalar *rhs) {
@@ -56,10 +91,9 @@ PetscInt Friction::FollowSlips(const std::vector<PetscReal> &reactions, PetscSca
   return changed;
 }
 
-PetscInt Friction::ReleaseSlipping(const std::vector<PetscReal> &reactions, size_t num_contacts,
+PetscInt Friction::ReleaseSticking(const std::vector<PetscReal> &reactions, size_t num_contacts,
                                    PetscScalar *rhs) {
-  in_solve_.resize(num_contacts, 0);
-  PetscInt released = FollowSlips(reactions, rhs);
+  PetscInt released = 0;
   std::vector<VelocityConstraint> kept_tangents;
   std::vector<size_t> kept_contacts;
   for (size_t k = 0; k < sticking_contact_.size(); ++k) {
@@ -72,16 +106,65 @@ PetscInt Friction::ReleaseSlipping(const std::vector<PetscReal> &reactions, size
       kept_contacts.push_back(contact);
       continue;
     }
-    // Kinetic friction for this step: mu lambda_n along the sticking reaction.
+    // Kinetic friction for the rest of the step: mu lambda_n along the sticking reaction.
     const Point direction = impulse / impulse.norm();
     for (int c = 0; c < 3; ++c) rhs[3 * t1.vertex + c] += limit * direction[c];
     slips_.push_back({contact, t1.vertex, direction, limit});
-    in_solve_[contact] = 1;
+    mode_[contact] = kReleased;
     ++released;
   }
   tangents_.swap(kept_tangents);
   sticking_contact_.swap(kept_contacts);
   return released;
+}
+
+// The slip's impulse points against the sliding it met; a tangential velocity
+// along it now means friction would have stopped the contact within the step.
+PetscInt Friction::StickReversedSlips(PetscScalar *rhs) {
+  PetscInt stuck = 0;
+  std::vector<Slip> kept;
+  for (const Slip &slip : slips_) {
+    const Observed &o = observed_[slip.contact];
+    if (mode_[slip.contact] != kSlipping || !(o.tangential.dot(slip.direction) > 0)) {
+      kept.push_back(slip);
+      continue;
+    }
+    for (int c = 0; c < 3; ++c) rhs[3 * slip.vertex + c] -= slip.magnitude * slip.direction[c];
+    AddTangents(slip.contact);
+    ++stuck;
+  }
+  slips_.swap(kept);
+  return stuck;
+}
+
+PetscInt Friction::DecideNewContacts(const std::vector<PetscReal> &reactions, size_t num_contacts,
+                                     PetscScalar *rhs) {
+  PetscInt decided = 0;
+  for (size_t i = 0; i < num_contacts; ++i) {
+    if (mode_[i] != kUndecided) continue;
+    const Observed &o = observed_[i];
+    const double slip = o.tangential.norm();
+    // A contact that is being released (it pulls) gets no hold, only the
+    // slip's magnitude following its reaction.
+    if (slip <= kRoundOff * o.scale && reactions[i] > 0)
+      AddTangents(i);
+    else
+      AddSlip(i, slip > 0 ? Point(-o.tangential / slip) : Point::Zero(),
+              mu_ * std::max(reactions[i], 0.0), kSlipping, rhs);
+    ++decided;
+  }
+  return decided;
+}
+
+PetscInt Friction::Update(const std::vector<PetscReal> &reactions, size_t num_contacts,
+                          PetscScalar *rhs) {
+  if (mode_.size() < num_contacts) mode_.resize(num_contacts, kUndecided);
+  PetscInt changed = FollowSlips(reactions, rhs);
+  changed += ReleaseSticking(reactions, num_contacts, rhs);
+  if (observed_.size() < num_contacts) return changed;  // no velocities seen: nothing to decide
+  changed += StickReversedSlips(rhs);
+  changed += DecideNewContacts(reactions, num_contacts, rhs);
+  return changed;
 }
 
 }  // namespace softbody

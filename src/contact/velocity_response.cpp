@@ -40,6 +40,7 @@ std::vector<Collision> VelocityResponse::Respond(const ContactConstraints &const
   const std::vector<char> friction_in_solve = friction.InSolve(contacts.size());
   std::vector<Collision> collisions;
   for (size_t i = 0; i < contacts.size(); ++i) {
+    if (constraints.released(i)) continue;  // left the solve: its vertex is free
     const Contact &contact = contacts[i];
     const VelocityConstraint &constraint = constraints.normals()[i];
     const Point position(&x[3 * constraint.vertex]), velocity(&v[3 * constraint.vertex]);
