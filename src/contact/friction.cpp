@@ -17,6 +17,18 @@ constexpr double kRoundOff = 1e-9;
 // ask (5 %), in half the rounds a 1e-6 fixed point took.
 constexpr double kSlipUpdate = 1e-3;
 
+// A slip's direction turns with its contact's sliding when the two differ by
+// more than this (1 - cos of the angle, about 2.6 degrees): closer than that,
+// another solve round is not worth it.
+constexpr double kSlipTurn = 1e-3;
+
+// Releases of one contact from sticking in a step after which a reversed
+// slip holds it for the rest of the step. Contacts released in the same round
+// push each other (a block starting to slide releases its edges, then its
+// middle): two reversals already meant a contact at the Coulomb limit in the
+// tests (docs/design/contact.md); three leaves a margin.
+constexpr int kMaxReleases = 3;
+
 }  // namespace
 
 void Friction::Clear() {
@@ -24,6 +36,7 @@ void Friction::Clear() {
   sticking_contact_.clear();
   slips_.clear();
   mode_.clear();
+  releases_.clear();
   observed_.clear();
 }
 
@@ -52,6 +65,7 @@ void Friction::Observe(const std::vector<VelocityConstraint> &normals,
                     contacts[i].obstacle_velocity,
                     relative - n.dot(relative) * n,
                     velocity.norm() + contacts[i].obstacle_velocity.norm(),
+                    1 / state_->inverse_mass(contacts[i].natural),
                     normal.immobile};
   }
 }
@@ -63,13 +77,13 @@ std::vector<char> Friction::InSolve(size_t num_contacts) const {
   return in_solve;
 }
 
-void Friction::AddTangents(size_t contact) {
+void Friction::AddTangents(size_t contact, Mode mode) {
   const Observed &o = observed_[contact];
   const Point t1 = o.normal.unitOrthogonal(), t2 = o.normal.cross(t1);
   tangents_.push_back({o.vertex, t1, t1.dot(o.obstacle_velocity), o.immobile});
   tangents_.push_back({o.vertex, t2, t2.dot(o.obstacle_velocity), o.immobile});
   sticking_contact_.push_back(contact);
-  mode_[contact] = kSticking;
+  mode_[contact] = mode;
 }
 
 void Friction::AddSlip(size_t contact, const Point &direction, double magnitude, Mode mode,
@@ -94,25 +108,29 @@ PetscInt Friction::FollowSlips(const std::vector<PetscReal> &reactions, PetscSca
 }
 
 PetscInt Friction::ReleaseSticking(const std::vector<PetscReal> &reactions, size_t num_contacts,
-                                   PetscScalar *rhs) {
+                                   size_t solved, PetscScalar *rhs) {
   PetscInt released = 0;
   std::vector<VelocityConstraint> kept_tangents;
   std::vector<size_t> kept_contacts;
   for (size_t k = 0; k < sticking_contact_.size(); ++k) {
     const size_t contact = sticking_contact_[k], first = num_contacts + 2 * k;
     const VelocityConstraint &t1 = tangents_[2 * k], &t2 = tangents_[2 * k + 1];
-    const Point impulse = reactions[first] * t1.normal + reactions[first + 1] * t2.normal;
+    const bool keep = k >= solved || mode_[contact] == kHeld;
+    const Point impulse =
+        keep ? Point::Zero()
+             : Point(reactions[first] * t1.normal + reactions[first + 1] * t2.normal);
     const double limit = mu_ * std::max(reactions[contact], 0.0);
-    if (impulse.norm() <= limit * (1 + kRoundOff)) {
+    if (keep || impulse.norm() <= limit * (1 + kRoundOff)) {
       kept_tangents.insert(kept_tangents.end(), {t1, t2});
       kept_contacts.push_back(contact);
       continue;
     }
-    // Kinetic friction for the rest of the step: mu lambda_n along the sticking reaction.
+    // Kinetic friction: mu lambda_n along the sticking reaction.
     const Point direction = impulse / impulse.norm();
     for (int c = 0; c < 3; ++c) rhs[3 * t1.vertex + c] += limit * direction[c];
     slips_.push_back({contact, t1.vertex, direction, limit});
     mode_[contact] = kReleased;
+    ++releases_[contact];
     ++released;
   }
   tangents_.swap(kept_tangents);
@@ -121,22 +139,33 @@ PetscInt Friction::ReleaseSticking(const std::vector<PetscReal> &reactions, size
 }
 
 // The slip's impulse points against the sliding it met; a tangential velocity
-// along it now means friction would have stopped the contact within the step.
-PetscInt Friction::StickReversedSlips(PetscScalar *rhs) {
-  PetscInt stuck = 0;
+// along it (or none) means friction would have stopped the contact within the
+// step. Otherwise the impulse turns with the sliding.
+PetscInt Friction::SteerSlips(PetscScalar *rhs) {
+  PetscInt changed = 0;
   std::vector<Slip> kept;
-  for (const Slip &slip : slips_) {
+  for (Slip &slip : slips_) {
     const Observed &o = observed_[slip.contact];
-    if (mode_[slip.contact] != kSlipping || !(o.tangential.dot(slip.direction) > 0)) {
-      kept.push_back(slip);
+    // Alart-Curnier's trial impulse r - c v_t, c the vertex's mass.
+    const Point trial = slip.magnitude * slip.direction - o.mass * o.tangential;
+    if (trial.norm() <= slip.magnitude) {
+      for (int c = 0; c < 3; ++c) rhs[3 * slip.vertex + c] -= slip.magnitude * slip.direction[c];
+      const bool hold = mode_[slip.contact] == kReleased && releases_[slip.contact] >= kMaxReleases;
+      AddTangents(slip.contact, hold ? kHeld : kSticking);
+      ++changed;
       continue;
     }
-    for (int c = 0; c < 3; ++c) rhs[3 * slip.vertex + c] -= slip.magnitude * slip.direction[c];
-    AddTangents(slip.contact);
-    ++stuck;
+    const Point turned = trial / trial.norm();
+    if (1 - turned.dot(slip.direction) > kSlipTurn) {
+      for (int c = 0; c < 3; ++c)
+        rhs[3 * slip.vertex + c] += slip.magnitude * (turned[c] - slip.direction[c]);
+      slip.direction = turned;
+      ++changed;
+    }
+    kept.push_back(slip);
   }
   slips_.swap(kept);
-  return stuck;
+  return changed;
 }
 
 PetscInt Friction::DecideNewContacts(const std::vector<PetscReal> &reactions, size_t num_contacts,
@@ -149,7 +178,7 @@ PetscInt Friction::DecideNewContacts(const std::vector<PetscReal> &reactions, si
     // A contact that is being released (it pulls) gets no hold, only the
     // slip's magnitude following its reaction.
     if (slip <= kRoundOff * o.scale && reactions[i] > 0)
-      AddTangents(i);
+      AddTangents(i, kSticking);
     else
       AddSlip(i, slip > 0 ? Point(-o.tangential / slip) : Point::Zero(),
               mu_ * std::max(reactions[i], 0.0), kSlipping, rhs);
@@ -161,11 +190,13 @@ PetscInt Friction::DecideNewContacts(const std::vector<PetscReal> &reactions, si
 PetscInt Friction::Update(const std::vector<PetscReal> &reactions, size_t num_contacts,
                           PetscScalar *rhs) {
   if (mode_.size() < num_contacts) mode_.resize(num_contacts, kUndecided);
+  if (releases_.size() < num_contacts) releases_.resize(num_contacts, 0);
+  const size_t solved_pairs = sticking_contact_.size();
   PetscInt changed = FollowSlips(reactions, rhs);
-  changed += ReleaseSticking(reactions, num_contacts, rhs);
-  if (observed_.size() < num_contacts) return changed;  // no velocities seen: nothing to decide
-  changed += StickReversedSlips(rhs);
-  changed += DecideNewContacts(reactions, num_contacts, rhs);
+  const bool observed = observed_.size() >= num_contacts;  // else no velocities seen
+  if (observed) changed += SteerSlips(rhs);
+  changed += ReleaseSticking(reactions, num_contacts, solved_pairs, rhs);
+  if (observed) changed += DecideNewContacts(reactions, num_contacts, rhs);
   return changed;
 }
 

@@ -4,18 +4,23 @@
 // with a tangential impulse of at most mu lambda, or slips with the impulse
 // mu lambda against its sliding direction. Both act in the solve, so the whole
 // body feels them in the step (backward Euler in the friction force too):
-// - sticking: two tangent constraints hold the contact to the obstacle
-//   (Stick, for contacts resting without tangential velocity at the step's
-//   start; and a slip that friction would reverse);
-// - slipping: the impulse mu lambda along -t (t the unit tangential velocity
-//   relative to the obstacle that the solve without it gave) enters the
-//   right-hand side, and follows lambda over the solve rounds;
-// - after each solve that added no contact (Update): a contact not yet decided
-//   sticks if the solve left it no tangential velocity, else slips; a slip
-//   whose impulse reversed the tangential velocity sticks instead; a sticking
-//   contact whose tangential reaction exceeds mu lambda slips along that
-//   reaction, for the rest of the step (no cycling).
-// The contacts' velocities after each solve come in through Observe.
+// - sticking: two tangent constraints hold the contact to the obstacle;
+// - slipping: the impulse mu lambda along d enters the right-hand side.
+// The contacts' velocities after each solve come in through Observe; after
+// each solve that added no contact, Update decides, contact by contact, and the
+// step is solved again while anything changed:
+// - a contact resting without tangential velocity at the step's start sticks
+//   from the first solve on (Stick); any other is undecided in the first solve
+//   and then sticks if the solve left it no tangential velocity, else slips
+//   against that velocity;
+// - a slip's magnitude follows mu lambda; its direction follows the sliding
+//   (d = -v_t / |v_t|, when it turned by more than kSlipTurn); a slip whose
+//   impulse reversed or stopped the sliding (v_t . d >= 0) sticks instead;
+// - a sticking contact whose tangential reaction exceeds mu lambda slips along
+//   that reaction. Contacts released together move each other, so such a slip
+//   can be reversed in turn and stick again; after kMaxReleases reversed
+//   releases it sticks for the rest of the step (it stands at the Coulomb
+//   limit: holding it is the dissipative choice), so no contact cycles.
 // Friction between two free bodies acts on the constrained vertex only (the
 // obstacle's side gets its own contacts). Not collective.
 #pragma once
@@ -26,6 +31,7 @@
 #include <vector>
 
 #include "contact/contact_constraints.hpp"
+#include "contact/free_state.hpp"
 #include "contact/obstacles.hpp"
 #include "solvers/projected_solve.hpp"
 
@@ -33,7 +39,11 @@ namespace softbody {
 
 class Friction {
  public:
-  void Setup(double mu) { mu_ = mu; }
+  // state: the vertices' masses, kept (must outlive this).
+  void Setup(double mu, const FreeState *state) {
+    mu_ = mu;
+    state_ = state;
+  }
   double mu() const { return mu_; }
   // A new step: no tangents, no slips, no contact decided.
   void Clear();
@@ -62,7 +72,8 @@ class Friction {
     kUndecided,  // no friction yet (a new contact, or one sliding at the step's start)
     kSticking,   // held by a tangent pair
     kSlipping,   // impulse mu lambda against its sliding direction
-    kReleased,   // slipping after sticking: stays so for the rest of the step
+    kReleased,   // slipping after sticking beyond mu lambda
+    kHeld,       // sticking after kMaxReleases reversed releases: for the rest of the step
   };
   // A slipping contact: impulse magnitude along direction in rhs.
   struct Slip {
@@ -73,30 +84,34 @@ class Friction {
   };
   // Earlier slips: their impulse follows the latest normal reaction.
   PetscInt FollowSlips(const std::vector<PetscReal> &reactions, PetscScalar *rhs);
-  // Sticking contacts beyond mu lambda slip along their reaction.
+  // Sticking contacts beyond mu lambda slip along their reaction (the first
+  // `solved` pairs: those in the last solve).
   PetscInt ReleaseSticking(const std::vector<PetscReal> &reactions, size_t num_contacts,
-                           PetscScalar *rhs);
-  // Slips that reversed their contact's tangential velocity stick instead.
-  PetscInt StickReversedSlips(PetscScalar *rhs);
+                           size_t solved, PetscScalar *rhs);
+  // Slips that reversed or stopped their contact's sliding stick instead; the
+  // others turn with it.
+  PetscInt SteerSlips(PetscScalar *rhs);
   // Undecided contacts stick or slip.
   PetscInt DecideNewContacts(const std::vector<PetscReal> &reactions, size_t num_contacts,
                              PetscScalar *rhs);
-  void AddTangents(size_t contact);
+  void AddTangents(size_t contact, Mode mode);
   void AddSlip(size_t contact, const Point &direction, double magnitude, Mode mode,
                PetscScalar *rhs);
 
   double mu_ = 0;
+  const FreeState *state_ = nullptr;
   std::vector<VelocityConstraint> tangents_;  // (t1, t2) per sticking contact
   std::vector<size_t> sticking_contact_;      // the contact of each pair
   std::vector<Slip> slips_;
-  std::vector<Mode> mode_;  // per contact
+  std::vector<Mode> mode_;      // per contact
+  std::vector<char> releases_;  // per contact: its releases from sticking this step
   // Per contact, from the last Observe: vertex (local), normal, obstacle
-  // velocity, the tangential relative velocity, the speeds' scale |v| + |v_o|
-  // and whether the obstacle cannot yield.
+  // velocity, the tangential relative velocity, the speeds' scale |v| + |v_o|,
+  // the vertex's mass (kg) and whether the obstacle cannot yield.
   struct Observed {
     PetscInt vertex;
     Point normal, obstacle_velocity, tangential;
-    double scale;
+    double scale, mass;
     bool immobile;
   };
   std::vector<Observed> observed_;
