@@ -138,17 +138,21 @@ PetscInt Friction::ReleaseSticking(const std::vector<PetscReal> &reactions, size
   return released;
 }
 
-// The slip's impulse points against the sliding it met; a tangential velocity
-// along it (or none) means friction would have stopped the contact within the
-// step. Otherwise the impulse turns with the sliding.
+// The slip's impulse r points against the sliding it met; when the trial
+// impulse r - m v_t lies within the cone |.| <= mu lambda (the sliding
+// stopped, or reversed by less than 2 mu lambda / m, twice what friction
+// alone gives the vertex in a step), friction would have stopped the contact
+// within the step and it sticks. Otherwise the impulse turns towards the
+// trial's direction, which becomes -v_t as the rounds go on.
 PetscInt Friction::SteerSlips(PetscScalar *rhs) {
   PetscInt changed = 0;
   std::vector<Slip> kept;
   for (Slip &slip : slips_) {
     const Observed &o = observed_[slip.contact];
-    // Alart-Curnier's trial impulse r - c v_t, c the vertex's mass.
+    // Alart-Curnier's trial impulse r - c v_t, c the vertex's mass: within
+    // the cone, friction holds the contact. One without load (it pulls) slips.
     const Point trial = slip.magnitude * slip.direction - o.mass * o.tangential;
-    if (trial.norm() <= slip.magnitude) {
+    if (slip.magnitude > 0 && trial.norm() <= slip.magnitude) {
       for (int c = 0; c < 3; ++c) rhs[3 * slip.vertex + c] -= slip.magnitude * slip.direction[c];
       const bool hold = mode_[slip.contact] == kReleased && releases_[slip.contact] >= kMaxReleases;
       AddTangents(slip.contact, hold ? kHeld : kSticking);
