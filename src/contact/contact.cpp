@@ -160,6 +160,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   friction_.Clear();
   constraints_.Clear(kBounceSpeedInGravitySteps * options_.gravity * dt);
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
+  if (options_.restitution > 0) PetscCall(response_.RecordStart(v0));
   // Obstacles where they will be if they keep their velocity.
   PetscCall(Refresh(x0, v0, dt, true));
   PetscCall(ReaimRestingContacts(x0, v0, dt));
