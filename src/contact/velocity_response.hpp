@@ -2,7 +2,8 @@
 // constraints' reactions (normal impulses lambda, N s, >= 0 where the obstacle
 // pushes):
 // - a contact vertex leaves with the two sides' momentum-weighted normal
-//   velocity (Contact::normal_velocity), minus sliding friction (friction.hpp);
+//   velocity (Contact::normal_velocity), minus sliding friction if the solve
+//   rounds ran out before its friction was decided (friction.hpp);
 // - restitution (-restitution e): impacts are new contacts closing faster than
 //   the bounce speed 2 |g| dt (what gravity adds in a step; slower ones are
 //   resting). A body with impacts against the ground or a fixed body bounces
