@@ -9,7 +9,8 @@ rigid translations in its null space), nor do the elastic forces (they sum to
 zero). Every figure is recomputed here from the result file (the centroid from
 the lumped masses of the mesh).
 
-(a) Sliding to a stop, v0 = 2 m/s along x, 1 and 2 ranks. A rigid block obeys
+(a) Sliding to a stop, v0 = 2 m/s along x, linear mode on 1 and 2 ranks,
+    corotational mode on 2. A rigid block obeys
     dv/dt = -mu g - a v, so v(t) = (v0 + mu g / a) exp(-a t) - mu g / a, it stops
     at t_s = ln(1 + a v0 / (mu g)) / a (0.3997 s) after x_s = (v0 - mu g t_s) / a
     (0.3970 m; without damping v0 / (mu g) = 0.4077 s and v0^2 / (2 mu g) =
@@ -66,11 +67,11 @@ harness.box_mesh(args, "cube.mesh", (SIZE, SIZE, SIZE), (4, 4, 4))
 NV = 125
 
 
-def simulate(name, scene, gravity, friction, ranks=1):
+def simulate(name, scene, gravity, friction, ranks=1, extra=()):
     out = harness.fresh_result(args.work, name)
     harness.run(args, ranks, ["-scene", scene, "-output", out, "-gravity", gravity, "-ground", "0",
                               "-restitution", "0", "-dt", str(DT), "-steps", str(STEPS),
-                              "-friction", str(friction)])
+                              "-friction", str(friction), *extra])
     frames = harness.read_frames(out)
     masses = harness.lumped_masses(frames["mesh/tets"], frames["mesh/rest_positions"],
                                    frames["mesh/vertex_body"], [RHO])
@@ -90,27 +91,29 @@ x_stop = (V0 - MU * G * t_stop) / ALPHA
 t_slow = math.log((V0 + MU * G / ALPHA) / (0.01 * V0 + MU * G / ALPHA)) / ALPHA
 print(f"  closed form with mass damping: stops at t_s = {t_stop:.4f} s after x_s = {x_stop:.4f} m; "
       f"1 % of v0 at {t_slow:.4f} s")
-for ranks in (1, 2):
-    frames, masses, centroid, velocity = simulate(f"slide_{ranks}", slide_scene, "0,-9.81,0", MU, ranks)
+for ranks, mode in ((1, "linear"), (2, "linear"), (2, "corotational")):
+    frames, masses, centroid, velocity = simulate(f"slide_{ranks}_{mode}", slide_scene, "0,-9.81,0", MU, ranks,
+                                                  ["-mode", mode])
+    ranks = f"{ranks} ({mode})"
     t, vx = frames["time"], velocity[:, 0]
     slid = centroid[-1, 0] - centroid[0, 0]
     checks.check(abs(slid / x_stop - 1) < TOLERANCE,
-                 f"(a) {ranks} rank(s): distance slid {slid:.4f} m vs x_s = {x_stop:.4f} m "
+                 f"(a) ranks {ranks}: distance slid {slid:.4f} m vs x_s = {x_stop:.4f} m "
                  f"({100 * (slid / x_stop - 1):+.2f} %, within {100 * TOLERANCE:g} %)")
     slow = np.abs(vx) < 0.01 * V0
     first = int(np.argmax(slow)) if slow.any() else None
     if first is None:
-        checks.check(False, f"(a) {ranks} rank(s): never slower than 1 % of v0 (final {vx[-1]:.3f} m/s)")
+        checks.check(False, f"(a) ranks {ranks}: never slower than 1 % of v0 (final {vx[-1]:.3f} m/s)")
     else:
         checks.check(abs(t[first] / t_slow - 1) < TOLERANCE and slow[first:].all(),
-                     f"(a) {ranks} rank(s): slower than 1 % of v0 from t = {t[first]:.2f} s on vs "
+                     f"(a) ranks {ranks}: slower than 1 % of v0 from t = {t[first]:.2f} s on vs "
                      f"{t_slow:.4f} s ({100 * (t[first] / t_slow - 1):+.2f} %, within {100 * TOLERANCE:g} %; "
                      f"final speed {abs(vx[-1]):.1e} m/s)")
     friction = -((vx[1:] - vx[:-1]) / DT + ALPHA * vx[1:]) / (MU * G)  # F / (mu M g), step n -> n+1
     sliding = [n for n in range(len(friction)) if 0.02 - 1e-9 <= t[n + 1] <= 0.35 + 1e-9]
     worst = max(sliding, key=lambda n: abs(friction[n] - 1))
     checks.check(abs(friction[worst] - 1) < FORCE_TOLERANCE,
-                 f"(a) {ranks} rank(s): friction force while sliding (0.02 to 0.35 s, {len(sliding)} steps) = "
+                 f"(a) ranks {ranks}: friction force while sliding (0.02 to 0.35 s, {len(sliding)} steps) = "
                  f"mu M g within {100 * abs(friction[worst] - 1):.2f} % (worst at t = {t[worst + 1]:.2f} s; "
                  f"within {100 * FORCE_TOLERANCE:g} %)")
 
