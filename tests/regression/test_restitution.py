@@ -16,8 +16,9 @@ the energies it records every step).
     gravitational energy never increases from one step to the next (1e-9 of the
     initial total).
 (b) e = 0.5 and 0.8, linear mode on 1 and 2 ranks, e = 0.8 corotational on
-    2: rebound within 5 % of e^2 times the fall height (measured -1.6 % and -1.3 %: backward Euler's own loss in the flight,
-    about g dt / v of the height each way); no step gains energy (1e-9 of the
+    2: rebound within 5 % of e^2 times the fall height (measured -1.6 % and
+    -1.3 %: backward Euler's own loss in the flight, about g dt / v of the
+    height each way); no step gains energy (1e-9 of the
     initial total), the bounce included. (The former model, e J / M given as a
     uniform velocity after each impact step, rose to 0.22 and 0.58 of the fall,
     -11 % and -10 % at dt = 0.01 s.)
