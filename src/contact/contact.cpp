@@ -55,7 +55,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   if (body_obstacles_) SetupBodyObstacles(candidates);
   CollectCheckedVertices();
   constraints_.Setup(scene, layout, state_, obstacles_, features_);
-  friction_.Setup(options.friction, &state_);
+  friction_.Setup(options.friction, [this](int32_t n) { return 1 / state_.inverse_mass(n); });
   response_.Setup(comm, scene, layout, state_, obstacles_, options);
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -65,7 +65,7 @@ void Friction::Observe(const std::vector<VelocityConstraint> &normals,
                     contacts[i].obstacle_velocity,
                     relative - n.dot(relative) * n,
                     velocity.norm() + contacts[i].obstacle_velocity.norm(),
-                    1 / state_->inverse_mass(contacts[i].natural),
+                    mass_of_(contacts[i].natural),
                     normal.immobile};
   }
 }

@@ -28,10 +28,12 @@
 #include <petscvec.h>
 
 #include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <utility>
 #include <vector>
 
 #include "contact/contact_constraints.hpp"
-#include "contact/free_state.hpp"
 #include "contact/obstacles.hpp"
 #include "solvers/projected_solve.hpp"
 
@@ -39,10 +41,11 @@ namespace softbody {
 
 class Friction {
  public:
-  // state: the vertices' masses, kept (must outlive this).
-  void Setup(double mu, const FreeState *state) {
+  // A vertex's lumped mass (kg) by natural index.
+  using MassOf = std::function<double(int32_t natural)>;
+  void Setup(double mu, MassOf mass_of) {
     mu_ = mu;
-    state_ = state;
+    mass_of_ = std::move(mass_of);
   }
   double mu() const { return mu_; }
   // A new step: no tangents, no slips, no contact decided.
@@ -99,7 +102,7 @@ class Friction {
                PetscScalar *rhs);
 
   double mu_ = 0;
-  const FreeState *state_ = nullptr;
+  MassOf mass_of_;
   std::vector<VelocityConstraint> tangents_;  // (t1, t2) per sticking contact
   std::vector<size_t> sticking_contact_;      // the contact of each pair
   std::vector<Slip> slips_;
