@@ -5,8 +5,9 @@
 // mu lambda against its sliding; a slip that the next solve shows reversed by
 // less than 2 mu lambda / m sticks (its impulse taken back out, two tangent
 // constraints holding the obstacle's velocity); a reversal faster than that
-// keeps slipping, its impulse flipped, and a slip turns with its sliding; a sticking contact whose tangential reaction exceeds
-// mu lambda slips along that reaction; a slip's magnitude follows lambda.
+// keeps slipping, its impulse flipped, and a slip turns with its sliding; a sticking contact whose
+// tangential reaction exceeds mu lambda slips along that reaction; a slip's magnitude follows
+// lambda.
 #include <gtest/gtest.h>
 
 #include <cmath>
