@@ -65,7 +65,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   if (body_obstacles_) SetupBodyObstacles(candidates);
   CollectCheckedVertices();
   constraints_.Setup(scene, layout, state_, obstacles_, features_, options.gap);
-  friction_.Setup(options.friction);
+  friction_.Setup(options.friction, [this](int32_t n) { return 1 / state_.inverse_mass(n); });
   response_.Setup(comm, scene, layout, state_, obstacles_, options);
   if (guard_on_) PetscCall(SetupGuard(lumped_mass));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -195,6 +195,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   constraints_.Clear(kBounceSpeedInGravitySteps * options_.gravity * dt);
   holding_ = false;
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
+  if (options_.restitution > 0) PetscCall(response_.RecordStart(v0));
   // Obstacles where they will be if they keep their velocity.
   PetscCall(Refresh(x0, v0, dt, true));
   PetscCall(ReaimRestingContacts(x0, v0, dt));
@@ -283,6 +284,7 @@ PetscErrorCode ContactSolver::AddVertexPenetrations(Vec x0, Vec v, PetscReal dt,
     if (constraints_.AddVertexPenetration(local, natural, Point(&x[3 * local]),
                                           Point(&lv[3 * local]), dt))
       ++*found;
+  if (options_.friction > 0) friction_.Observe(constraints_.normals(), constraints_.contacts(), lv);
   PetscCall(VecRestoreArrayRead(x0, &x));
   PetscCall(VecRestoreArrayRead(v, &lv));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -292,10 +294,12 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
                                               bool *released) {
   PetscFunctionBeginUser;
   Timing timing(this);
+  // With friction, pulling contacts leave the solve: friction needs the true normal load.
+  const std::vector<PetscReal> by_contact = constraints_.ByContact(reactions);
+  PetscInt local_released = options_.friction > 0 ? constraints_.ReleasePulling(by_contact) : 0;
   PetscScalar *b;
   PetscCall(VecGetArray(rhs, &b));
-  const PetscInt local_released =
-      friction_.ReleaseSlipping(reactions, constraints_.contacts().size(), b);
+  local_released += friction_.Update(by_contact, constraints_.contacts().size(), b);
   PetscCall(VecRestoreArray(rhs, &b));
   PetscInt all_released;
   PetscCallMPI(MPIU_Allreduce(&local_released, &all_released, 1, MPIU_INT, MPI_SUM, comm_));
@@ -319,7 +323,7 @@ PetscErrorCode ContactSolver::HoldGuardedVertices(Vec x0, Vec x, PetscReal dt,
     holding_ = true;
   }
   // Once vertices are held, contacts aimed at the first prediction may pull.
-  PetscInt released = holding_ ? constraints_.ReleasePulling(reactions) : 0;
+  PetscInt released = holding_ ? constraints_.ReleasePulling(constraints_.ByContact(reactions)) : 0;
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &released, 1, MPIU_INT, MPI_SUM, comm_));
   *held = moved || released > 0;
   if (*held) PetscCall(constraints_.Combine(comm_, friction_.tangents()));
@@ -365,15 +369,16 @@ PetscErrorCode ContactSolver::RespondToContacts(Vec x, Vec v,
   PetscCall(VecGetArray(x, &lx));
   PetscCall(VecGetArray(v, &lv));
   resting_.Clear();
+  const std::vector<PetscReal> by_contact = constraints_.ByContact(reactions);
   std::vector<Collision> collisions =
-      response_.Respond(constraints_, friction_, reactions, lx, lv, &resting_);
+      response_.Respond(constraints_, friction_, by_contact, lx, lv, &resting_);
   stats_.projections +=
       response_.ProjectRemaining(checked_vertices_, constraints_, lx, lv, &collisions);
   if (!options_.impulse_spreading) response_.Apply(collisions, lv);
   PetscCall(VecRestoreArray(x, &lx));
   PetscCall(VecRestoreArray(v, &lv));
   if (options_.impulse_spreading) PetscCall(response_.SpreadImpulses(collisions, v));
-  if (options_.restitution > 0) PetscCall(response_.Bounce(constraints_, reactions, v));
+  if (options_.restitution > 0) PetscCall(response_.Bounce(constraints_, by_contact, v));
   PetscInt local_changes = static_cast<PetscInt>(collisions.size()), changes;
   PetscCallMPI(MPIU_Allreduce(&local_changes, &changes, 1, MPIU_INT, MPI_SUM, comm_));
   *changed = changes > 0;

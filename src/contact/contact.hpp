@@ -90,10 +90,10 @@ class ContactSolver {
     return constraints_.solve_constraints();
   }
   PetscInt global_constraint_count() const { return constraints_.global_count(); }
-  // 2b. After a solve that added no contact: a sticking contact whose tangential
-  //    reaction exceeds mu times its normal one slips instead: its tangent pair
-  //    is dropped and the Coulomb impulse mu lambda_n along the reaction goes
-  //    into rhs (owned entries) for the next solve; *released tells any rank did.
+  // 2b. After a solve that added no contact: friction decides which contacts
+  //    stick (tangent pairs) and which slip (impulses mu lambda_n into rhs, owned
+  //    entries), friction.hpp; with friction, contacts that pull leave the
+  //    solve; *released tells any rank changed anything.
   PetscErrorCode ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released);
   // 2c. After the solves, on x = x0 + dt v: when the collision guard would move
   //    vertices (collision_guard.hpp), their velocities are prescribed for the

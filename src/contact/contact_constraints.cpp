@@ -18,6 +18,16 @@ constexpr double kFeatureTouching = 1e-3;
 // A feature point is inside a free body when all its barycentric coordinates
 // in one of the body's tets exceed this: points on the surface are touching.
 constexpr double kFeatureInsideMargin = 1e-6;
+// A contact pulls when its reaction is below -kPullRoundOff times the impulse
+// that stops its vertex at the bounce speed (m times about two steps of
+// gravity); smaller pulls are round-off of contacts at zero load.
+constexpr double kPullRoundOff = 1e-9;
+
+// Removes obstacle o from the vertex's list (keeping the others' order).
+void Remove(VertexObstacles *held, int32_t o) {
+  int32_t *end = held->obstacle + held->count;
+  if (std::remove(held->obstacle, end, o) != end) --held->count;
+}
 
 }  // namespace
 
@@ -43,6 +53,9 @@ void ContactConstraints::Clear(PetscReal bounce_speed) {
   held_slot_.assign(state_->local_count(), -1);
   global_count_ = 0;
   bounce_speed_ = bounce_speed;
+  released_.clear();
+  release_reaction_.clear();
+  num_released_ = 0;
 }
 
 bool ContactConstraints::AddVertexPenetration(PetscInt local, int32_t natural, const Point &x0,
@@ -82,7 +95,8 @@ void ContactConstraints::Constrain(PetscInt local, int32_t natural, const Point 
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
   const double normal_velocity = RecoveryVelocity(natural, x0, target, dt, hit);
   normals_.push_back({local, n, normal_velocity, w_obstacle == 0});
-  contacts_.push_back({natural, hit.body, common, fresh && approach < -bounce_speed_});
+  contacts_.push_back(
+      {natural, hit.body, common, fresh && approach < -bounce_speed_, -1, hit.velocity});
   VertexObstacles &obstacles = constrained_[local];
   obstacles.obstacle[obstacles.count++] = hit.body;
 }
@@ -213,19 +227,39 @@ void ContactConstraints::Hold(PetscInt local, const Point &velocity) {
 }
 
 PetscInt ContactConstraints::ReleasePulling(const std::vector<PetscReal> &reactions) {
+  released_.resize(contacts_.size(), 0);
+  release_reaction_.resize(contacts_.size(), 0);
   PetscInt released = 0;
-  for (size_t i = 0; i < normals_.size() && i < reactions.size(); ++i)
-    if (!normals_[i].released && reactions[i] < 0) {
-      normals_[i].released = true;
-      ++released;
-    }
+  for (size_t i = 0; i < contacts_.size(); ++i) {
+    const Contact &contact = contacts_[i];
+    const double scale = bounce_speed_ / state_->inverse_mass(contact.natural);
+    if (released_[i] || contact.feature >= 0 || !(reactions[i] < -kPullRoundOff * scale)) continue;
+    released_[i] = 1;
+    release_reaction_[i] = reactions[i];
+    Remove(&constrained_[normals_[i].vertex], contact.body);
+    ++num_released_;
+    ++released;
+  }
   return released;
+}
+
+std::vector<PetscReal> ContactConstraints::ByContact(
+    const std::vector<PetscReal> &reactions) const {
+  if (num_released_ == 0) return reactions;
+  std::vector<PetscReal> by_contact(reactions.size() + num_released_);
+  size_t next = 0;
+  for (size_t i = 0; i < contacts_.size(); ++i)
+    by_contact[i] = i < released_.size() && released_[i] ? release_reaction_[i] : reactions[next++];
+  std::copy(reactions.begin() + next, reactions.end(), by_contact.begin() + contacts_.size());
+  return by_contact;
 }
 
 PetscErrorCode ContactConstraints::Combine(MPI_Comm comm,
                                            const std::vector<VelocityConstraint> &tangents) {
   PetscFunctionBeginUser;
-  solve_constraints_ = normals_;
+  solve_constraints_.clear();
+  for (size_t i = 0; i < normals_.size(); ++i)
+    if (i >= released_.size() || !released_[i]) solve_constraints_.push_back(normals_[i]);
   solve_constraints_.insert(solve_constraints_.end(), tangents.begin(), tangents.end());
   solve_constraints_.insert(solve_constraints_.end(), held_.begin(), held_.end());
   const PetscInt local = static_cast<PetscInt>(solve_constraints_.size());

@@ -53,6 +53,7 @@ struct Contact {
   double normal_velocity;  // n . v after the step's velocity response
   bool impact;             // new this step and closing faster than the bounce speed
   int32_t feature = -1;    // a fixed body's feature point pressing on the vertex's face
+  Point obstacle_velocity = Point::Zero();  // the obstacle's surface velocity there (m/s)
 };
 
 class ContactConstraints {
@@ -96,13 +97,19 @@ class ContactConstraints {
   // step (the collision guard's zones), overriding its other constraints;
   // a later call for the same vertex replaces the prescription.
   void Hold(PetscInt local, const Point &velocity);
-  // Leaves out of the solve the normal constraints whose reaction (the last
-  // solve's, solve order) pulls the vertex into its obstacle (lambda < 0): once
-  // the guard holds vertices, a contact aimed at the step's first prediction may
-  // drag its vertex after them. Returns how many this rank released.
+  // After a solve (reactions in contact order, ByContact): releases the vertex
+  // contacts that pull (lambda < 0 beyond round-off) for the rest of the step: they leave the
+  // solve, and their vertex may be constrained again if it sinks. Friction
+  // needs it: a pulling contact holding the body down adds to the others'
+  // normal load and so to their friction. Returns how many it released.
   PetscInt ReleasePulling(const std::vector<PetscReal> &reactions);
-  // Collective. The solve's constraints: the normals, then `tangents`, then the
-  // held vertices' (three each).
+  bool released(size_t contact) const { return contact < released_.size() && released_[contact]; }
+  // The solve's reactions (its constraints' order) in contact order, normals
+  // then tangents; a released contact keeps the reaction it was released with.
+  std::vector<PetscReal> ByContact(const std::vector<PetscReal> &reactions) const;
+
+  // Collective. The solve's constraints: the normals not released, then `tangents`,
+  // then the held vertices' (three each).
   PetscErrorCode Combine(MPI_Comm comm, const std::vector<VelocityConstraint> &tangents);
   const std::vector<VelocityConstraint> &solve_constraints() const { return solve_constraints_; }
   PetscInt global_count() const { return global_count_; }
@@ -136,9 +143,12 @@ class ContactConstraints {
   std::vector<VertexObstacles> constrained_;  // per local vertex
   std::vector<char> feature_held_;            // per feature point: constrained this step
   std::vector<ptrdiff_t> feature_contact_;    // per local vertex: its feature contact (-1: none)
-  std::vector<VelocityConstraint> held_;      // the held vertices' three axis constraints
-  std::vector<ptrdiff_t> held_slot_;          // per local vertex: its first in held_ (-1: none)
-  std::vector<VelocityConstraint> solve_constraints_;  // normals, tangents, held
+  std::vector<char> released_;                // per contact: left the solve (ReleasePulling)
+  std::vector<PetscReal> release_reaction_;   // per contact: its reaction when released
+  size_t num_released_ = 0;
+  std::vector<VelocityConstraint> held_;  // the held vertices' three axis constraints
+  std::vector<ptrdiff_t> held_slot_;      // per local vertex: its first in held_ (-1: none)
+  std::vector<VelocityConstraint> solve_constraints_;  // normals not released, tangents, held
   PetscInt global_count_ = 0;
 };
 

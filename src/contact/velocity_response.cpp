@@ -14,6 +14,12 @@ constexpr double kOnSurface = 1e-6;
 // Numbers per collision when collisions travel between ranks: vertex, body,
 // position (3), dv (3).
 constexpr size_t kPackedCollision = 8;
+// Numbers per body describing its motion: momentum (3), kinetic energy.
+constexpr size_t kPackedMotion = 4;
+// Numbers per body that Bounce reduces: the motion at the start and now, the
+// normal impulse of its impacts against immobile obstacles (3) and against
+// free bodies (3).
+constexpr size_t kPackedBounce = 2 * kPackedMotion + 6;
 
 }  // namespace
 
@@ -37,6 +43,7 @@ std::vector<Collision> VelocityResponse::Respond(const ContactConstraints &const
   const std::vector<char> friction_in_solve = friction.InSolve(contacts.size());
   std::vector<Collision> collisions;
   for (size_t i = 0; i < contacts.size(); ++i) {
+    if (constraints.released(i)) continue;  // left the solve: its vertex is free
     const Contact &contact = contacts[i];
     const VelocityConstraint &constraint = constraints.normals()[i];
     const Point position(&x[3 * constraint.vertex]), velocity(&v[3 * constraint.vertex]);
@@ -118,27 +125,81 @@ void VelocityResponse::Apply(const std::vector<Collision> &collisions, PetscScal
   }
 }
 
+void VelocityResponse::AddMotion(const PetscScalar *v, double *sums) const {
+  for (PetscInt p = 0; p < state_->local_count(); ++p) {
+    const int32_t natural = state_->owned_natural()[p];
+    const double w = state_->inverse_mass(natural);
+    if (!(w > 0)) continue;
+    const Point velocity(&v[3 * p]);
+    double *body = &sums[kPackedMotion * state_->body_of(natural)];
+    for (int k = 0; k < 3; ++k) body[k] += velocity[k] / w;
+    body[3] += 0.5 * velocity.squaredNorm() / w;
+  }
+}
+
+PetscErrorCode VelocityResponse::RecordStart(Vec v0) {
+  PetscFunctionBeginUser;
+  const PetscScalar *start;
+  start_motion_.assign(kPackedMotion * scene_->bodies.size(), 0.0);
+  PetscCall(VecGetArrayRead(v0, &start));
+  AddMotion(start, start_motion_.data());
+  PetscCall(VecRestoreArrayRead(v0, &start));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The change d = target - n . V (V the centroid velocity now); when that
+// speeds the body up, at most what keeps its kinetic energy
+// K + M (n . V) d + M d^2 / 2 within its kinetic energy K0 at the start.
+double VelocityResponse::RigidBounce(size_t b, const Point &n, double target, const double *start,
+                                     const double *now) const {
+  const double mass = state_->mass(b), normal = n.dot(Point(now)) / mass;
+  const double wanted = target - normal;
+  if (wanted <= 0) return wanted;
+  const double room = normal * normal - 2 * (now[3] - start[3]) / mass;
+  return std::min(wanted, room > 0 ? std::max(0.0, -normal + std::sqrt(room)) : 0.0);
+}
+
 PetscErrorCode VelocityResponse::Bounce(const ContactConstraints &constraints,
                                         const std::vector<PetscReal> &reactions, Vec v) const {
   PetscFunctionBeginUser;
   const size_t bodies = scene_->bodies.size();
-  std::vector<double> local(3 * bodies, 0.0), impulse(3 * bodies);
-  const auto &contacts = constraints.contacts();
-  for (size_t i = 0; i < contacts.size(); ++i) {
-    if (!contacts[i].impact || reactions[i] <= 0) continue;
-    const int32_t body = state_->body_of(contacts[i].natural);
-    for (int k = 0; k < 3; ++k)
-      local[3 * body + k] += reactions[i] * constraints.normals()[i].normal[k];
-  }
-  PetscCallMPI(MPI_Allreduce(local.data(), impulse.data(), static_cast<int>(local.size()),
-                             MPI_DOUBLE, MPI_SUM, comm_));
+  std::vector<double> local(kPackedBounce * bodies, 0.0), all(local.size());
   PetscScalar *lv;
   PetscCall(VecGetArray(v, &lv));
-  for (PetscInt p = 0; p < state_->local_count(); ++p) {
-    const int32_t body = state_->body_of(state_->owned_natural()[p]);
-    for (int k = 0; k < 3; ++k)
-      lv[3 * p + k] += options_.restitution * impulse[3 * body + k] / state_->mass(body);
+  for (size_t b = 0; b < bodies; ++b)
+    for (size_t k = 0; k < kPackedMotion && !start_motion_.empty(); ++k)
+      local[kPackedBounce * b + k] = start_motion_[kPackedMotion * b + k];
+  std::vector<double> now(kPackedMotion * bodies, 0.0);
+  AddMotion(lv, now.data());
+  const auto &contacts = constraints.contacts();
+  for (size_t b = 0; b < bodies; ++b)
+    for (size_t k = 0; k < kPackedMotion; ++k)
+      local[kPackedBounce * b + kPackedMotion + k] = now[kPackedMotion * b + k];
+  for (size_t i = 0; i < contacts.size(); ++i) {
+    if (!contacts[i].impact || reactions[i] <= 0 || constraints.released(i)) continue;
+    const VelocityConstraint &normal = constraints.normals()[i];
+    double *impulse = &local[kPackedBounce * state_->body_of(contacts[i].natural) +
+                             2 * kPackedMotion + (normal.immobile ? 0 : 3)];
+    for (int k = 0; k < 3; ++k) impulse[k] += reactions[i] * normal.normal[k];
   }
+  PetscCallMPI(MPI_Allreduce(local.data(), all.data(), static_cast<int>(local.size()), MPI_DOUBLE,
+                             MPI_SUM, comm_));
+  std::vector<Point> change(bodies, Point::Zero());
+  for (size_t b = 0; b < bodies; ++b) {
+    const double *body = &all[kPackedBounce * b];
+    const Point immobile(&body[2 * kPackedMotion]), free(&body[2 * kPackedMotion + 3]);
+    change[b] = options_.restitution * free / state_->mass(b);
+    if (immobile.norm() > 0) {
+      const Point n = immobile / immobile.norm();
+      const double approach = n.dot(Point(body)) / state_->mass(b);  // < 0: closing
+      if (approach < 0)
+        change[b] +=
+            RigidBounce(b, n, -options_.restitution * approach, body, body + kPackedMotion) * n;
+    }
+  }
+  for (PetscInt p = 0; p < state_->local_count(); ++p)
+    for (int k = 0; k < 3; ++k)
+      lv[3 * p + k] += change[state_->body_of(state_->owned_natural()[p])][k];
   PetscCall(VecRestoreArray(v, &lv));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -2,12 +2,20 @@
 // constraints' reactions (normal impulses lambda, N s, >= 0 where the obstacle
 // pushes):
 // - a contact vertex leaves with the two sides' momentum-weighted normal
-//   velocity (Contact::normal_velocity), minus sliding friction (friction.hpp);
-// - restitution (-restitution e): impacts (new contacts closing faster than the
-//   bounce speed 2 |g| dt, what gravity adds in a step; slower ones are
-//   resting) give their body back e times the normal impulse J they received,
-//   as the uniform velocity change e J / M (M the body's mass): a bounce that
-//   never adds energy;
+//   velocity (Contact::normal_velocity), minus sliding friction if the solve
+//   rounds ran out before its friction was decided (friction.hpp);
+// - restitution (-restitution e): impacts are new contacts closing faster than
+//   the bounce speed 2 |g| dt (what gravity adds in a step; slower ones are
+//   resting). A body with impacts against the ground or a fixed body bounces
+//   like a rigid one, at once: with n the direction of the impacts' normal
+//   impulse and u the approach n . V0 < 0 of its centroid at the step's start,
+//   a uniform velocity change along n sets its centroid's normal velocity to
+//   -e u, so its centroid rises to e^2 of the height it fell from. The change
+//   is capped so that the body's kinetic energy stays at most what it had at
+//   the step's start (a bounce never gives back more than the fall brought);
+//   its deformation keeps vibrating about the centroid. Impacts against a free
+//   body give their body back e times their normal impulse J as the uniform
+//   velocity change e J / M (M the body's mass), which keeps the pair's momentum;
 // - impulse spreading (-impulse_spreading): the momentum m_c dv_c given to a
 //   contact vertex c is shared by all vertices j of its body with weights
 //   w_j = 1 / (l + |x_j - x_c|)^2 (l the body's mean boundary edge length),
@@ -59,7 +67,10 @@ class VelocityResponse {
   void Apply(const std::vector<Collision> &collisions, PetscScalar *v) const;
   // Collective. Every rank's collisions, spread over their bodies' vertices.
   PetscErrorCode SpreadImpulses(const std::vector<Collision> &local, Vec v) const;
-  // Collective. Restitution: body b gets e J_b / M_b, J_b the normal impulse of its impacts.
+  // Not collective. The bodies' momenta and kinetic energies at the step's
+  // start (v0), this rank's share, for Bounce.
+  PetscErrorCode RecordStart(Vec v0);
+  // Collective. Restitution (see the file comment); reactions in contact order.
   PetscErrorCode Bounce(const ContactConstraints &constraints,
                         const std::vector<PetscReal> &reactions, Vec v) const;
 
@@ -71,6 +82,14 @@ class VelocityResponse {
   // Whether the vertex at x (inside an obstacle at hit) is projected out.
   bool ShouldProject(PetscInt local, int32_t natural, const Point &x, const SurfaceHit &hit,
                      const ContactConstraints &constraints) const;
+  // Per body, this rank's share of momentum (3) and kinetic energy (1) of
+  // velocities v (kPackedMotion numbers per body, added to *sums).
+  void AddMotion(const PetscScalar *v, double *sums) const;
+  // Body b's uniform velocity change along n (unit) that sets its centroid's
+  // normal velocity to target (m/s), capped by its kinetic energy at the
+  // step's start; motion: its momentum and kinetic energy, at the start and now.
+  double RigidBounce(size_t b, const Point &n, double target, const double *start,
+                     const double *now) const;
   // Every rank's collisions on every rank, packed 8 numbers each.
   PetscErrorCode AllGather(const std::vector<Collision> &local, std::vector<double> *all) const;
   // Adds to this rank's vertices of `body` their share of the impulse m_c dv
@@ -83,6 +102,7 @@ class VelocityResponse {
   const FreeState *state_ = nullptr;
   const Obstacles *obstacles_ = nullptr;
   ContactOptions options_;
+  std::vector<double> start_motion_;  // RecordStart's sums, kPackedMotion per body
 };
 
 }  // namespace softbody

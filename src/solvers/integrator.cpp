@@ -880,6 +880,13 @@ PetscErrorCode ImplicitEuler::SolveWithGuardedVertices(Vec x, Vec v, ContactSolv
     }
     if (!held) break;
     PetscCall(Solve(v, contact));
+    // A contact released above may let its vertex sink: constrained again.
+    bool added;
+    {
+      StageScope stage(Stages().contact);
+      PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, &added));
+    }
+    if (added) PetscCall(Solve(v, contact));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }

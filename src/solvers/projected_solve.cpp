@@ -66,8 +66,7 @@ ProjectedSolver::~ProjectedSolver() {
 
 void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &constraints) {
   std::map<PetscInt, std::vector<const VelocityConstraint *>> by_vertex;
-  for (const VelocityConstraint &c : constraints)
-    if (!c.released) by_vertex[c.vertex].push_back(&c);
+  for (const VelocityConstraint &c : constraints) by_vertex[c.vertex].push_back(&c);
   vertices_.clear();
   for (const auto &[vertex, list] : by_vertex) {
     std::vector<VelocityConstraint> own;

@@ -31,8 +31,6 @@ struct VelocityConstraint {
   // One of three orthonormal constraints that prescribe the whole velocity (the
   // collision guard's): they override every other constraint of the vertex.
   bool prescribes_all = false;
-  // Left out of the solve (a contact that pulled; its reaction is still reported).
-  bool released = false;
 };
 // The constraints of one vertex: an orthonormal basis of their directions and
 // the velocity component in its span that satisfies them all.
