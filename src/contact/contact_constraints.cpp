@@ -89,7 +89,11 @@ void ContactConstraints::Constrain(PetscInt local, int32_t natural, const Point 
   const Point &n = hit.normal;
   const double w = state_->inverse_mass(natural), w_obstacle = hit.inverse_mass;
   const double share = w / (w + w_obstacle);  // 1 against a fixed obstacle
-  const Point outside = hit.point + gap_ * state_->edge(state_->body_of(natural)) * n;
+  // The contact ends the gap outside, but never higher than the vertex started
+  // the step: lifting a vertex that vibrates within the gap would add energy.
+  const double gap = gap_ * state_->edge(state_->body_of(natural));
+  const double start_height = n.dot(x0 - hit.point);
+  const Point outside = hit.point + (start_height >= 0 ? std::min(gap, start_height) : gap) * n;
   const Point target = predicted + share * (outside - predicted);
   const double approach = n.dot(velocity - hit.velocity);  // < 0: closing
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);

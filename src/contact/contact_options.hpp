@@ -22,7 +22,7 @@ struct ContactOptions {
   // body's mean boundary edge outside the obstacle, and no surface pair comes
   // closer than a quarter of it.
   PetscBool guard = PETSC_TRUE;
-  PetscReal gap = 1e-3;
+  PetscReal gap = 1e-4;
   // A body's surface against its own (non-adjacent) faces and edges: on with any
   // other contact unless -self_contact 0; -self_contact 1 also guards a lone body.
   PetscBool self_contact = PETSC_TRUE;

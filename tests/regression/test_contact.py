@@ -70,7 +70,7 @@ RHO, YOUNG, NU = 1000.0, 1e6, 0.3
 G = 9.81
 DROP = ["-gravity", "0,-9.81,0", "-ground", "0", "-dt", "0.01", "-steps", "300"]
 PENETRATION = 0.01 * SIZE      # 1 % of the body size
-# Contacts end -contact_gap (1e-3) of the body's mean boundary edge outside the
+# Contacts end -contact_gap (1e-4) of the body's mean boundary edge outside the
 # obstacle: a vertex resting on the ground lies within 1e-3 of the body's size above it.
 RESTING_GAP = 1e-3 * SIZE
 DEPTH = 0.01                   # barycentric depth tolerance

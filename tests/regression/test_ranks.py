@@ -73,7 +73,7 @@ def main():
         contact = ["-scene", dropped, "-mode", mode] + CONTACT
         contact_reference, _ = simulate(f"contact-{mode}-1", 1, contact)
         low = contact_reference["positions"][:, :, 1]
-        # Contacts end -contact_gap (1e-3) mean boundary edges above the ground:
+        # Contacts end -contact_gap (1e-4) mean boundary edges above the ground:
         # within 1e-3 of the block's size.
         size = np.ptp(contact_reference["positions"][0], axis=0).max()
         resting = (low[-1] - (-0.9) <= 1e-3 * size).sum()

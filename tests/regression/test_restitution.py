@@ -71,7 +71,8 @@ def drop(e, ranks, mode="linear", body=scene, name="drop"):
     masses = harness.lumped_masses(frames["mesh/tets"], frames["mesh/rest_positions"],
                                    frames["mesh/vertex_body"], [RHO])
     height = frames["positions"][:, :, 1] @ masses / masses.sum()
-    touch = int(np.argmax(frames["positions"][:, :, 1].min(axis=1) <= 1e-12))
+    # Contacts end -contact_gap (1e-4) mean boundary edges above the ground.
+    touch = int(np.argmax(frames["positions"][:, :, 1].min(axis=1) <= 1e-3 * SIZE))
     low = touch + int(np.argmin(height[touch:touch + int(0.2 / DT)]))
     total = frames["energy/kinetic"] + frames["energy/elastic"] + frames["energy/gravitational"]
     return height, low, total
