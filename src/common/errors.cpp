@@ -38,4 +38,12 @@ PetscErrorCode InstallErrorHandler() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+int RunTool(int argc, char **argv, const char *help, ToolBody run) {
+  PetscCall(PetscInitialize(&argc, &argv, nullptr, help));
+  PetscCall(InstallErrorHandler());
+  const PetscErrorCode status = run(PETSC_COMM_WORLD, argc, argv);
+  PetscCall(PetscFinalize());
+  return status == PETSC_SUCCESS ? 0 : 1;
+}
+
 }  // namespace softbody

@@ -30,6 +30,12 @@ std::string Where(const std::string &path, long line, const std::string &what);
 // Not collective. Installs the one-line handler for user-input errors.
 PetscErrorCode InstallErrorHandler();
 
+// A tool's whole main: PetscInitialize with `help`, the one-line error handler,
+// run(PETSC_COMM_WORLD, argc, argv), PetscFinalize; returns the exit status (0
+// when run succeeded).
+using ToolBody = PetscErrorCode (*)(MPI_Comm comm, int argc, char **argv);
+int RunTool(int argc, char **argv, const char *help, ToolBody run);
+
 }  // namespace softbody
 
 // Runs `statement`; an InputError it throws becomes a collective PETSc user-input

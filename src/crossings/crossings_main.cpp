@@ -197,9 +197,5 @@ PetscErrorCode Run(MPI_Comm comm, int argc, char **argv) {
 }  // namespace
 
 int main(int argc, char **argv) {
-  PetscCall(PetscInitialize(&argc, &argv, nullptr, help));
-  PetscCall(InstallErrorHandler());
-  const PetscErrorCode status = Run(PETSC_COMM_WORLD, argc, argv);
-  PetscCall(PetscFinalize());
-  return status == PETSC_SUCCESS ? 0 : 1;
+  return RunTool(argc, argv, help, Run);
 }

@@ -9,6 +9,7 @@ test when the data is absent. Every other test runs on the project's own
 scenes and meshes (scenes/, tests/data/, meshes written by tools/box_mesh.py).
 """
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -168,3 +169,29 @@ def paraview_frames(args, xdmf_path, timeout=120):
                            result.stderr[-2000:])
     data = np.load(out)
     return data["times"], data["positions"], data["velocities"], data["cells"]
+
+
+def crossings_checker(args):
+    """softbody-crossings, built beside the softbody under test; exits with SKIP
+    when it was not built (CGAL not found when configuring)."""
+    checker = os.path.join(os.path.dirname(os.path.abspath(args.softbody)), "softbody-crossings")
+    if not os.path.exists(checker):
+        print(f"SKIP: {checker} not built (CGAL not found when configuring: Debian's libcgal-dev)")
+        sys.exit(SKIP)
+    return checker
+
+
+def run_crossings(args, checks, path, *options, ranks=1):
+    """Runs softbody-crossings on a result file (on `ranks` ranks, with `options`);
+    returns its -json report, or None after a failed check when it failed."""
+    report = path[:-3] + f"-{ranks}.json"
+    command = [crossings_checker(args), path, "-json", report, *options]
+    if ranks > 1:
+        command = [args.mpiexec, "-n", str(ranks), *command]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=mpi_environment())
+    if not checks.check(run.returncode == 0, f"softbody-crossings {os.path.basename(path)} {' '.join(options)} "
+                        f"on {ranks} rank(s): exit {run.returncode}"):
+        print(run.stdout, run.stderr)
+        return None
+    with open(report) as f:
+        return json.load(f)

@@ -27,7 +27,6 @@ Synthetic result files written with h5py, whose counts are known by construction
     scenes load.
 Skipped when softbody-crossings was not built (no CGAL).
 """
-import json
 import os
 import subprocess
 import sys
@@ -43,10 +42,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 
 args = harness.arguments()
 checks = harness.Checks()
-checker = os.path.join(os.path.dirname(os.path.abspath(args.softbody)), "softbody-crossings")
-if not os.path.exists(checker):
-    print(f"SKIP: {checker} not built (CGAL not found when configuring: Debian's libcgal-dev)")
-    sys.exit(harness.SKIP)
+checker = harness.crossings_checker(args)
 
 TET = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
 TET_FACES = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
@@ -69,18 +65,7 @@ def write_result(name, frames, triangles, vertex_body, body_fixed, ground_y=None
 
 def check_file(path, *options, ranks=1):
     """Runs the checker; returns its JSON report (None when it failed)."""
-    report = path[:-3] + f"-{ranks}.json"
-    command = [checker, path, "-json", report, *options]
-    if ranks > 1:
-        command = [args.mpiexec, "-n", str(ranks), *command]
-    run = subprocess.run(command, capture_output=True, text=True, timeout=300,
-                         env=harness.mpi_environment())
-    if not checks.check(run.returncode == 0, f"softbody-crossings {os.path.basename(path)} "
-                        f"{' '.join(options)} on {ranks} rank(s): exit {run.returncode}"):
-        print(run.stdout, run.stderr)
-        return None
-    with open(report) as f:
-        return json.load(f)
+    return harness.run_crossings(args, checks, path, *options, ranks=ranks)
 
 
 def frame_counts(report, kind):

@@ -25,10 +25,8 @@ sharing no vertex), and vertices below the ground.
 
 Skipped when softbody-crossings was not built (no CGAL).
 """
-import json
 import os
 import re
-import subprocess
 import sys
 
 import numpy as np
@@ -49,10 +47,7 @@ RANK_TOLERANCE = 1e-9
 
 args = harness.arguments()
 checks = harness.Checks()
-checker = os.path.join(os.path.dirname(os.path.abspath(args.softbody)), "softbody-crossings")
-if not os.path.exists(checker):
-    print(f"SKIP: {checker} not built (CGAL not found when configuring: Debian's libcgal-dev)")
-    sys.exit(harness.SKIP)
+harness.crossings_checker(args)
 
 
 def simulate(label, case, ranks, extra=()):
@@ -66,15 +61,8 @@ def simulate(label, case, ranks, extra=()):
 
 def crossings(path):
     """Per kind, the largest count over the frames (None when the checker failed)."""
-    report = path[:-3] + ".json"
-    run = subprocess.run([checker, path, "-json", report], capture_output=True, text=True, timeout=300,
-                         env=harness.mpi_environment())
-    if not checks.check(run.returncode == 0, f"softbody-crossings {os.path.basename(path)}: exit {run.returncode}"):
-        print(run.stdout, run.stderr)
-        return None
-    with open(report) as f:
-        frames = json.load(f)["frames"]
-    return {kind: max(frame[kind] for frame in frames) for kind in KINDS}
+    report = harness.run_crossings(args, checks, path)
+    return {kind: max(frame[kind] for frame in report["frames"]) for kind in KINDS} if report else None
 
 
 def guard_pairs(stdout):

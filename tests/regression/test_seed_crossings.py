@@ -10,9 +10,7 @@
     frame (-steps 0) has free-free crossings, as many as the independent count.
 Skipped without the seed data or without softbody-crossings (no CGAL).
 """
-import json
 import os
-import subprocess
 import sys
 
 import h5py
@@ -30,24 +28,11 @@ args = harness.arguments()
 checks = harness.Checks()
 bunny_scene = harness.seed(args, "infomgp-p3", "bunny-scene.txt")
 fertility_scene = harness.seed(args, "infomgp-p3", "fertility-scene.txt")
-checker = os.path.join(os.path.dirname(os.path.abspath(args.softbody)), "softbody-crossings")
-if not os.path.exists(checker):
-    print(f"SKIP: {checker} not built (CGAL not found when configuring: Debian's libcgal-dev)")
-    sys.exit(harness.SKIP)
+harness.crossings_checker(args)
 
 
 def check_file(path, ranks=1):
-    report = path[:-3] + f"-{ranks}.json"
-    command = [checker, path, "-json", report]
-    if ranks > 1:
-        command = [args.mpiexec, "-n", str(ranks), *command]
-    run = subprocess.run(command, capture_output=True, text=True, timeout=300,
-                         env=harness.mpi_environment())
-    if not checks.check(run.returncode == 0, f"softbody-crossings {os.path.basename(path)} on {ranks} "
-                        f"rank(s): {run.stdout.strip().splitlines()[-1:] or run.stderr.strip()}"):
-        return None
-    with open(report) as f:
-        return json.load(f)
+    return harness.run_crossings(args, checks, path, ranks=ranks)
 
 
 def reference_counts(path, frame):
