@@ -122,6 +122,20 @@ void CollisionGuard::MarkMoved(std::vector<char> *marked) const {
     if (moved_[s]) (*marked)[surface_.natural[s]] = 1;
 }
 
+// Which pairs freeze is decided on the zones as the last round left them: pairs
+// of one round share vertices, and merging one must not make the next look like
+// a zone colliding with itself.
+void CollisionGuard::MergeZones(const std::vector<SurfaceCollision> &collisions) {
+  std::vector<char> immobile(collisions.size(), 0);
+  for (size_t i = 0; i < collisions.size(); ++i) {
+    const SurfaceCollision &c = collisions[i];
+    immobile[i] = c.count == 1 || zones_.InOneMobileZone(c.vertices.data(), c.count);
+    for (int k = 0; k < c.count; ++k) immobile[i] = immobile[i] || !moving_[c.vertices[k]];
+  }
+  for (size_t i = 0; i < collisions.size(); ++i)
+    zones_.Merge(collisions[i].vertices.data(), collisions[i].count, immobile[i]);
+}
+
 std::vector<char> CollisionGuard::Resolve() {
   const int32_t n = surface_.num_vertices();
   std::vector<char> moved(n, 0), changed;
@@ -139,17 +153,7 @@ std::vector<char> CollisionGuard::Resolve() {
       for (const int32_t v : free_vertices_) end_[v] = start_[v], moved[v] = 1;
       break;
     }
-    // Which pairs freeze, decided on the zones as the last round left them:
-    // pairs of this round share vertices, and merging one must not make the next
-    // look like a zone colliding with itself.
-    std::vector<char> immobile(collisions.size(), 0);
-    for (size_t i = 0; i < collisions.size(); ++i) {
-      const SurfaceCollision &c = collisions[i];
-      immobile[i] = c.count == 1 || zones_.InOneMobileZone(c.vertices.data(), c.count);
-      for (int k = 0; k < c.count; ++k) immobile[i] = immobile[i] || !moving_[c.vertices[k]];
-    }
-    for (size_t i = 0; i < collisions.size(); ++i)
-      zones_.Merge(collisions[i].vertices.data(), collisions[i].count, immobile[i]);
+    MergeZones(collisions);
     changed.assign(n, 0);
     for (const int32_t v : zones_.Move(start_, mass_, &end_)) changed[v] = moved[v] = 1;
     query_.changed = &changed;

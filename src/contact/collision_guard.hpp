@@ -87,6 +87,9 @@ class CollisionGuard {
   PetscErrorCode Fetch(Vec from, std::vector<Point> *to);
   // Detection and zones until no pair collides; returns the vertices moved.
   std::vector<char> Resolve();
+  // One round's colliding pairs into the zones (immobile: the ground, a vertex
+  // that does not move, or a mobile zone colliding with itself).
+  void MergeZones(const std::vector<SurfaceCollision> &collisions);
   // This rank's vertices the last Probe moved: (local vertex, surface vertex).
   std::vector<std::pair<PetscInt, int32_t>> OwnedMoved() const;
   PetscErrorCode WriteBack(Vec x, Vec v, PetscReal dt);
