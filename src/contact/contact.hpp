@@ -12,8 +12,11 @@
 // (velocity_response.hpp) applies restitution, Coulomb friction (friction.hpp)
 // and impulse spreading, and projects what still ends inside an obstacle to
 // its surface; contacts that rest stay constrained into the next step
-// (resting_contacts.hpp); distance constraints are resolved last
-// (distance_constraints.hpp).
+// (resting_contacts.hpp); distance constraints are resolved after that, and the
+// collision guard (collision_guard.hpp) last: no surface primitive crosses
+// another or its own body's during the step. Contacts end -contact_gap of the
+// body's mean boundary edge outside the obstacle, so that resting contacts stay
+// clear of the guard's separation.
 //
 // Units: metres, seconds, kilograms; velocities m/s, impulses N s. Normals
 // point out of the obstacle; a normal impulse lambda >= 0 pushes.
@@ -25,7 +28,8 @@
 // sharp-edge point, constraining its own vertices of the triangle), every rank
 // resolves all distance constraints identically, and each keeps its own
 // vertices' results. The ground alone and fixed bodies away from the free ones
-// need no gather.
+// need no gather. The guard gathers only the free surface vertices' positions
+// and runs identically on every rank.
 #pragma once
 
 #include <petscvec.h>
