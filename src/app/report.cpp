@@ -137,12 +137,19 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
     PetscCall(PetscPrintf(comm, ", %" PetscInt_FMT " sharp-edge contacts", c.feature_contacts));
   PetscInt grid_builds = contact.free_grid_builds();
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &grid_builds, 1, MPIU_INT, MPI_MAX, comm));
+  PetscInt64 bytes = contact.exchange_bytes();
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &bytes, 1, MPIU_INT64, MPI_MAX, comm));
   if (contact.tracks_free_bodies())
     PetscCall(PetscPrintf(comm,
                           "; moving obstacles' grids built in %" PetscInt_FMT
-                          " passes (only where bodies' boxes met)"
-                          ", free state gathered %" PetscInt_FMT " times",
-                          grid_builds, c.gathers));
+                          " passes (only where bodies' boxes met)",
+                          grid_builds));
+  if (c.exchanges)
+    PetscCall(PetscPrintf(comm,
+                          "; free state exchanged %" PetscInt_FMT
+                          " times (halo and constrained vertices: %.3g kB sent by the busiest "
+                          "rank in all)",
+                          c.exchanges, bytes / 1e3));
   if (contact.num_constraints())
     PetscCall(PetscPrintf(comm,
                           "; constraint sweeps %" PetscInt_FMT " total, %" PetscInt_FMT
