@@ -2,20 +2,9 @@
 
 #include <algorithm>
 
-#include "common/exchange.hpp"
+#include "contact/halo.hpp"
 
 namespace softbody {
-
-namespace {
-
-// A rank's box of its own vertices of one body, as the halo exchange gathers it.
-struct RankBox {
-  PetscMPIInt rank;
-  int32_t body;
-  double lower[3], upper[3];
-};
-
-}  // namespace
 
 FreeState::~FreeState() {
   VecScatterDestroy(&fixed_scatter_);
@@ -179,31 +168,26 @@ PetscErrorCode FreeState::ReduceBodyBoxes(const std::vector<Box> &owned_boxes) {
 
 PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
   PetscFunctionBeginUser;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm_, &rank));
-  std::vector<RankBox> mine, all;
-  for (size_t b = 0; b < num_bodies_; ++b) {
-    if (owned_boxes[b].Empty()) continue;
-    RankBox box{rank, static_cast<int32_t>(b), {}, {}};
-    for (int c = 0; c < 3; ++c) {
-      box.lower[c] = owned_boxes[b].lower[c];
-      box.upper[c] = owned_boxes[b].upper[c];
-    }
-    mine.push_back(box);
-  }
-  PetscCall(AllGatherRecords(comm_, mine, &all));
-  bytes_sent_ += static_cast<PetscInt64>(mine.size() * sizeof(RankBox));
-  std::vector<std::pair<PetscMPIInt, std::pair<int32_t, Box>>> others;
-  for (const RankBox &r : all) {
-    if (r.rank == rank) continue;
-    Box box;
-    box.lower = Point(r.lower);
-    box.upper = Point(r.upper);
-    others.push_back({r.rank, {r.body, box}});
-  }
+  std::vector<RankBox> others;
+  PetscCall(GatherRankBoxes(comm_, owned_boxes, &others, &bytes_sent_));
   std::vector<PetscMPIInt> ranks, counts;
+  std::vector<int32_t> items;
+  SelectForRanks(
+      others, owned_natural_.size(),
+      [&](int32_t p, const RankBox &box) {
+        const int32_t n = owned_natural_[p], body = body_of_[n];
+        return (same_body_ || box.body != body) &&
+               box.box().Contains(position(n), body_reach_[body]);
+      },
+      &ranks, &counts, &items);
   std::vector<HaloVertex> records, received;
-  SelectHalo(others, &ranks, &counts, &records);
+  for (const int32_t p : items) {
+    const int32_t n = owned_natural_[p];
+    HaloVertex h{n, {}, {}, inverse_mass_[n]};
+    std::copy(&x_[3 * n], &x_[3 * n] + 3, h.x);
+    std::copy(&v_[3 * n], &v_[3 * n] + 3, h.v);
+    records.push_back(h);
+  }
   PetscInt64 bytes;
   PetscCall(neighbours_.Exchange(ranks, counts, records, &received, &bytes));
   bytes_sent_ += bytes;
@@ -215,33 +199,6 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
     MarkCurrent(n);
   }
   PetscFunctionReturn(PETSC_SUCCESS);
-}
-
-// `boxes` come in rank order; each rank gets each owned vertex at most once.
-void FreeState::SelectHalo(
-    const std::vector<std::pair<PetscMPIInt, std::pair<int32_t, Box>>> &boxes,
-    std::vector<PetscMPIInt> *ranks, std::vector<PetscMPIInt> *counts,
-    std::vector<HaloVertex> *records) const {
-  for (size_t first = 0, last; first < boxes.size(); first = last) {
-    const PetscMPIInt to = boxes[first].first;
-    for (last = first; last < boxes.size() && boxes[last].first == to;) ++last;
-    const size_t before = records->size();
-    for (const int32_t n : owned_natural_) {
-      const int32_t body = body_of_[n];
-      const bool sent = std::any_of(boxes.begin() + first, boxes.begin() + last, [&](auto &b) {
-        return (same_body_ || b.second.first != body) &&
-               b.second.second.Contains(position(n), body_reach_[body]);
-      });
-      if (!sent) continue;
-      HaloVertex h{n, {}, {}, inverse_mass_[n]};
-      std::copy(&x_[3 * n], &x_[3 * n] + 3, h.x);
-      std::copy(&v_[3 * n], &v_[3 * n] + 3, h.v);
-      records->push_back(h);
-    }
-    if (records->size() == before) continue;
-    ranks->push_back(to);
-    counts->push_back(static_cast<PetscMPIInt>(records->size() - before));
-  }
 }
 
 PetscErrorCode FreeState::FetchFixedSet(Vec x, Vec v, PetscReal dt) {

@@ -72,6 +72,8 @@ class FreeState {
   int32_t body_of(int32_t natural) const { return body_of_[natural]; }
   double edge(size_t body) const { return body_edge_[body]; }
   double mass(size_t body) const { return body_mass_[body]; }
+  // The halo's reach for the body's vertices (m).
+  double reach(size_t body) const { return body_reach_[body]; }
   // Whether the vertex has unknowns (moves).
   bool is_free(int32_t natural) const { return free_[natural]; }
   // Whether the arrays hold the vertex's state of the last Exchange (fixed
@@ -100,10 +102,6 @@ class FreeState {
   // Collective. body_box_: every rank's boxes joined, and the non-free vertices'.
   PetscErrorCode ReduceBodyBoxes(const std::vector<Box> &owned_boxes);
   PetscErrorCode ExchangeHalo(const std::vector<Box> &owned_boxes);
-  // The records for each rank whose boxes (inflated) hold owned vertices.
-  void SelectHalo(const std::vector<std::pair<PetscMPIInt, std::pair<int32_t, Box>>> &boxes,
-                  std::vector<PetscMPIInt> *ranks, std::vector<PetscMPIInt> *counts,
-                  std::vector<HaloVertex> *records) const;
   PetscErrorCode FetchFixedSet(Vec x, Vec v, PetscReal dt);
   void MarkCurrent(int32_t natural) {
     if (stamp_[natural] != stamp_now_) current_free_.push_back(natural);
