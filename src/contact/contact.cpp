@@ -77,8 +77,10 @@ PetscErrorCode ContactSolver::SetupGuard(Vec lumped_mass) {
   double min_edge = kUnbounded;
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (!scene_->bodies[b].fixed) min_edge = std::min(min_edge, state_.edge(b));
+  std::vector<double> reach(scene_->bodies.size());
+  for (size_t b = 0; b < reach.size(); ++b) reach[b] = state_.reach(b);
   PetscCall(guard_.Setup(comm_, *scene_, *layout_, lumped_mass, options_, options_.self_contact,
-                         min_edge));
+                         min_edge, reach));
   const PetscInt close = guard_.statistics().initial_close_pairs;
   if (close > 0)
     PetscCall(PetscPrintf(comm_,

@@ -30,8 +30,8 @@
 // constraints' vertices are fetched on every rank (a scatter of just them) and
 // resolved identically there; impulse spreading sums its weights over ranks.
 // The ground alone and fixed bodies away from the free ones need no exchange.
-// The guard gathers only the free surface vertices' positions and runs
-// identically on every rank.
+// The guard likewise tests the pairs of its own surface vertices against a
+// halo, and shares only the colliding pairs (collision_guard.hpp).
 #pragma once
 
 #include <petscvec.h>
@@ -129,8 +129,9 @@ class ContactSolver {
   const GuardStatistics *guard_statistics() const {
     return guard_on_ ? &guard_.statistics() : nullptr;
   }
-  // Not collective. Bytes this rank sent in the free state's exchanges.
+  // Not collective. Bytes this rank sent in the free state's exchanges, and for the guard.
   PetscInt64 exchange_bytes() const { return state_.bytes_sent(); }
+  PetscInt64 guard_bytes() const { return guard_on_ ? guard_.bytes_sent() : 0; }
   // Not collective. How often this rank built the free bodies' grids (only
   // when a vertex came within another free body's box or a fixed body's sharp
   // edge within a free body's).
