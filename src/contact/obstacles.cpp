@@ -16,6 +16,13 @@ constexpr double kInsideTolerance = 1e-12;
 constexpr double kBoxMargin = 1e-12;
 // Where an entry search starts: beyond the segment's fraction range [0, 1].
 constexpr double kNoCrossing = 2;
+// Closest triangles whose distances differ by less than this fraction of the
+// obstacle's mean boundary edge are a tie, broken by the lower index: a point
+// near an edge of the obstacle is nearly as close to both faces, and which one
+// round-off (1e-16 relative: another rank count, another summation order) makes
+// closer must not decide its normal. 1e-9: far above round-off in positions of
+// order 1-100 m, far below any geometric difference that matters.
+constexpr double kTieOfEdge = 1e-9;
 
 }  // namespace
 
@@ -166,8 +173,11 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
                        (grid.bounds().upper - p).norm() + (grid.bounds().lower - p).norm();
   double best = kUnbounded;
   int32_t chosen = -1;
-  // Growing neighbourhoods until the closest point found lies within the searched one.
-  for (double radius = grid.cell_size(); best > radius && radius < 2 * limit; radius *= 2)
+  const double tie = kTieOfEdge * state_->edge(obstacle);
+  // Growing neighbourhoods until the closest point found lies within the one
+  // searched: every triangle nearer than it meets that neighbourhood.
+  for (double radius = grid.cell_size(), searched = 0; best > searched && searched < 2 * limit;
+       searched = radius, radius *= 2)
     grid.ForEachNear(p, radius, [&](int32_t t) {
       const auto &tri = triangles[t];
       if (tri[3] != obstacle) return;
@@ -176,7 +186,8 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
       const Point q = ClosestPointOnTriangle(p, a, b, c, &w);
       const double distance = (q - p).norm();
       const Point normal = (b - a).cross(c - a);
-      if (distance > best || (distance == best && t >= chosen) || !(normal.norm() > 0)) return;
+      if (distance > best + tie || (distance >= best - tie && t >= chosen) || !(normal.norm() > 0))
+        return;
       best = distance;
       chosen = t;
       hit->point = q;
