@@ -159,8 +159,10 @@ class ContactSolver {
   // sharp-edge points, or any rank rests a sharp-edge contact.
   PetscErrorCode FeaturesNear(Vec x, Vec v, PetscReal dt, bool *near);
   PetscErrorCode ExchangeFreeState(Vec x, Vec v, PetscReal dt, const StateNeeds &needs);
-  // BeginStep's re-aiming of one resting contact.
-  void ReaimFeatureContact(PetscInt local, const Contact &contact, const Point &velocity,
+  // BeginStep's re-aiming of one resting contact; the sharp-edge ones are
+  // shared by all ranks first.
+  PetscErrorCode ShareRestingFeatures(std::vector<std::array<int32_t, 2>> *all) const;
+  void ReaimFeatureContact(int32_t feature, int32_t natural, PetscInt local, const Point &velocity,
                            PetscReal dt);
   void ReaimVertexContact(PetscInt local, const Contact &contact, const Point &position,
                           const Point &velocity, PetscReal dt);
