@@ -169,11 +169,13 @@ class ImplicitEuler {
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step; with
   // -dt_adapt, by substeps of the step: each is repeated with a smaller size
-  // while its local error estimate exceeds -tol (relative to |x - X| + h |v|:
+  // while its local error estimate exceeds -tol (relative to |x - X| + Dt |v|, Dt
+  // the step and |v| the larger of the substep's start and end speeds:
   // backward Euler h |v1 - v0| / 2, the second-order schemes
   // h |v1 - v0 - (h / h_prev)(v0 - v_prev)| / 6, the velocity's second difference),
   // and the next substeps' size follows the estimate (grown only beyond a
-  // factor, so that A is refactorised seldom); not with contact. The external
+  // factor, so that A is refactorised seldom); with contact, a rejected
+  // substep also restores the contact's carried state. The external
   // force is gravity, f_ext = M g (none when g = 0). With contact (may be null):
   // solve, constrain the vertices the step would take inside obstacles, solve
   // again with the constraints until no new one appears (contact.hpp), then the
@@ -247,9 +249,11 @@ class ImplicitEuler {
   PetscErrorCode TakeStep(Vec x, Vec v, ContactSolver *contact);
   // -dt_adapt: the substeps of one step; saving and restoring the state of a
   // substep; its relative local error estimate (*estimated false: no history).
-  PetscErrorCode AdaptiveStep(Vec x, Vec v);
-  PetscErrorCode SaveSubstepState(Vec x, Vec v);
-  PetscErrorCode RestoreSubstepState(Vec x, Vec v);
+  // With contact (null: none), its carried state (the resting contacts) is
+  // saved and restored with the substep's.
+  PetscErrorCode AdaptiveStep(Vec x, Vec v, ContactSolver *contact);
+  PetscErrorCode SaveSubstepState(Vec x, Vec v, const ContactSolver *contact);
+  PetscErrorCode RestoreSubstepState(Vec x, Vec v, ContactSolver *contact);
   PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);
   PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
   PetscErrorCode BeginSchemeStep(Vec x, Vec v);
@@ -303,6 +307,9 @@ class ImplicitEuler {
   // start of a substep (x, v, history) to restore after a rejection.
   PetscReal target_step_ = 0, saved_previous_dt_ = 0;
   bool saved_acceleration_valid_ = false;
+  RestingContacts saved_contact_;
+  // The last step's contact constrained a vertex or changed x or v after the solve.
+  bool contact_acted_ = false;
   Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
       saved_previous_v_ = nullptr, saved_acceleration_ = nullptr;
   // The next (during Step: this) step's coefficients; A's step sizes (h_f, h_x).
