@@ -58,8 +58,12 @@ constexpr PetscReal kSecondOrderErrorConstant = 1.0 / 6.0;
 // A substep rejected this often in a row stops the run (the error estimate
 // does not fall with the size: not a smooth motion).
 constexpr int kMaxRejections = 30;
-// The substeps end the step when less than this fraction of it remains (round-off).
-constexpr PetscReal kIntervalTolerance = 1e-10;
+// Substep sizes are the step's halvings dt / 2^k, k <= kLadderLevels (a
+// substep of dt / 2^60 is far below any the error control asks for: the
+// rejections stop the run first); elapsed time is counted exactly in units of
+// the smallest.
+constexpr int kLadderLevels = 60;
+constexpr uint64_t kLadderUnits = uint64_t(1) << kLadderLevels;
 
 }  // namespace
 
@@ -992,14 +996,21 @@ PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool 
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+int ImplicitEuler::LadderLevel(uint64_t elapsed) const {
+  int level = 0;
+  while (level < kLadderLevels &&
+         (std::ldexp(interval_, -level) > target_step_ || elapsed % (kLadderUnits >> level) != 0))
+    ++level;
+  return level;
+}
+
 PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
-  PetscReal elapsed = 0;
+  uint64_t elapsed = 0;  // in units of the smallest substep
   int rejections = 0;
-  while (interval_ - elapsed > kIntervalTolerance * interval_) {
-    // The substeps left, all of one size near the target (no new size: no refactorisation).
-    const PetscReal remaining = interval_ - elapsed;
-    dt_ = remaining / PetscMax(1.0, std::ceil(remaining / target_step_ - kIntervalTolerance));
+  while (elapsed < kLadderUnits) {
+    const int level = LadderLevel(elapsed);
+    dt_ = std::ldexp(interval_, -level);
     PetscCall(SaveSubstepState(x, v, contact));
     PetscCall(PrepareStep());
     PetscCall(TakeStep(x, v, contact));
@@ -1022,7 +1033,7 @@ PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v, ContactSolver *contact)
       continue;
     }
     rejections = 0;
-    elapsed += dt_;
+    elapsed += kLadderUnits >> level;
     // A contact's velocity jump is no smooth history: the scheme restarts after
     // it (a multistep scheme would extrapolate the jump into a rebound) and the
     // next estimate is the first difference.

@@ -61,6 +61,7 @@
 
 #include <petscksp.h>
 
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
@@ -252,6 +253,12 @@ class ImplicitEuler {
   // With contact (null: none), its carried state (the resting contacts) is
   // saved and restored with the substep's.
   PetscErrorCode AdaptiveStep(Vec x, Vec v, ContactSolver *contact);
+  // The substep sizes are the step's halvings dt / 2^level: a few sizes recur,
+  // so A changes (linear mode: is refactorised) only when the size moves on
+  // this ladder, and the substeps end on the step's end exactly. The level of
+  // the next substep: the largest size not above the target that `elapsed`
+  // (in units of the smallest size) is a multiple of.
+  int LadderLevel(uint64_t elapsed) const;
   PetscErrorCode SaveSubstepState(Vec x, Vec v, const ContactSolver *contact);
   PetscErrorCode RestoreSubstepState(Vec x, Vec v, ContactSolver *contact);
   PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);

@@ -1,0 +1,95 @@
+"""-dt_adapt with collisions, friction and the collision guard.
+
+For backward Euler and bdf2 (second order):
+(a) the default scene (two struck beams, collisions and the guard on), 2 steps
+    at -tol 1e-3, 1 rank: substeps were rejected and repeated
+    (rejected_steps > 0 in the result file), and no surface crosses another
+    or its own body's (softbody-crossings: 0 crossings);
+(b) a cube dropped on the ground with gravity, friction 0.3 and restitution 0,
+    -tol 1e-4, 2 ranks: substeps were rejected, no surface crosses, no vertex
+    below the ground, the total energy (kinetic, elastic, gravitational) never
+    rises from one frame to the next by more than round-off (1e-10 of the
+    energy of the fall; the fixed-step bdf2 gains 4 % of it at the impact, the
+    adaptive one restarts its history after a contact's velocity jump), and
+    the cube comes to rest on the ground;
+(c) restart bit for bit: the drop with -dt_adapt, 2 ranks, checkpoint two
+    steps after the impact (resting contacts and the substep size in the
+    checkpoint), positions and velocities of every frame equal.
+"""
+import os
+import sys
+
+import h5py
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import harness  # noqa: E402
+
+args = harness.arguments()
+checks = harness.Checks()
+work = os.path.abspath(args.work)
+scenes = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes")
+SCHEMES = ("be", "bdf2")
+# Energies are sums over every vertex of terms of the fall's size: round-off.
+ENERGY_ROUND_OFF = 1e-10
+GROUND_ROUND_OFF = 1e-10  # m: contacts end the contact gap above the ground
+CROSSING_KINDS = ("free_free", "free_fixed", "self", "below_ground")  # softbody-crossings -json
+
+
+def attributes(path):
+    with h5py.File(path, "r") as f:
+        return {k: float(f.attrs[k]) for k in ("accepted_steps", "rejected_steps", "min_dt", "max_dt")}
+
+
+def crossings(path, label, ranks=1):
+    report = harness.run_crossings(args, checks, path, ranks=ranks)
+    if report is not None:
+        counts = {kind: max(frame[kind] for frame in report["frames"]) for kind in CROSSING_KINDS}
+        checks.check(not any(counts.values()), f"{label}: largest crossing counts per frame {counts} (all 0)")
+
+
+for scheme in SCHEMES:
+    out = harness.fresh_result(work, f"default_{scheme}")
+    harness.run(args, 1, ["-scene", os.path.join(scenes, "default-scene.txt"), "-steps", 2, "-integrator",
+                          scheme, "-dt_adapt", "-tol", "1e-3", "-output", out, "-quiet"])
+    a = attributes(out)
+    checks.check(a["rejected_steps"] > 0, f"(a) {scheme}, default scene: {a['accepted_steps']:.0f} substeps "
+                 f"accepted, {a['rejected_steps']:.0f} rejected (> 0), dt {a['min_dt']:.2e} .. {a['max_dt']:.2e} s")
+    crossings(out, f"(a) {scheme}, default scene")
+
+cube = harness.box_mesh(args, "cube.mesh", (0.5, 0.5, 0.5), (4, 4, 4))
+drop = harness.write_scene(os.path.join(work, "drop.txt"),
+                           [("cube.mesh", 1000.0, 1e6, 0.3, 0, (0, 0.3, 0), (1, 0, 0, 0))])
+world = ["-scene", drop, "-gravity", "0,-9.81,0", "-ground", "0", "-dt", "0.01", "-restitution", "0",
+         "-friction", "0.3", "-dt_adapt", "-tol", "1e-4", "-quiet"]
+fall = 1000.0 * 0.125 * 9.81 * 0.05  # J: the cube's bottom starts 0.05 m above the ground
+
+for scheme in SCHEMES:
+    out = harness.fresh_result(work, f"drop_{scheme}")
+    harness.run(args, 2, world + ["-integrator", scheme, "-steps", 60, "-output", out])
+    a = attributes(out)
+    r = harness.read_frames(out)
+    energy = r["energy/kinetic"] + r["energy/elastic"] + r["energy/gravitational"]
+    rise = np.diff(energy).max()
+    lowest = r["positions"][:, :, 1].min()
+    kinetic = r["energy/kinetic"][-1]
+    checks.check(a["rejected_steps"] > 0, f"(b) {scheme} drop: {a['accepted_steps']:.0f} substeps accepted, "
+                 f"{a['rejected_steps']:.0f} rejected (> 0), dt {a['min_dt']:.2e} .. {a['max_dt']:.2e} s")
+    checks.check(rise <= ENERGY_ROUND_OFF * fall and lowest > -GROUND_ROUND_OFF and kinetic < 1e-3 * fall,
+                 f"(b) {scheme} drop: largest rise of the total energy between frames {rise:.2e} J "
+                 f"(<= {ENERGY_ROUND_OFF:g} of the fall's {fall:.3g} J), lowest vertex y = {lowest:.2e} m, "
+                 f"kinetic energy at the end {kinetic:.2e} J (< 1e-3 of the fall)")
+    crossings(out, f"(b) {scheme} drop", ranks=2)
+
+    steps = 24  # the impact is at t = 0.101 s: the checkpoint at 0.12 s, resting on the ground
+    full, part, cont = (harness.fresh_result(work, f"restart_{scheme}_{n}") for n in ("full", "part", "cont"))
+    options = world + ["-integrator", scheme]
+    harness.run(args, 2, options + ["-steps", steps, "-output", full])
+    harness.run(args, 2, options + ["-steps", steps // 2, "-checkpoint_every", steps // 2, "-output", part])
+    harness.run(args, 2, options + ["-steps", steps, "-restart", part, "-output", cont])
+    x, y = harness.read_frames(full), harness.read_frames(cont)
+    same = len(x["time"]) == len(y["time"]) and all(np.array_equal(x[k], y[k])
+                                                    for k in ("time", "positions", "velocities"))
+    checks.check(same, f"(c) {scheme} drop, -dt_adapt: {len(y['time'])} frames bit for bit equal after the "
+                       "restart")
+checks.exit()
