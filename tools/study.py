@@ -574,7 +574,7 @@ def write_plot(path, args, rows, fronts):
     markers = ["o", "s", "^", "D"]
     rank_style = {n: (styles[i % 4], markers[i % 4]) for i, n in enumerate(rank_list)}
 
-    fig, axes = plt.subplots(1, len(modes), figsize=(6.4 * len(modes), 5.6), squeeze=False,
+    fig, axes = plt.subplots(1, len(modes), figsize=(max(6.4 * len(modes), 9.6), 5.6), squeeze=False,
                              sharey=True)
     all_errors = [r["error_l2"] for r in rows if _good(r)]
     for ax, mode in zip(axes[0], modes):
@@ -645,18 +645,19 @@ def write_plot(path, args, rows, fronts):
     other_handles.append(Line2D([], [], color="black", marker="o", markersize=10, markerfacecolor="none",
                                 linestyle="-", linewidth=0.8, alpha=0.6,
                                 label="Pareto front (no run is both faster and more accurate)"))
-    legend_rows = math.ceil(len(solver_handles) / 5) + 1
-    first = fig.legend(handles=solver_handles, loc="lower center", ncol=min(len(solver_handles), 5),
+    columns = 3 if len(modes) == 1 else 5
+    legend_rows = math.ceil(len(solver_handles) / columns) + 1
+    first = fig.legend(handles=solver_handles, loc="lower center", ncol=min(len(solver_handles), columns),
                        fontsize=9, frameon=False, bbox_to_anchor=(0.5, 0.045))
     fig.add_artist(first)
     fig.legend(handles=other_handles, loc="lower center", ncol=len(other_handles), fontsize=9,
                frameon=False, bbox_to_anchor=(0.5, 0.0))
     fig.suptitle(f"{os.path.basename(args.scene)}: error at T = {args.end_time:g} s against run time; "
-                 f"points along a line: dt = {args.dts[0]:g} s (left) halved down to {args.dts[-1]:g} s (right)"
+                 f"\npoints along a line: dt = {args.dts[0]:g} s (left) halved down to {args.dts[-1]:g} s (right)"
                  + (f"; -dt_adapt (stars): -tol {args.tols[0]:g} (left) to {args.tols[-1]:g}" if args.adaptive
                     else ""),
                  fontsize=10.5)
-    fig.tight_layout(rect=(0, 0.045 * legend_rows + 0.01, 1, 0.96))
+    fig.tight_layout(rect=(0, 0.045 * legend_rows + 0.01, 1, 0.93))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
