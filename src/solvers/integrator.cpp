@@ -40,12 +40,12 @@ constexpr PetscReal kEnergyRoundOff = 1e-12;
 // The iteration stalls when |g| keeps more than this fraction of its last value.
 constexpr PetscReal kStallRatio = 0.9;
 
-// -dt_adapt (AdaptiveStep). A new substep size is the old one times
+// -dt_adapt (AdaptiveStep). A new target substep size is the old one times
 // kSafety (tol / error)^(1 / (order + 1)), the customary safety factor 0.9 so
 // that the next substep passes; a rejection shrinks it by at most kMaxShrink;
 // an accepted substep grows it only when the estimate allows kGrowthThreshold
 // (A is refactorised for every new size: sizes that would grow by less stay),
-// and by at most kMaxGrowth per substep.
+// and by at most kMaxGrowth per substep (one rung of the ladder of halvings).
 constexpr PetscReal kSafety = 0.9;
 constexpr PetscReal kMaxShrink = 0.2;
 constexpr PetscReal kGrowthThreshold = 1.5;
@@ -194,7 +194,7 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              nullptr, o->adaptive, &o->adaptive, nullptr));
   PetscCall(PetscOptionsReal("-tol",
                              "-dt_adapt: largest relative local error of a substep (its estimate "
-                             "over |x - X| + dt |v|)",
+                             "over |x - X| + dt max(|v0|, |v1|), dt the step of -dt)",
                              nullptr, o->tolerance, &o->tolerance, nullptr));
   PetscCall(
       PetscOptionsString("-dt_schedule",

@@ -174,9 +174,10 @@ class ImplicitEuler {
   // the step and |v| the larger of the substep's start and end speeds:
   // backward Euler h |v1 - v0| / 2, the second-order schemes
   // h |v1 - v0 - (h / h_prev)(v0 - v_prev)| / 6, the velocity's second difference),
-  // and the next substeps' size follows the estimate (grown only beyond a
-  // factor, so that A is refactorised seldom); with contact, a rejected
-  // substep also restores the contact's carried state. The external
+  // and the next substeps' size follows the estimate (sizes Dt / 2^k, grown
+  // only beyond a factor, so that A is refactorised seldom); with contact, a
+  // rejected substep also restores the contact's carried state, and after a
+  // substep in which the contact acted the scheme's history restarts. The external
   // force is gravity, f_ext = M g (none when g = 0). With contact (may be null):
   // solve, constrain the vertices the step would take inside obstacles, solve
   // again with the constraints until no new one appears (contact.hpp), then the
