@@ -14,7 +14,8 @@ Runs one scene to a fixed end time T over a grid of
 and compares the positions at T with a reference run of the same mode (by default
 dt ten times smaller than the finest level, direct solver, the largest rank
 count; integrator be when the study runs be alone, else newmark, second order:
--study_reference_integrator). Per run:
+-study_reference_integrator; with -study_reference_tol, -dt_adapt at that -tol).
+Per run:
   error_l2   ||u - u_ref|| / ||u_ref||, u = x - X over all free vertices
              (relative L2 norm of the displacement field, dimensionless),
   error_max  max_i |x_i - x_ref,i| over the free vertices (m),
@@ -120,6 +121,10 @@ def parse_arguments(argv):
                default=[[1, 2]], help="MPI rank counts (default: 1,2)")
     add_option(parser, "study_reference_dt", "--reference-dt", dest="reference_dt", metavar="DT", type=float,
                default=None, help="time step (s) of the reference runs (default: the finest level's dt / 10)")
+    add_option(parser, "study_reference_tol", "--reference-tol", dest="reference_tol", metavar="TOL", type=float,
+               default=None,
+               help="run the references with -dt_adapt at this -tol, in steps of -study_dt0 "
+                    "(-study_reference_dt is then not used; default: fixed steps)")
     add_option(parser, "study_reference_ranks", "--reference-ranks", dest="reference_ranks", metavar="N", type=int,
                default=None, help="rank count of the reference runs (default: the largest of -study_ranks)")
     add_option(parser, "study_repeat", "--repeat", dest="repeat", metavar="N", type=int, default=1,
@@ -153,6 +158,8 @@ def parse_arguments(argv):
         if not os.path.isfile(path):
             fail(f"-study_solvers: no preset {path}")
         args.direct[solver] = _is_direct(path)
+    if args.reference_tol is not None and not 0 < args.reference_tol < 1:
+        fail("-study_reference_tol must lie in (0, 1)")
     if any(not 0 < t < 1 for t in args.tols):
         fail("-study_tols must lie in (0, 1)")
     if any(r <= 0 or not math.isfinite(r) for r in args.rtols):
@@ -438,7 +445,7 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md.append("")
     md.append(_table(["mode", "integrator", "solver", "ranks", "dt (s)", "steps", "set-up (s)", "loop (s)",
                       "status"],
-                     [[ref["mode"], ref["integrator"], SOLVER_LABELS.get(ref["solver"], ref["solver"]),
+                     [[ref["mode"], run_name(ref), SOLVER_LABELS.get(ref["solver"], ref["solver"]),
                        str(ref["ranks"]),
                        f"{ref['dt']:g}", str(ref["steps"]), _fmt(ref.get("setup_s"), ".3f"),
                        _fmt(ref.get("loop_s"), ".3f"),
@@ -692,8 +699,10 @@ def main(argv=None):
                             grid.append((mode, solver, rtol, ranks, args.dt0, integrator, tol))
     reference_solver = next((s for s in args.solvers if args.direct[s]), "direct")
     total = len(grid) * args.repeat + len(args.modes)
+    reference_dt = args.dt0 if args.reference_tol is not None else args.reference_dt
+    adaptive_reference = "" if args.reference_tol is None else f" -dt_adapt -tol {args.reference_tol:g}"
     print(f"study: {args.scene}, T = {args.end_time:g} s, {len(grid)} runs + {len(args.modes)} "
-          f"reference(s) (dt {args.reference_dt:g} s, {args.reference_integrator}, {reference_solver}, "
+          f"reference(s) (dt {reference_dt:g} s{adaptive_reference}, {args.reference_integrator}, {reference_solver}, "
           f"{args.reference_ranks} ranks) "
           f"into {args.study_dir}", flush=True)
 
@@ -702,9 +711,9 @@ def main(argv=None):
     for mode in args.modes:
         count += 1
         name = (f"reference_{mode}_{args.reference_integrator}_{reference_solver}_np{args.reference_ranks}"
-                f"_dt{args.reference_dt:g}")
-        ref = run_softbody(args, name, mode, reference_solver, None, args.reference_ranks, args.reference_dt,
-                           args.reference_integrator)
+                f"_dt{reference_dt:g}" + ("" if args.reference_tol is None else f"_adapt_tol{args.reference_tol:g}"))
+        ref = run_softbody(args, name, mode, reference_solver, None, args.reference_ranks, reference_dt,
+                           args.reference_integrator, args.reference_tol)
         references[mode] = ref
         print(f"[{count}/{total}] reference {mode}: "
               + (f"{ref['steps']} steps, loop {ref['loop_s']:.2f} s" if ref["status"] == "ok"
