@@ -652,7 +652,7 @@ def write_plot(path, args, rows, fronts):
     other_handles.append(Line2D([], [], color="black", marker="o", markersize=10, markerfacecolor="none",
                                 linestyle="-", linewidth=0.8, alpha=0.6,
                                 label="Pareto front (no run is both faster and more accurate)"))
-    columns = 3 if len(modes) == 1 else 5
+    columns = 3
     legend_rows = math.ceil(len(solver_handles) / columns) + 1
     first = fig.legend(handles=solver_handles, loc="lower center", ncol=min(len(solver_handles), columns),
                        fontsize=9, frameon=False, bbox_to_anchor=(0.5, 0.045))
