@@ -1039,6 +1039,7 @@ PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v, ContactSolver *contact)
     // next estimate is the first difference.
     if (contact && contact_acted_) PositionsChanged();
     ++stats_.accepted_steps;
+    PetscCall(PetscInfo(nullptr, "-dt_adapt: substep of %.17g s accepted\n", (double)dt_));
     stats_.min_step = PetscMin(stats_.min_step, dt_);
     stats_.max_step = PetscMax(stats_.max_step, dt_);
     if (factor >= kGrowthThreshold)
