@@ -124,6 +124,13 @@ class ContactSolver {
   PetscErrorCode GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const;
   void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all);
 
+  // Repeating a step (-dt_adapt's rejected substeps): everything a step hands
+  // to the next is the resting contacts (BeginStep clears the rest), so a step
+  // started again from a restored copy runs as if the first attempt never
+  // happened. Not collective; the statistics keep counting the attempt.
+  RestingContacts CarriedState() const { return resting_; }
+  void RestoreCarriedState(const RestingContacts &carried) { resting_ = carried; }
+
   const ContactStatistics &statistics() const { return stats_; }
   // The guard's figures (null when it does not run).
   const GuardStatistics *guard_statistics() const {
