@@ -46,6 +46,7 @@
 #include "contact/free_state.hpp"
 #include "contact/friction.hpp"
 #include "contact/obstacles.hpp"
+#include "contact/overlap_separation.hpp"
 #include "contact/resting_contacts.hpp"
 #include "contact/sharp_features.hpp"
 #include "contact/velocity_response.hpp"
@@ -166,6 +167,11 @@ class ContactSolver {
   PetscErrorCode RespondToContacts(Vec x, Vec v, const std::vector<PetscReal> &reactions,
                                    bool *changed);
   PetscErrorCode ResolveDistanceConstraints(Vec x, Vec v, const std::vector<char> *pinned);
+  // Collective. Free bodies placed overlapping (overlap_separation.hpp): found
+  // at the first step's start (x0), moved apart after each step (x) until their
+  // surfaces no longer cross.
+  PetscErrorCode FindOverlaps(Vec x0, Vec v0);
+  PetscErrorCode SeparateOverlaps(Vec x, Vec v, bool *changed);
   // The guard, and with distance constraints, the constraints again with the
   // vertices it moved pinned, then the guard again (it has the last word).
   PetscErrorCode Guard(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
@@ -204,6 +210,8 @@ class ContactSolver {
   RestingContacts resting_;
   DistanceConstraints distance_;
   CollisionGuard guard_;
+  OverlapSeparation separation_;
+  bool overlaps_checked_ = false;  // FindOverlaps ran
   ContactStatistics stats_;
 };
 
