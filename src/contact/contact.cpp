@@ -361,8 +361,8 @@ PetscErrorCode ContactSolver::FindOverlaps(Vec x0, Vec v0) {
   if (pairs > 0)
     PetscCall(PetscPrintf(comm_,
                           "Warning: %zu pair(s) of free bodies start with their surfaces crossing "
-                          "(placed overlapping): each pair is moved apart rigidly, %.3g mean "
-                          "boundary edges of its finer body per step, until its surfaces no "
+                          "(placed overlapping): each pair is moved apart rigidly by %.3g x the "
+                          "mean boundary edge of its finer body per step, until its surfaces no "
                           "longer cross; contact between them acts from then on\n",
                           pairs, kSeparationPerStep));
   PetscFunctionReturn(PETSC_SUCCESS);

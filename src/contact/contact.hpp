@@ -16,7 +16,8 @@
 // collision guard (collision_guard.hpp) last: no surface primitive crosses
 // another or its own body's during the step. Contacts end -contact_gap of the
 // body's mean boundary edge outside the obstacle, so that resting contacts stay
-// clear of the guard's separation.
+// clear of the guard's separation. Free bodies placed overlapping are moved
+// apart rigidly over the first steps (overlap_separation.hpp).
 //
 // Units: metres, seconds, kilograms; velocities m/s, impulses N s. Normals
 // point out of the obstacle; a normal impulse lambda >= 0 pushes.

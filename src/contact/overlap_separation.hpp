@@ -35,9 +35,9 @@
 namespace softbody {
 
 // How far a separating pair moves apart per step, in mean boundary edges of
-// its finer body: one edge per step separates deep overlaps (fertility's
-// statues, 95 m of 145 m in depth with 6.2 m edges) within a few dozen steps
-// and ends the pair at most one edge further apart than needed.
+// its finer body: an overlap of depth D takes about D / edge steps, and the
+// pair ends at most one edge further apart than needed (the crossing test runs
+// once per step).
 constexpr double kSeparationPerStep = 1.0;
 
 class OverlapSeparation {
