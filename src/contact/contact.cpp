@@ -255,8 +255,7 @@ void ContactSolver::ReaimFeatureContact(PetscInt local, const Contact &contact,
 void ContactSolver::ReaimVertexContact(PetscInt local, const Contact &contact,
                                        const Point &position, const Point &velocity, PetscReal dt) {
   SurfaceHit hit;
-  if (!obstacles_.ContactOnBody(position + dt * velocity, contact.natural, contact.body, &hit))
-    return;
+  if (!obstacles_.ClosestOnBody(position + dt * velocity, contact.body, &hit)) return;
   constraints_.Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt,
                          hit, false);
   if (options_.friction > 0)
@@ -310,9 +309,7 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
   PetscCall(VecRestoreArray(rhs, &b));
   PetscInt all_released;
   PetscCallMPI(MPIU_Allreduce(&local_released, &all_released, 1, MPIU_INT, MPI_SUM, comm_));
-  bool loaded = false;  // the faces' loads handed over by the last step's free-free contacts
-  if (free_obstacles_) PetscCall(constraints_.ApplyHandedOver(comm_, rhs, &loaded));
-  *released = all_released > 0 || loaded;
+  *released = all_released > 0;
   if (*released) PetscCall(constraints_.Combine(comm_, friction_.tangents()));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -406,7 +403,6 @@ PetscErrorCode ContactSolver::RespondToContacts(Vec x, Vec v,
   PetscCall(VecGetArray(v, &lv));
   resting_.Clear();
   const std::vector<PetscReal> by_contact = constraints_.ByContact(reactions);
-  if (free_obstacles_) constraints_.HandOverReactions(by_contact);
   std::vector<Collision> collisions =
       response_.Respond(constraints_, friction_, by_contact, lx, lv, &resting_);
   stats_.projections +=

@@ -43,7 +43,6 @@ void ContactConstraints::Setup(const Scene &scene, const DofLayout &layout, cons
 }
 
 void ContactConstraints::Clear(PetscReal bounce_speed) {
-  handed_over_applied_ = false;
   normals_.clear();
   solve_constraints_.clear();
   contacts_.clear();
@@ -65,7 +64,7 @@ bool ContactConstraints::AddVertexPenetration(PetscInt local, int32_t natural, c
   if (held.full()) return false;
   const Point predicted = x0 + dt * velocity;
   SurfaceHit hit;
-  if (!obstacles_->FindPenetration(predicted, natural, held, &hit)) return false;
+  if (!obstacles_->FindPenetration(predicted, state_->body_of(natural), held, &hit)) return false;
   PreferEntry(x0, predicted, &hit);
   Constrain(local, natural, x0, predicted, velocity, dt, hit, true);
   return true;
@@ -100,9 +99,8 @@ void ContactConstraints::Constrain(PetscInt local, int32_t natural, const Point 
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
   const double normal_velocity = RecoveryVelocity(natural, x0, target, dt, hit);
   normals_.push_back({local, n, normal_velocity, w_obstacle == 0});
-  const bool free_obstacle = hit.body >= 0 && !scene_->bodies[hit.body].fixed;
-  contacts_.push_back({natural, hit.body, common, fresh && approach < -bounce_speed_, -1,
-                       hit.velocity, free_obstacle ? hit.triangle : -1, hit.weights});
+  contacts_.push_back(
+      {natural, hit.body, common, fresh && approach < -bounce_speed_, -1, hit.velocity});
   VertexObstacles &obstacles = constrained_[local];
   obstacles.obstacle[obstacles.count++] = hit.body;
 }
@@ -258,36 +256,6 @@ std::vector<PetscReal> ContactConstraints::ByContact(
     by_contact[i] = i < released_.size() && released_[i] ? release_reaction_[i] : reactions[next++];
   std::copy(reactions.begin() + next, reactions.end(), by_contact.begin() + contacts_.size());
   return by_contact;
-}
-
-void ContactConstraints::HandOverReactions(const std::vector<PetscReal> &reactions) {
-  handed_over_.clear();
-  for (size_t i = 0; i < contacts_.size(); ++i) {
-    const Contact &contact = contacts_[i];
-    if (contact.triangle < 0 || released(i) || !(reactions[i] > 0)) continue;
-    const auto &triangle = obstacles_->free_triangle(contact.triangle);
-    for (int k = 0; k < 3; ++k)
-      handed_over_.push_back(
-          {triangle[k], -reactions[i] * contact.weights[k] * normals_[i].normal});
-  }
-}
-
-PetscErrorCode ContactConstraints::ApplyHandedOver(MPI_Comm comm, Vec rhs, bool *applied) {
-  PetscFunctionBeginUser;
-  const PetscInt local = handed_over_applied_ ? 0 : static_cast<PetscInt>(handed_over_.size());
-  PetscInt all;
-  PetscCallMPI(MPIU_Allreduce(&local, &all, 1, MPIU_INT, MPI_SUM, comm));
-  handed_over_applied_ = true;
-  *applied = all > 0;
-  if (!*applied) PetscFunctionReturn(PETSC_SUCCESS);
-  for (const auto &[natural, load] : handed_over_) {
-    const PetscInt petsc = layout_->PetscVertexOfNatural(natural);
-    const PetscInt rows[3] = {3 * petsc, 3 * petsc + 1, 3 * petsc + 2};
-    if (petsc >= 0) PetscCall(VecSetValues(rhs, 3, rows, load.data(), ADD_VALUES));
-  }
-  PetscCall(VecAssemblyBegin(rhs));
-  PetscCall(VecAssemblyEnd(rhs));
-  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ContactConstraints::Combine(MPI_Comm comm,

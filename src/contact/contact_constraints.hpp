@@ -22,22 +22,14 @@
 // displacement that moves the triangle's point under p by d. One feature
 // constraint per vertex (the larger d_k).
 //
-// Free-free contact: each side's vertices are constrained on their own, and a
-// vertex's reaction lambda n acts on its own body only. The face it met gets
-// the opposite, -lambda w_k n on its vertex k (w the contact point's
-// barycentric weights), as a load in the next step (HandOverReactions, then
-// ApplyHandedOver adds it to the solve's right-hand side). Without it a block
-// resting on another pressed it four to five times as far as its weight says.
-//
 // Combine lists the normals in contact order, then the friction tangents, and
-// counts them on all ranks. Not collective except Combine and ApplyHandedOver.
+// counts them on all ranks. Not collective except Combine.
 #pragma once
 
 #include <petscsys.h>
 
 #include <cstddef>
 #include <cstdint>
-#include <utility>
 #include <vector>
 
 #include "contact/free_state.hpp"
@@ -62,8 +54,6 @@ struct Contact {
   bool impact;             // new this step and closing faster than the bounce speed
   int32_t feature = -1;    // a fixed body's feature point pressing on the vertex's face
   Point obstacle_velocity = Point::Zero();  // the obstacle's surface velocity there (m/s)
-  int32_t triangle = -1;                    // a free obstacle's triangle (free_triangle), or -1
-  Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // the contact point's in it
 };
 
 class ContactConstraints {
@@ -118,14 +108,6 @@ class ContactConstraints {
   // then tangents; a released contact keeps the reaction it was released with.
   std::vector<PetscReal> ByContact(const std::vector<PetscReal> &reactions) const;
 
-  // After the step (reactions in contact order): the free-free contacts'
-  // reactions, handed over to the faces they met for the next step.
-  void HandOverReactions(const std::vector<PetscReal> &reactions);
-  // Collective. Once per step: adds the loads handed over by the last step
-  // (kg m/s, on any rank's vertices) to the solve's right-hand side rhs;
-  // *applied tells whether any rank had one (then the step solves again).
-  PetscErrorCode ApplyHandedOver(MPI_Comm comm, Vec rhs, bool *applied);
-
   // Collective. The solve's constraints: the normals not released, then `tangents`,
   // then the held vertices' (three each).
   PetscErrorCode Combine(MPI_Comm comm, const std::vector<VelocityConstraint> &tangents);
@@ -166,9 +148,7 @@ class ContactConstraints {
   size_t num_released_ = 0;
   std::vector<VelocityConstraint> held_;  // the held vertices' three axis constraints
   std::vector<ptrdiff_t> held_slot_;      // per local vertex: its first in held_ (-1: none)
-  std::vector<VelocityConstraint> solve_constraints_;   // normals not released, tangents, held
-  std::vector<std::pair<int32_t, Point>> handed_over_;  // (natural vertex, load), last step's
-  bool handed_over_applied_ = false;                    // this step's ApplyHandedOver ran
+  std::vector<VelocityConstraint> solve_constraints_;  // normals not released, tangents, held
   PetscInt global_count_ = 0;
 };
 

@@ -1,7 +1,6 @@
 #include "contact/obstacles.hpp"
 
 #include <Eigen/Geometry>
-#include <cmath>
 
 namespace softbody {
 
@@ -31,17 +30,6 @@ void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool gro
 void Obstacles::SetupBodies(bool track_free) {
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (scene_->bodies[b].fixed || track_free) AddBody(b);
-  // Each vertex's free triangles (CSR: count, then fill).
-  vertex_triangle_start_.assign(static_cast<size_t>(scene_->num_vertices()) + 1, 0);
-  for (const auto &tri : free_triangles_)
-    for (int k = 0; k < 3; ++k) ++vertex_triangle_start_[tri[k] + 1];
-  for (size_t n = 1; n < vertex_triangle_start_.size(); ++n)
-    vertex_triangle_start_[n] += vertex_triangle_start_[n - 1];
-  vertex_triangles_.resize(vertex_triangle_start_.back());
-  std::vector<int32_t> next(vertex_triangle_start_.begin(), vertex_triangle_start_.end() - 1);
-  for (size_t t = 0; t < free_triangles_.size(); ++t)
-    for (int k = 0; k < 3; ++k)
-      vertex_triangles_[next[free_triangles_[t][k]]++] = static_cast<int32_t>(t);
   BuildBodyBoxes(true);
   BuildGrids(fixed_tets_, fixed_triangles_, &fixed_tet_box_, &fixed_tet_grid_,
              &fixed_triangle_grid_);
@@ -141,80 +129,6 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   return best < kUnbounded;
 }
 
-Point Obstacles::VertexNormal(int32_t vertex) const {
-  Point sum = Point::Zero();
-  if (vertex_triangle_start_.empty()) return sum;
-  for (int32_t i = vertex_triangle_start_[vertex]; i < vertex_triangle_start_[vertex + 1]; ++i) {
-    const auto &tri = free_triangles_[vertex_triangles_[i]];
-    const int k = tri[0] == vertex ? 0 : tri[1] == vertex ? 1 : 2;
-    const Point a = WorldPoint(tri[k]), b = WorldPoint(tri[(k + 1) % 3]),
-                c = WorldPoint(tri[(k + 2) % 3]);
-    const Point normal = (b - a).cross(c - a);
-    const double angle = std::atan2(normal.norm(), (b - a).dot(c - a));
-    if (normal.norm() > 0) sum += angle * normal.normalized();
-  }
-  return sum.norm() > 0 ? Point(sum.normalized()) : Point::Zero();
-}
-
-bool Obstacles::ContactOnBody(const Point &p, int32_t vertex, int32_t obstacle,
-                              SurfaceHit *hit) const {
-  if (obstacle < 0 || scene_->bodies[obstacle].fixed) return ClosestOnBody(p, obstacle, hit);
-  const Point own = VertexNormal(vertex);
-  if (!(own.norm() > 0)) return ClosestOnBody(p, obstacle, hit);
-  return ClosestFacing(p, own, kFacingSlack * state_->edge(state_->body_of(vertex)), obstacle, hit);
-}
-
-// Growing neighbourhoods until the closest facing face found lies within the
-// searched one, or the closest face does by more than the slack.
-bool Obstacles::ClosestFacing(const Point &p, const Point &own, double slack, int32_t obstacle,
-                              SurfaceHit *hit) const {
-  EnsureFreeGrids();
-  const UniformGrid &grid = free_triangle_grid_;
-  if (grid.empty()) return false;
-  const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
-                       (grid.bounds().upper - p).norm() + (grid.bounds().lower - p).norm();
-  double best = kUnbounded, best_facing = kUnbounded;
-  SurfaceHit facing;
-  for (double radius = grid.cell_size(); radius < 2 * limit; radius *= 2) {
-    grid.ForEachNear(p, radius, [&](int32_t t) {
-      const auto &tri = free_triangles_[t];
-      if (tri[3] != obstacle) return;
-      const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
-      Eigen::Vector3d w;
-      const Point q = ClosestPointOnTriangle(p, a, b, c, &w);
-      const double distance = (q - p).norm();
-      const Point normal = (b - a).cross(c - a);
-      if (!(normal.norm() > 0)) return;
-      const Point n = normal.normalized();
-      if (distance < best) {
-        best = distance;
-        FreeHit(t, q, w, n, hit);
-      }
-      if (n.dot(own) < 0 && distance < best_facing) {
-        best_facing = distance;
-        FreeHit(t, q, w, n, &facing);
-      }
-    });
-    if (best_facing <= radius || best + slack <= radius) break;
-  }
-  if (best_facing <= best + slack) *hit = facing;
-  return best < kUnbounded;
-}
-
-void Obstacles::FreeHit(int32_t t, const Point &q, const Eigen::Vector3d &w, const Point &n,
-                        SurfaceHit *hit) const {
-  const auto &tri = free_triangles_[t];
-  hit->point = q;
-  hit->normal = n;
-  hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
-                  w[2] * state_->velocity(tri[2]);
-  hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) + w[1] * state_->inverse_mass(tri[1]) +
-                      w[2] * state_->inverse_mass(tri[2]);
-  hit->body = tri[3];
-  hit->triangle = t;
-  hit->weights = w;
-}
-
 bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
@@ -280,9 +194,8 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
   return first <= 1;
 }
 
-bool Obstacles::FindPenetration(const Point &p, int32_t vertex, const VertexObstacles &skip,
+bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
                                 SurfaceHit *hit) const {
-  const int32_t body = state_->body_of(vertex);
   if (ground_ && p[1] < ground_y_ + ground_margin_ * state_->edge(body) && !skip.Has(-1))
     return ClosestOnBody(p, -1, hit);
   // Broad phase: only bodies whose box holds p.
@@ -295,7 +208,7 @@ bool Obstacles::FindPenetration(const Point &p, int32_t vertex, const VertexObst
   for (const bool fixed_part : {true, false}) {
     if (!(fixed_part ? near_fixed : near_free)) continue;
     const int32_t inside = BodyContaining(p, fixed_part, body, skip);
-    if (inside >= 0) return ContactOnBody(p, vertex, inside, hit);
+    if (inside >= 0) return ClosestOnBody(p, inside, hit);
   }
   return false;
 }

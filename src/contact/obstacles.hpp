@@ -33,16 +33,6 @@ struct SurfaceHit {
   Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric coordinates of point in it
 };
 
-// A vertex against a free body meets the closest of the body's faces that
-// face it (outward normal at an obtuse angle to the vertex's own outward
-// normal) when that face lies at most this fraction of the vertex's body's mean
-// boundary edge farther than the closest face. A vertex near the other body's
-// edge is closer to its side face than to the face it came in through (two
-// aligned blocks stacked: exactly as close), and the side face's normal would
-// push it sideways. A tenth of an edge: the most a step's constraint takes a
-// vertex out (kMaxRecoveryPerStep), well above a resting step's sinking.
-constexpr double kFacingSlack = 0.1;
-
 // The obstacles constraining one vertex in a step (-1: the ground); at most
 // three (a corner).
 struct VertexObstacles {
@@ -71,22 +61,13 @@ class Obstacles {
   // (OverlapSeparation moves them apart); replaces the last list.
   void SetSeparating(const std::vector<std::pair<size_t, size_t>> &pairs) { separating_ = pairs; }
 
-  // The first obstacle other than free vertex `vertex`'s (natural) body and
-  // those in `skip` that contains p, the vertex's position (the ground when p
-  // lies below it or within its margin), with its contact point (ContactOnBody).
-  bool FindPenetration(const Point &p, int32_t vertex, const VertexObstacles &skip,
+  // The first obstacle other than `body` and those in `skip` that contains p
+  // (the ground when p lies below it or within its margin), with its closest
+  // surface point.
+  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
                        SurfaceHit *hit) const;
   // The closest point to p on the obstacle's surface (-1: the ground).
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
-  // Where free vertex `vertex` (natural) at p meets the obstacle: the closest
-  // surface point, but on a free body the closest face facing the vertex when
-  // one is within kFacingSlack of its body's edge of the closest (a vertex of
-  // no surface, or one no such face faces: the closest).
-  bool ContactOnBody(const Point &p, int32_t vertex, int32_t obstacle, SurfaceHit *hit) const;
-  // A free body's surface vertex's outward normal (unit; angle-weighted mean of
-  // its boundary triangles' normals, Thuermer & Wuethrich 1998) at the state's
-  // positions; zero for a vertex of no boundary triangle.
-  Point VertexNormal(int32_t vertex) const;
   // Whether p lies in one of the obstacle body's tets (faces included).
   bool InsideBody(const Point &p, int32_t obstacle) const;
   // The free body's tet holding p with all barycentric coordinates above
@@ -122,13 +103,6 @@ class Obstacles {
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
                          const VertexObstacles &skip) const;
-  // ContactOnBody on a free obstacle, own: the vertex's normal (non-zero);
-  // slack: kFacingSlack in metres.
-  bool ClosestFacing(const Point &p, const Point &own, double slack, int32_t obstacle,
-                     SurfaceHit *hit) const;
-  // Fills *hit with free triangle t's point q (barycentric w), unit normal n.
-  void FreeHit(int32_t t, const Point &q, const Eigen::Vector3d &w, const Point &n,
-               SurfaceHit *hit) const;
   // Whether free bodies a and b are a separating pair.
   bool Separating(int32_t a, int32_t b) const;
   Point WorldPoint(int32_t n) const { return state_->position(n); }
@@ -140,9 +114,6 @@ class Obstacles {
   double ground_margin_ = 0;  // in mean boundary edges of the point's body
   std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
   std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
-  // The free triangles around each natural vertex (CSR; empty rows for fixed
-  // and interior vertices).
-  std::vector<int32_t> vertex_triangle_start_, vertex_triangles_;
   UniformGrid fixed_tet_grid_, fixed_triangle_grid_;
   mutable UniformGrid free_tet_grid_, free_triangle_grid_;
   mutable bool free_grids_current_ = false;

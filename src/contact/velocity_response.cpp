@@ -89,7 +89,7 @@ PetscInt VelocityResponse::ProjectRemaining(
     SurfaceHit hit;
     // Only vertices truly inside: the ground's margin (within half the contact
     // gap above it) is for the constraints, and lifting such a vertex adds energy.
-    if (!obstacles_->FindPenetration(position, natural, VertexObstacles(), &hit) ||
+    if (!obstacles_->FindPenetration(position, state_->body_of(natural), VertexObstacles(), &hit) ||
         hit.normal.dot(position - hit.point) >= 0 ||
         !ShouldProject(local, natural, position, hit, constraints))
       continue;
