@@ -68,7 +68,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   friction_.Setup(options.friction, [this](int32_t n) { return 1 / state_.inverse_mass(n); });
   response_.Setup(comm, scene, layout, state_, obstacles_, options);
   if (guard_on_) PetscCall(SetupGuard(lumped_mass));
-  if (free_obstacles_) separation_.Setup(scene, state_, &obstacles_);
+  if (free_obstacles_) separation_.Setup(comm, scene, state_, &obstacles_);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -201,7 +201,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   holding_ = false;
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
   if (options_.restitution > 0) PetscCall(response_.RecordStart(v0));
-  if (free_obstacles_ && !overlaps_checked_) PetscCall(FindOverlaps(x0, v0));
+  if (free_obstacles_ && !overlaps_checked_) PetscCall(FindOverlaps(x0));
   // Obstacles where they will be if they keep their velocity.
   PetscCall(Refresh(x0, v0, dt, true));
   PetscCall(ReaimRestingContacts(x0, v0, dt));
@@ -348,16 +348,15 @@ PetscErrorCode ContactSolver::EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
     *changed = true;
   }
   if (guard_on_) PetscCall(Guard(x0, x, v, dt, changed));
-  if (separation_.active()) PetscCall(SeparateOverlaps(x, v, changed));
+  if (separation_.active()) PetscCall(SeparateOverlaps(x, changed));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::FindOverlaps(Vec x0, Vec v0) {
+PetscErrorCode ContactSolver::FindOverlaps(Vec x0) {
   PetscFunctionBeginUser;
   overlaps_checked_ = true;
-  PetscCall(GatherFreeState(x0, v0, 0.0));
-  obstacles_.MoveFreeBodies();
-  const size_t pairs = separation_.FindOverlaps();
+  size_t pairs;
+  PetscCall(separation_.FindOverlaps(x0, &pairs));
   if (pairs > 0)
     PetscCall(PetscPrintf(comm_,
                           "Warning: %zu pair(s) of free bodies start with their surfaces crossing "
@@ -368,12 +367,10 @@ PetscErrorCode ContactSolver::FindOverlaps(Vec x0, Vec v0) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::SeparateOverlaps(Vec x, Vec v, bool *changed) {
+PetscErrorCode ContactSolver::SeparateOverlaps(Vec x, bool *changed) {
   PetscFunctionBeginUser;
-  PetscCall(GatherFreeState(x, v, 0.0));
-  obstacles_.MoveFreeBodies();
   bool moved;
-  PetscCall(separation_.Step(x, &state_, &moved));
+  PetscCall(separation_.Step(x, &moved));
   *changed = *changed || moved;
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -171,8 +171,8 @@ class ContactSolver {
   // Collective. Free bodies placed overlapping (overlap_separation.hpp): found
   // at the first step's start (x0), moved apart after each step (x) until their
   // surfaces no longer cross.
-  PetscErrorCode FindOverlaps(Vec x0, Vec v0);
-  PetscErrorCode SeparateOverlaps(Vec x, Vec v, bool *changed);
+  PetscErrorCode FindOverlaps(Vec x0);
+  PetscErrorCode SeparateOverlaps(Vec x, bool *changed);
   // The guard, and with distance constraints, the constraints again with the
   // vertices it moved pinned, then the guard again (it has the last word).
   PetscErrorCode Guard(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);

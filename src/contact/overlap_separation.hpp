@@ -16,8 +16,11 @@
 // crosses a triangle of the other (SegmentCrossesTriangle), or one body lies
 // inside the other.
 //
-// Reads the free state gathered on every rank (FreeState::Gather): every rank
-// takes the same decisions and writes its own vertices. Collective where noted.
+// Parallel model: the separating bodies' surface vertices are brought to
+// every rank (an all-gather of their positions, only at the first step and
+// while a pair separates) and their mass centroids reduced, so every rank takes
+// the same decisions and writes its own vertices. It reads nothing of the free
+// state but the bodies, masses and owned vertices. Collective where noted.
 #pragma once
 
 #include <petscvec.h>
@@ -42,37 +45,46 @@ constexpr double kSeparationPerStep = 1.0;
 
 class OverlapSeparation {
  public:
-  void Setup(const Scene &scene, const FreeState &state, Obstacles *obstacles);
+  void Setup(MPI_Comm comm, const Scene &scene, const FreeState &state, Obstacles *obstacles);
 
-  // Not collective. On the gathered state: the pairs of free bodies whose
-  // surfaces cross now become the separating pairs (the start of the run);
-  // their vertex contacts are turned off. Returns how many.
-  size_t FindOverlaps();
+  // Collective. At positions x (PETSc order, this rank's vertices): the pairs
+  // of free bodies whose surfaces cross become the separating pairs (the start
+  // of the run); their vertex contacts are turned off. *found: how many.
+  PetscErrorCode FindOverlaps(Vec x, size_t *found);
   bool active() const { return !pairs_.empty(); }
-  // Collective (the state must be gathered at x first). Translates the
-  // separating pairs that still cross (x: this rank's vertices; the gathered
-  // state follows) and drops those that no longer do. *moved: any translation.
-  PetscErrorCode Step(Vec x, FreeState *state, bool *moved);
+  // Collective. Translates the separating pairs that still cross at x (this
+  // rank's vertices) and drops those that no longer do. *moved: any translation.
+  PetscErrorCode Step(Vec x, bool *moved);
 
   // Steps taken while some pair was separating; pairs found at the start.
   PetscInt steps() const { return steps_; }
   size_t initial_pairs() const { return initial_pairs_; }
 
  private:
+  // Collective. The surface vertices of `bodies` at x into positions_, and
+  // their mass centroids into centroid_.
+  PetscErrorCode Fetch(Vec x, const std::vector<char> &bodies);
   // Whether the surfaces of free bodies a and b cross (or one holds the other).
   bool Cross(size_t a, size_t b) const;
   // Whether an edge of body a crosses a triangle of body b.
   bool EdgeCrossesSurface(size_t a, size_t b) const;
+  // Whether p lies inside body b's closed surface (parity of a ray's crossings).
+  bool InsideSurface(const Point &p, size_t b) const;
   // The translation of each of the pair's bodies this step.
   std::pair<Point, Point> Translations(size_t a, size_t b) const;
-  Point Centroid(size_t b) const;
+  Point At(int32_t natural) const { return Point(&positions_[3 * natural]); }
 
+  MPI_Comm comm_ = MPI_COMM_NULL;
   const Scene *scene_ = nullptr;
   const FreeState *state_ = nullptr;
   Obstacles *obstacles_ = nullptr;
   // Per body: its boundary edges and triangles (natural vertices).
   std::vector<std::vector<std::pair<int32_t, int32_t>>> edges_;
   std::vector<std::vector<std::array<int32_t, 3>>> triangles_;
+  std::vector<char> on_surface_;   // per natural vertex
+  std::vector<double> positions_;  // natural, 3 per vertex: the fetched surface vertices
+  std::vector<Box> box_;           // per body: its fetched surface's box
+  std::vector<Point> centroid_;    // per body: its mass centroid at the fetch
   std::vector<std::pair<size_t, size_t>> pairs_;  // separating (a < b)
   PetscInt steps_ = 0;
   size_t initial_pairs_ = 0;
