@@ -71,6 +71,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   friction_.Setup(options.friction, [this](int32_t n) { return 1 / state_.inverse_mass(n); });
   response_.Setup(comm, scene, layout, state_, obstacles_, options);
   if (guard_on_) PetscCall(SetupGuard(lumped_mass));
+  if (free_obstacles_) separation_.Setup(comm, scene, state_, &obstacles_);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -134,6 +135,10 @@ std::string ContactSolver::Description() const {
     add(std::to_string(features_.size()) + " points on fixed bodies' sharp edges");
   if (!distance_.empty()) add(std::to_string(distance_.size()) + " distance constraints");
   if (guard_on_) add(guard_.Description());
+  if (separation_.initial_pairs() > 0)
+    add(std::to_string(separation_.initial_pairs()) + " pair(s) of bodies placed overlapping, " +
+        (separation_.active() ? "still separating after " : "separated in ") +
+        std::to_string(separation_.steps()) + " steps");
   if (active() && options_.impulse_spreading) add("impulse spreading");
   if (active() && (ground_ || body_obstacles_)) {
     std::snprintf(buffer, sizeof(buffer), "restitution %g, friction %g", options_.restitution,
@@ -203,6 +208,7 @@ PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
   holding_ = false;
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
   if (options_.restitution > 0) PetscCall(response_.RecordStart(v0));
+  if (free_obstacles_ && !overlaps_checked_) PetscCall(FindOverlaps(x0));
   // Obstacles where they will be if they keep their velocity.
   PetscCall(Refresh(x0, v0, dt, true));
   PetscCall(ReaimRestingContacts(x0, v0, dt));
@@ -366,6 +372,31 @@ PetscErrorCode ContactSolver::EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
     *changed = true;
   }
   if (guard_on_) PetscCall(Guard(x0, x, v, dt, changed));
+  if (separation_.active()) PetscCall(SeparateOverlaps(x, changed));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::FindOverlaps(Vec x0) {
+  PetscFunctionBeginUser;
+  overlaps_checked_ = true;
+  size_t pairs;
+  PetscCall(separation_.FindOverlaps(x0, &pairs));
+  if (pairs > 0)
+    PetscCall(PetscPrintf(
+        comm_,
+        "softbody: warning: %zu pair(s) of free bodies start with their surfaces crossing "
+        "(placed overlapping): each pair is moved apart rigidly by %.3g x the "
+        "mean boundary edge of its finer body per step, until its surfaces no "
+        "longer cross; contact between them acts from then on\n",
+        pairs, kSeparationPerStep));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::SeparateOverlaps(Vec x, bool *changed) {
+  PetscFunctionBeginUser;
+  bool moved;
+  PetscCall(separation_.Step(x, &moved));
+  *changed = *changed || moved;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -16,7 +16,8 @@
 // collision guard (collision_guard.hpp) last: no surface primitive crosses
 // another or its own body's during the step. Contacts end -contact_gap of the
 // body's mean boundary edge outside the obstacle, so that resting contacts stay
-// clear of the guard's separation.
+// clear of the guard's separation. Free bodies placed overlapping are moved
+// apart rigidly over the first steps (overlap_separation.hpp).
 //
 // Units: metres, seconds, kilograms; velocities m/s, impulses N s. Normals
 // point out of the obstacle; a normal impulse lambda >= 0 pushes.
@@ -48,6 +49,7 @@
 #include "contact/free_state.hpp"
 #include "contact/friction.hpp"
 #include "contact/obstacles.hpp"
+#include "contact/overlap_separation.hpp"
 #include "contact/resting_contacts.hpp"
 #include "contact/sharp_features.hpp"
 #include "contact/velocity_response.hpp"
@@ -180,6 +182,11 @@ class ContactSolver {
   PetscErrorCode RespondToContacts(Vec x, Vec v, const std::vector<PetscReal> &reactions,
                                    bool *changed);
   PetscErrorCode ResolveDistanceConstraints(Vec x, Vec v, const std::vector<char> *pinned);
+  // Collective. Free bodies placed overlapping (overlap_separation.hpp): found
+  // at the first step's start (x0), moved apart after each step (x) until their
+  // surfaces no longer cross.
+  PetscErrorCode FindOverlaps(Vec x0);
+  PetscErrorCode SeparateOverlaps(Vec x, bool *changed);
   // The guard, and with distance constraints, the constraints again with the
   // vertices it moved pinned, then the guard again (it has the last word).
   PetscErrorCode Guard(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
@@ -218,6 +225,8 @@ class ContactSolver {
   RestingContacts resting_;
   DistanceConstraints distance_;
   CollisionGuard guard_;
+  OverlapSeparation separation_;
+  bool overlaps_checked_ = false;  // FindOverlaps ran
   ContactStatistics stats_;
 };
 

@@ -297,7 +297,7 @@ int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
   (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
     const auto &tet = tets[t];
     if ((first >= 0 && t >= first) || tet[4] == body || skip.Has(tet[4]) ||
-        !tet_boxes[t].Contains(p, kBoxMargin))
+        !tet_boxes[t].Contains(p, kBoxMargin) || (!fixed_part && Separating(body, tet[4])))
       return;
     if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
                     WorldPoint(tet[3]))
@@ -305,6 +305,11 @@ int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
       first = t;
   });
   return first >= 0 ? tets[first][4] : -1;
+}
+
+bool Obstacles::Separating(int32_t a, int32_t b) const {
+  const std::pair<size_t, size_t> pair(std::min(a, b), std::max(a, b));
+  return std::find(separating_.begin(), separating_.end(), pair) != separating_.end();
 }
 
 bool Obstacles::OnFixedSurface(const Point &x, const Point &direction, double min_cosine) const {

@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "contact/free_state.hpp"
@@ -60,6 +61,9 @@ class Obstacles {
   // The free bodies moved (FreeState holds their new positions and boxes):
   // their boxes follow, their grids are stale.
   void MoveFreeBodies();
+  // Pairs of free bodies (a, b) that are not obstacles to each other
+  // (OverlapSeparation moves them apart); replaces the last list.
+  void SetSeparating(const std::vector<std::pair<size_t, size_t>> &pairs) { separating_ = pairs; }
 
   // The first obstacle other than `body` and those in `skip` that contains p
   // (the ground when p lies below it or within its margin), with its closest
@@ -111,6 +115,8 @@ class Obstacles {
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
                          const VertexObstacles &skip) const;
+  // Whether free bodies a and b are a separating pair.
+  bool Separating(int32_t a, int32_t b) const;
   Point WorldPoint(int32_t n) const { return state_->position(n); }
 
   const Scene *scene_ = nullptr;
@@ -124,6 +130,7 @@ class Obstacles {
   mutable UniformGrid free_tet_grid_, free_triangle_grid_;
   mutable bool free_grids_current_ = false;
   mutable PetscInt free_grid_builds_ = 0;
+  std::vector<std::pair<size_t, size_t>> separating_;  // (a < b), SetSeparating
   std::vector<Box> body_box_;       // broad phase: each obstacle body's bounding box
   std::vector<Box> fixed_tet_box_;  // each obstacle tet's box (cheap rejection)
   mutable std::vector<Box> free_tet_box_;
