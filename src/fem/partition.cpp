@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "common/exchange.hpp"
+#include "common/options.hpp"
 
 namespace softbody {
 
@@ -87,6 +88,8 @@ PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options)
   static const char *const kNames[] = {"auto", "metis", "ptscotch", "Partitioner", "", nullptr};
   PetscEnum chosen = static_cast<PetscEnum>(options->partitioner);
   PetscEnum order = static_cast<PetscEnum>(options->vertex_order);
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kChoice, "-partitioner", kNames},
+                                     {OptionSyntax::kChoice, "-vertex_order", kVertexOrderNames}}));
   PetscOptionsBegin(comm, nullptr, "Partition of the free vertices over the ranks", nullptr);
   PetscCall(PetscOptionsEnum("-partitioner",
                              "auto (METIS on up to 2 ranks, else PT-Scotch), metis (the whole "
