@@ -109,10 +109,12 @@ PetscErrorCode PrintModel(MPI_Comm comm, const IntegratorOptions &o, const Solve
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Collective. "  guard ..." line: what the collision guard did (the same on every rank).
-PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g) {
+// Collective. "  guard ..." line: what the collision guard did (the same on
+// every rank), and the bytes the busiest rank sent for it (bytes: this rank's).
+PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g, PetscInt64 bytes) {
   PetscFunctionBeginUser;
   if (!g) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &bytes, 1, MPIU_INT64, MPI_MAX, comm));
   PetscCall(PetscPrintf(comm,
                         "  guard        %" PetscInt_FMT
                         " passes with colliding surface pairs (%" PetscInt_FMT
@@ -120,10 +122,14 @@ PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g) {
                         " in a step); zones moved %" PetscInt_FMT " vertices (%" PetscInt_FMT
                         " frozen); %" PetscInt_FMT " pairs tested; %" PetscInt_FMT
                         " pairs closer than the separation at a step's start (%" PetscInt_FMT
-                        " at the scene's start), not guarded; %.3f s\n",
+                        " at the scene's start), not guarded; %.3f s",
                         g->passes_guarded, g->collisions, g->rounds, g->max_rounds,
                         g->zone_vertices, g->frozen_vertices, g->candidates, g->close_pairs,
                         g->initial_close_pairs, (double)g->seconds));
+  if (bytes > 0)
+    PetscCall(PetscPrintf(comm, "; halo and pairs: %.3g kB sent by the busiest rank in all",
+                          bytes / 1e3));
+  PetscCall(PetscPrintf(comm, "\n"));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -138,12 +144,19 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
     PetscCall(PetscPrintf(comm, ", %" PetscInt_FMT " sharp-edge contacts", c.feature_contacts));
   PetscInt grid_builds = contact.free_grid_builds();
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &grid_builds, 1, MPIU_INT, MPI_MAX, comm));
+  PetscInt64 bytes = contact.exchange_bytes();
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &bytes, 1, MPIU_INT64, MPI_MAX, comm));
   if (contact.tracks_free_bodies())
     PetscCall(PetscPrintf(comm,
                           "; moving obstacles' grids built in %" PetscInt_FMT
-                          " passes (only where bodies' boxes met)"
-                          ", free state gathered %" PetscInt_FMT " times",
-                          grid_builds, c.gathers));
+                          " passes (only where bodies' boxes met)",
+                          grid_builds));
+  if (c.exchanges)
+    PetscCall(PetscPrintf(comm,
+                          "; free state exchanged %" PetscInt_FMT
+                          " times (halo and constrained vertices: %.3g kB sent by the busiest "
+                          "rank in all)",
+                          c.exchanges, bytes / 1e3));
   if (contact.num_constraints())
     PetscCall(PetscPrintf(comm,
                           "; constraint sweeps %" PetscInt_FMT " total, %" PetscInt_FMT
@@ -151,7 +164,7 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
                           c.constraint_sweeps, c.max_constraint_sweeps,
                           (double)c.max_constraint_violation));
   PetscCall(PetscPrintf(comm, "\n"));
-  PetscCall(PrintGuard(comm, contact.guard_statistics()));
+  PetscCall(PrintGuard(comm, contact.guard_statistics(), contact.guard_bytes()));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

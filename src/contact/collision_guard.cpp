@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "common/exchange.hpp"
+#include "contact/halo.hpp"
+
 namespace softbody {
 
 namespace {
@@ -22,43 +25,35 @@ constexpr int kMaxRounds = 1000;
 
 }  // namespace
 
-CollisionGuard::~CollisionGuard() {
-  VecScatterDestroy(&gather_);
-  VecDestroy(&gathered_);
-}
-
 PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                      Vec lumped_mass, const ContactOptions &options,
-                                     bool self_contact, double min_edge) {
+                                     bool self_contact, double min_edge,
+                                     const std::vector<double> &reach) {
   PetscFunctionBeginUser;
   comm_ = comm;
-  layout_ = &layout;
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  parallel_ = size > 1;
+  reach_ = reach;
   surface_.Build(scene);
   const int32_t n = surface_.num_vertices();
   moving_.assign(n, 0);
+  owned_mask_.assign(n, 0);
   rest_.resize(n);
-  std::vector<PetscInt> dofs;
   for (int32_t v = 0; v < n; ++v) {
     const int32_t natural = surface_.natural[v];
     const Body &body = scene.bodies[surface_.body[v]];
     rest_[v] = body.mesh.vertices.row(natural - body.first_vertex).transpose();
-    const PetscInt petsc = layout.PetscVertexOfNatural(natural);
-    if (petsc < 0) continue;
+    if (layout.PetscVertexOfNatural(natural) < 0) continue;
     moving_[v] = 1;
     free_vertices_.push_back(v);
-    for (int c = 0; c < 3; ++c) dofs.push_back(3 * petsc + c);
+    const PetscInt local = layout.LocalOfNatural(natural);
+    if (local >= 0) owned_.push_back({v, local}), owned_mask_[v] = 1;
   }
-  IS from;
-  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(dofs.size()), dofs.data(),
-                            PETSC_COPY_VALUES, &from));
-  PetscCall(VecCreateSeq(PETSC_COMM_SELF, static_cast<PetscInt>(dofs.size()), &gathered_));
-  PetscCall(VecScatterCreate(lumped_mass, from, gathered_, nullptr, &gather_));
-  PetscCall(ISDestroy(&from));
-  std::vector<Point> mass(n, Point::Zero());
-  PetscCall(Fetch(lumped_mass, &mass));
-  mass_.assign(n, 0.0);
-  for (const int32_t v : free_vertices_) mass_[v] = mass[v][0];
+  PetscCall(FetchMasses(lumped_mass));
+  if (parallel_) PetscCall(neighbours_.Setup(comm));
   start_ = end_ = rest_;
+  usable_.assign(n, 1);
   query_ = {&surface_,        &start_, &end_, &moving_, {}, self_contact, bool(options.ground),
             options.ground_y, nullptr};
   query_.tolerance.separation = kSeparationOfGap * options.gap * min_edge;
@@ -70,15 +65,75 @@ PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const Do
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The free surface vertices' entries of a PETSc vector (3 per vertex), on every rank.
-PetscErrorCode CollisionGuard::Fetch(Vec from, std::vector<Point> *to) {
+PetscErrorCode CollisionGuard::FetchMasses(Vec lumped_mass) {
   PetscFunctionBeginUser;
-  PetscCall(VecScatterBegin(gather_, from, gathered_, INSERT_VALUES, SCATTER_FORWARD));
-  PetscCall(VecScatterEnd(gather_, from, gathered_, INSERT_VALUES, SCATTER_FORWARD));
-  const PetscScalar *g;
-  PetscCall(VecGetArrayRead(gathered_, &g));
-  for (size_t k = 0; k < free_vertices_.size(); ++k) (*to)[free_vertices_[k]] = Point(&g[3 * k]);
-  PetscCall(VecRestoreArrayRead(gathered_, &g));
+  mass_.assign(surface_.num_vertices(), 0.0);
+  const PetscScalar *mass;
+  PetscCall(VecGetArrayRead(lumped_mass, &mass));
+  for (const auto &[v, local] : owned_) mass_[v] = mass[3 * local];
+  PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode CollisionGuard::WriteOwnedPositions(Vec x0, Vec x) {
+  PetscFunctionBeginUser;
+  const PetscScalar *a0, *a1;
+  PetscCall(VecGetArrayRead(x0, &a0));
+  PetscCall(VecGetArrayRead(x, &a1));
+  for (const auto &[v, local] : owned_) {
+    start_[v] = Point(&a0[3 * local]);
+    end_[v] = Point(&a1[3 * local]);
+  }
+  PetscCall(VecRestoreArrayRead(x0, &a0));
+  PetscCall(VecRestoreArrayRead(x, &a1));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Usable: the static vertices, this rank's and the halo's. A vertex goes to a
+// rank when its motion's box meets one of that rank's boxes grown by the reach
+// of the vertex's body.
+PetscErrorCode CollisionGuard::ExchangeHalo() {
+  PetscFunctionBeginUser;
+  for (const int32_t v : free_vertices_) usable_[v] = 0;
+  std::vector<Box> boxes(surface_.num_bodies());
+  for (const auto &[v, local] : owned_) {
+    usable_[v] = 1;
+    boxes[surface_.body[v]].Extend(start_[v]);
+    boxes[surface_.body[v]].Extend(end_[v]);
+  }
+  std::vector<RankBox> others;
+  PetscCall(GatherRankBoxes(comm_, boxes, &others, &bytes_sent_));
+  std::vector<PetscMPIInt> ranks, counts;
+  std::vector<int32_t> items;
+  SelectForRanks(
+      others, owned_.size(),
+      [&](int32_t i, const RankBox &box) {
+        const int32_t v = owned_[i].first;
+        Box motion;
+        motion.Extend(start_[v]);
+        motion.Extend(end_[v]);
+        const double reach = reach_[surface_.body[v]];
+        motion.lower.array() -= reach;
+        motion.upper.array() += reach;
+        return motion.Overlaps(box.box());
+      },
+      &ranks, &counts, &items);
+  std::vector<HaloVertex> records, received;
+  for (const int32_t i : items) {
+    const int32_t v = owned_[i].first;
+    HaloVertex h{v, {}, {}, mass_[v]};
+    for (int c = 0; c < 3; ++c) h.start[c] = start_[v][c], h.end[c] = end_[v][c];
+    records.push_back(h);
+  }
+  PetscInt64 bytes;
+  PetscCall(neighbours_.Exchange(ranks, counts, records, &received, &bytes));
+  bytes_sent_ += bytes;
+  for (const HaloVertex &h : received) {
+    start_[h.vertex] = Point(h.start);
+    end_[h.vertex] = Point(h.end);
+    mass_[h.vertex] = h.mass;
+    usable_[h.vertex] = 1;
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -86,9 +141,9 @@ PetscErrorCode CollisionGuard::Probe(Vec x0, Vec x, bool *moved) {
   PetscFunctionBeginUser;
   PetscLogDouble begin, finish;
   PetscCall(PetscTime(&begin));
-  PetscCall(Fetch(x0, &start_));
-  PetscCall(Fetch(x, &end_));
-  moved_ = Resolve();
+  PetscCall(WriteOwnedPositions(x0, x));
+  if (parallel_) PetscCall(ExchangeHalo());
+  PetscCall(Resolve(&moved_));
   *moved = std::find(moved_.begin(), moved_.end(), 1) != moved_.end();
   PetscCall(PetscTime(&finish));
   stats_.seconds += finish - begin;
@@ -97,10 +152,8 @@ PetscErrorCode CollisionGuard::Probe(Vec x0, Vec x, bool *moved) {
 
 std::vector<std::pair<PetscInt, int32_t>> CollisionGuard::OwnedMoved() const {
   std::vector<std::pair<PetscInt, int32_t>> owned;
-  for (const int32_t s : free_vertices_) {
-    const PetscInt local = layout_->LocalOfNatural(surface_.natural[s]);
-    if (moved_[s] && local >= 0) owned.push_back({local, s});
-  }
+  for (const auto &[v, local] : owned_)
+    if (moved_[v]) owned.push_back({local, v});
   return owned;
 }
 
@@ -136,38 +189,85 @@ void CollisionGuard::MergeZones(const std::vector<SurfaceCollision> &collisions)
     zones_.Merge(collisions[i].vertices.data(), collisions[i].count, immobile[i]);
 }
 
-std::vector<char> CollisionGuard::Resolve() {
+// In a fixed order (ground pairs first, then by vertices), so that zones merge
+// alike on every rank and at every rank count.
+PetscErrorCode CollisionGuard::ShareCollisions(std::vector<SurfaceCollision> *collisions) {
+  PetscFunctionBeginUser;
+  if (parallel_) {
+    std::vector<SharedCollision> mine, all;
+    for (const SurfaceCollision &c : *collisions) {
+      SharedCollision shared{{}, c.count, {}, {}, {}};
+      for (int k = 0; k < 4; ++k) {
+        shared.vertices[k] = c.vertices[k];
+        shared.mass[k] = mass_[c.vertices[k]];
+        for (int d = 0; d < 3; ++d) {
+          shared.start[k][d] = start_[c.vertices[k]][d];
+          shared.end[k][d] = end_[c.vertices[k]][d];
+        }
+      }
+      mine.push_back(shared);
+    }
+    PetscCall(AllGatherRecords(comm_, mine, &all));
+    bytes_sent_ += static_cast<PetscInt64>(mine.size() * sizeof(SharedCollision));
+    collisions->clear();
+    for (const SharedCollision &c : all) {
+      collisions->push_back(
+          {{c.vertices[0], c.vertices[1], c.vertices[2], c.vertices[3]}, c.count});
+      for (int k = 0; k < 4; ++k) {
+        start_[c.vertices[k]] = Point(c.start[k]);
+        end_[c.vertices[k]] = Point(c.end[k]);
+        mass_[c.vertices[k]] = c.mass[k];
+        usable_[c.vertices[k]] = 1;  // zones move it: later rounds test it wherever it goes
+      }
+    }
+  }
+  std::sort(collisions->begin(), collisions->end(),
+            [](const SurfaceCollision &a, const SurfaceCollision &b) {
+              return a.count != b.count ? a.count < b.count : a.vertices < b.vertices;
+            });
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
+  PetscFunctionBeginUser;
   const int32_t n = surface_.num_vertices();
-  std::vector<char> moved(n, 0), changed;
+  std::vector<char> changed;
+  moved->assign(n, 0);
   zones_.Reset(n);
   query_.changed = nullptr;
-  PetscInt rounds = 0;
+  query_.usable = parallel_ ? &usable_ : nullptr;
+  query_.owned = parallel_ ? &owned_mask_ : nullptr;
+  PetscInt rounds = 0, counts[2] = {0, 0};  // pairs tested, pairs close at the start
   for (;; ++rounds) {
     CollisionCount count;
-    const std::vector<SurfaceCollision> collisions = finder_.Find(query_, &count);
-    stats_.candidates += count.candidates;
-    if (rounds == 0) stats_.close_pairs += count.close;
+    std::vector<SurfaceCollision> collisions = finder_.Find(query_, &count);
+    counts[0] += count.candidates;
+    if (rounds == 0) counts[1] += count.close;
+    PetscCall(ShareCollisions(&collisions));
     if (collisions.empty()) break;
     stats_.collisions += static_cast<PetscInt>(collisions.size());
     if (rounds == kMaxRounds) {
-      for (const int32_t v : free_vertices_) end_[v] = start_[v], moved[v] = 1;
+      for (const int32_t v : free_vertices_) end_[v] = start_[v], (*moved)[v] = 1;
       break;
     }
     MergeZones(collisions);
     changed.assign(n, 0);
-    for (const int32_t v : zones_.Move(start_, mass_, &end_)) changed[v] = moved[v] = 1;
+    for (const int32_t v : zones_.Move(start_, mass_, &end_)) changed[v] = (*moved)[v] = 1;
     query_.changed = &changed;
   }
   query_.changed = nullptr;
+  if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM, comm_));
+  stats_.candidates += counts[0];
+  stats_.close_pairs += counts[1];
   if (rounds > 0) ++stats_.passes_guarded;
   stats_.rounds += rounds;
   stats_.max_rounds = std::max(stats_.max_rounds, rounds);
   for (int32_t v = 0; v < n; ++v)
-    if (moved[v] && moving_[v]) {
+    if ((*moved)[v] && moving_[v]) {
       ++stats_.zone_vertices;
       if (zones_.immobile(v)) ++stats_.frozen_vertices;
     }
-  return moved;
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 // This rank's moved vertices: x = the zone's end position, v = (x - x0) / dt.

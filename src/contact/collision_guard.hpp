@@ -18,11 +18,14 @@
 // mean boundary edge: contact constraints end contacts a full gap apart, so
 // resting contacts sit outside the guard's reach.
 //
-// Parallel model: the surface vertices' start and end positions are gathered
-// on every rank (a scatter of the free surface vertices only), every rank runs
-// the same detection and zones in the same order (results do not depend on the
-// rank count), and each writes its own vertices: a vertex a zone moved gets
-// x = its zone position and v = (x - x0) / dt.
+// Parallel model: each rank holds its own surface vertices' start and end
+// positions and a halo of the other ranks' within reach of its boxes
+// (halo.hpp: -contact_halo_reach longest tet edges), and tests the pairs whose
+// lowest moving surface vertex it owns. Each round's colliding pairs, with
+// their vertices' positions, are gathered on every rank (few: the pairs, not
+// the surface) and sorted, so every rank merges and moves the same zones in
+// the same order whatever the rank count; each writes its own vertices: a
+// vertex a zone moved gets x = its zone position and v = (x - x0) / dt.
 #pragma once
 
 #include <petscvec.h>
@@ -31,6 +34,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/neighbour_exchange.hpp"
 #include "contact/contact_options.hpp"
 #include "contact/contact_surface.hpp"
 #include "contact/impact_zones.hpp"
@@ -58,13 +62,14 @@ class CollisionGuard {
   CollisionGuard() = default;
   CollisionGuard(const CollisionGuard &) = delete;
   CollisionGuard &operator=(const CollisionGuard &) = delete;
-  ~CollisionGuard();
 
   // Collective. scene (whole meshes) and layout (replicated numbering) must
   // outlive the guard; lumped_mass per DOF (kg), PETSc order; min_edge: the
-  // smallest free body's mean boundary edge (m).
+  // smallest free body's mean boundary edge (m); reach: the halo's reach per
+  // body (m).
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
-                       const ContactOptions &options, bool self_contact, double min_edge);
+                       const ContactOptions &options, bool self_contact, double min_edge,
+                       const std::vector<double> &reach);
   // Collective. Detection and zones on the motion from x0 (the step's start
   // positions) to x (its end positions), PETSc order; nothing written.
   // *moved: zones moved vertices (the same on every rank).
@@ -80,13 +85,35 @@ class CollisionGuard {
   void MarkMoved(std::vector<char> *marked) const;
 
   const GuardStatistics &statistics() const { return stats_; }
+  // Not collective. Bytes this rank sent (halo, boxes, its colliding pairs), all probes.
+  PetscInt64 bytes_sent() const { return bytes_sent_; }
   double separation() const { return query_.tolerance.separation; }
   std::string Description() const;
 
  private:
-  PetscErrorCode Fetch(Vec from, std::vector<Point> *to);
-  // Detection and zones until no pair collides; returns the vertices moved.
-  std::vector<char> Resolve();
+  // A surface vertex in the halo.
+  struct HaloVertex {
+    int32_t vertex;
+    double start[3], end[3], mass;
+  };
+  // A colliding pair as every rank receives it: its vertices and their positions.
+  struct SharedCollision {
+    int32_t vertices[4];
+    int32_t count;
+    double start[4][3], end[4][3], mass[4];
+  };
+  // This rank's surface vertices' masses (the others' come with the halo and the pairs).
+  PetscErrorCode FetchMasses(Vec lumped_mass);
+  // This rank's surface vertices' start and end positions.
+  PetscErrorCode WriteOwnedPositions(Vec x0, Vec x);
+  // Collective. The other ranks' surface vertices near this rank's.
+  PetscErrorCode ExchangeHalo();
+  // Collective. Every rank's colliding pairs of a round, sorted; their
+  // vertices' positions and masses written into start_, end_ and mass_.
+  PetscErrorCode ShareCollisions(std::vector<SurfaceCollision> *collisions);
+  // Collective. Detection and zones until no pair collides; *moved: per
+  // surface vertex, moved by the zones.
+  PetscErrorCode Resolve(std::vector<char> *moved);
   // One round's colliding pairs into the zones (immobile: the ground, a vertex
   // that does not move, or a mobile zone colliding with itself).
   void MergeZones(const std::vector<SurfaceCollision> &collisions);
@@ -95,8 +122,13 @@ class CollisionGuard {
   PetscErrorCode WriteBack(Vec x, Vec v, PetscReal dt);
 
   MPI_Comm comm_ = MPI_COMM_NULL;
-  const DofLayout *layout_ = nullptr;
+  bool parallel_ = false;  // more than one rank
   ContactSurface surface_;
+  std::vector<std::pair<int32_t, PetscInt>> owned_;  // (surface vertex, local vertex), this rank's
+  std::vector<char> owned_mask_, usable_;            // per surface vertex
+  std::vector<double> reach_;                        // per body (m)
+  NeighbourExchange neighbours_;
+  PetscInt64 bytes_sent_ = 0;
   std::vector<int32_t> free_vertices_;  // surface vertices that move, surface order
   std::vector<char> moving_;            // per surface vertex
   std::vector<double> mass_;            // per surface vertex (kg; 0 when it does not move)
@@ -105,8 +137,6 @@ class CollisionGuard {
   CollisionQuery query_;
   SurfaceCollisionFinder finder_;
   ImpactZones zones_;
-  VecScatter gather_ = nullptr;  // free surface vertices' DOFs to every rank
-  Vec gathered_ = nullptr;
   GuardStatistics stats_;
 };
 

@@ -53,12 +53,13 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
              "contact needs every mesh and the replicated numbering on every rank "
              "(ContactMayNeedWholeMeshes)");
 
-  state_.SetupBodies(scene);
+  state_.SetupBodies(scene, options.halo_reach);
   SharpFeatures::Candidates candidates;
   if (body_obstacles_ && options.sharp_edges) candidates = SharpFeatures::Sample(scene, state_);
   track_free_ = free_obstacles_ || !candidates.empty();
-  gather_always_ = free_obstacles_ || !distance_.empty() || options.impulse_spreading;
-  PetscCall(state_.SetupMasses(comm, layout, lumped_mass, gather_always_ || track_free_));
+  exchange_always_ = free_obstacles_ || !distance_.empty() || options.impulse_spreading;
+  PetscCall(state_.SetupMasses(comm, layout, lumped_mass, track_free_, !candidates.empty()));
+  if (!distance_.empty()) PetscCall(state_.SetupFixedSet(lumped_mass, distance_.vertices()));
   // Vertices come back to the contact gap once within half of it of the ground.
   obstacles_.SetupGround(scene, state_, ground_, options.ground_y,
                          kGroundMarginOfGap * options.gap);
@@ -76,8 +77,10 @@ PetscErrorCode ContactSolver::SetupGuard(Vec lumped_mass) {
   double min_edge = kUnbounded;
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (!scene_->bodies[b].fixed) min_edge = std::min(min_edge, state_.edge(b));
+  std::vector<double> reach(scene_->bodies.size());
+  for (size_t b = 0; b < reach.size(); ++b) reach[b] = state_.reach(b);
   PetscCall(guard_.Setup(comm_, *scene_, *layout_, lumped_mass, options_, options_.self_contact,
-                         min_edge));
+                         min_edge, reach));
   const PetscInt close = guard_.statistics().initial_close_pairs;
   if (close > 0)
     PetscCall(PetscPrintf(comm_,
@@ -142,8 +145,9 @@ PetscErrorCode ContactSolver::Refresh(Vec x, Vec v, PetscReal dt, bool features)
   PetscFunctionBeginUser;
   features_near_ = false;
   if (features && !features_.empty()) PetscCall(FeaturesNear(x, v, dt, &features_near_));
-  if (gather_always_ || features_near_) PetscCall(GatherFreeState(x, v, dt));
-  if (free_obstacles_ || features_near_) obstacles_.MoveFreeBodies();
+  const StateNeeds needs{free_obstacles_ || features_near_, !distance_.empty()};
+  if (exchange_always_ || features_near_) PetscCall(ExchangeFreeState(x, v, dt, needs));
+  if (needs.halo) obstacles_.MoveFreeBodies();
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -181,10 +185,11 @@ PetscErrorCode ContactSolver::FeaturesNear(Vec x, Vec v, PetscReal dt, bool *nea
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::GatherFreeState(Vec x, Vec v, PetscReal dt) {
+PetscErrorCode ContactSolver::ExchangeFreeState(Vec x, Vec v, PetscReal dt,
+                                                const StateNeeds &needs) {
   PetscFunctionBeginUser;
-  ++stats_.gathers;
-  PetscCall(state_.Gather(x, v, dt));
+  if (needs.halo || needs.fixed_set) ++stats_.exchanges;
+  PetscCall(state_.Exchange(x, v, dt, needs));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -388,7 +393,7 @@ PetscErrorCode ContactSolver::RespondToContacts(Vec x, Vec v,
 PetscErrorCode ContactSolver::ResolveDistanceConstraints(Vec x, Vec v,
                                                          const std::vector<char> *pinned) {
   PetscFunctionBeginUser;
-  PetscCall(GatherFreeState(x, v, 0.0));
+  PetscCall(ExchangeFreeState(x, v, 0.0, {false, true}));
   const DistanceConstraints::Resolution resolution = distance_.Resolve(&state_, pinned);
   stats_.constraint_sweeps += resolution.sweeps;
   stats_.max_constraint_sweeps =

@@ -21,15 +21,17 @@
 // Units: metres, seconds, kilograms; velocities m/s, impulses N s. Normals
 // point out of the obstacle; a normal impulse lambda >= 0 pushes.
 //
-// Parallel model: the free state (free_state.hpp) is gathered on every rank
-// when free bodies collide with each other, distance constraints exist or
-// impulses spread, and while a free body's box meets a fixed body with sharp
-// edges; each rank then detects the contacts of its own vertices (and every
-// sharp-edge point, constraining its own vertices of the triangle), every rank
-// resolves all distance constraints identically, and each keeps its own
-// vertices' results. The ground alone and fixed bodies away from the free ones
-// need no gather. The guard gathers only the free surface vertices' positions
-// and runs identically on every rank.
+// Parallel model: each rank detects the contacts of its own vertices. When
+// free bodies can collide with each other, and while a free body's box meets
+// a fixed body with sharp edges, a rank fetches the halo of other ranks'
+// vertices near its own (free_state.hpp: boxes gathered, vertices sent point
+// to point) and queries the obstacles its halo holds whole; sharp-edge points
+// constrain the rank's own vertices of the triangle they push. Distance
+// constraints' vertices are fetched on every rank (a scatter of just them) and
+// resolved identically there; impulse spreading sums its weights over ranks.
+// The ground alone and fixed bodies away from the free ones need no exchange.
+// The guard likewise tests the pairs of its own surface vertices against a
+// halo, and shares only the colliding pairs (collision_guard.hpp).
 #pragma once
 
 #include <petscvec.h>
@@ -57,7 +59,7 @@ namespace softbody {
 
 struct ContactStatistics {
   PetscInt collisions = 0;         // new vertex contacts, all steps, all ranks
-  PetscInt gathers = 0;            // times the free state was gathered on every rank
+  PetscInt exchanges = 0;          // times the free state's halo or fixed set was exchanged
   PetscInt feature_contacts = 0;   // vertex constraints from fixed bodies' sharp edges
   PetscInt projections = 0;        // last-resort projections, all steps, all ranks
   PetscLogDouble seconds = 0;      // wall time in contact detection and response
@@ -127,6 +129,9 @@ class ContactSolver {
   const GuardStatistics *guard_statistics() const {
     return guard_on_ ? &guard_.statistics() : nullptr;
   }
+  // Not collective. Bytes this rank sent in the free state's exchanges, and for the guard.
+  PetscInt64 exchange_bytes() const { return state_.bytes_sent(); }
+  PetscInt64 guard_bytes() const { return guard_on_ ? guard_.bytes_sent() : 0; }
   // Not collective. How often this rank built the free bodies' grids (only
   // when a vertex came within another free body's box or a fixed body's sharp
   // edge within a free body's).
@@ -153,7 +158,7 @@ class ContactSolver {
   // Collective. Whether a free body's box at x + dt v meets a fixed body with
   // sharp-edge points, or any rank rests a sharp-edge contact.
   PetscErrorCode FeaturesNear(Vec x, Vec v, PetscReal dt, bool *near);
-  PetscErrorCode GatherFreeState(Vec x, Vec v, PetscReal dt);
+  PetscErrorCode ExchangeFreeState(Vec x, Vec v, PetscReal dt, const StateNeeds &needs);
   // BeginStep's re-aiming of one resting contact.
   void ReaimFeatureContact(PetscInt local, const Contact &contact, const Point &velocity,
                            PetscReal dt);
@@ -185,14 +190,14 @@ class ContactSolver {
   const Scene *scene_ = nullptr;
   const DofLayout *layout_ = nullptr;
   ContactOptions options_;
-  bool ground_ = false;          // the ground is an obstacle
-  bool body_obstacles_ = false;  // bodies are obstacles (a free body meets another body)
-  bool free_obstacles_ = false;  // free bodies are obstacles to each other
-  bool guard_on_ = false;        // the collision guard runs after each step
-  bool holding_ = false;         // this step's solves hold vertices for the guard
-  bool track_free_ = false;      // the free bodies' grids are needed (free or feature obstacles)
-  bool gather_always_ = false;   // every call gathers (free obstacles, constraints, spreading)
-  bool features_near_ = false;   // this call's sharp-edge contacts need the free state
+  bool ground_ = false;           // the ground is an obstacle
+  bool body_obstacles_ = false;   // bodies are obstacles (a free body meets another body)
+  bool free_obstacles_ = false;   // free bodies are obstacles to each other
+  bool guard_on_ = false;         // the collision guard runs after each step
+  bool holding_ = false;          // this step's solves hold vertices for the guard
+  bool track_free_ = false;       // the free bodies' grids are needed (free or feature obstacles)
+  bool exchange_always_ = false;  // every call exchanges (free obstacles, constraints, spreading)
+  bool features_near_ = false;    // this call's sharp-edge contacts need the free state
   // The vertices checked against obstacles: (local, natural), this rank's.
   std::vector<std::pair<PetscInt, int32_t>> checked_vertices_;
   FreeState state_;

@@ -16,6 +16,8 @@ PetscErrorCode CheckContactOptions(MPI_Comm comm, const PetscReal bounds[2], Pet
              "option -restitution: must lie in [0, 1] (got %g)", (double)o->restitution);
   PetscCheck(o->gap > 0 && o->gap < 0.1, comm, PETSC_ERR_USER_INPUT,
              "option -contact_gap: must lie in (0, 0.1) edge lengths (got %g)", (double)o->gap);
+  PetscCheck(o->halo_reach >= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -contact_halo_reach: must be >= 1 tet edge (got %g)", (double)o->halo_reach);
   if (o->edge_bounds) {
     PetscCheck(nbounds == 2, comm, PETSC_ERR_USER_INPUT, "option -edge_bounds: expected lo,hi");
     o->edge_lower = bounds[0];
@@ -39,6 +41,7 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                                      {OptionSyntax::kBool, "-contact_guard"},
                                      {OptionSyntax::kReal, "-contact_gap"},
                                      {OptionSyntax::kBool, "-self_contact"},
+                                     {OptionSyntax::kReal, "-contact_halo_reach"},
                                      {OptionSyntax::kRealList, "-edge_bounds"}}));
   char path[PETSC_MAX_PATH_LEN] = "";
   PetscReal bounds[2] = {o->edge_lower, o->edge_upper};
@@ -85,6 +88,10 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                              "Guard each body's surface against itself (default: with any other "
                              "contact; 1 also for a lone body)",
                              nullptr, o->self_contact, &o->self_contact, &o->self_contact_set));
+  PetscCall(PetscOptionsReal("-contact_halo_reach",
+                             "Halo of contact: other ranks' vertices within this many of their "
+                             "body's longest tet edge of a rank's own (>= 1; huge: all near)",
+                             nullptr, o->halo_reach, &o->halo_reach, nullptr));
   PetscOptionsEnd();
   o->constraints_path = path;
   PetscCall(CheckContactOptions(comm, bounds, nbounds, o));

@@ -27,10 +27,15 @@ struct ContactOptions {
   // other contact unless -self_contact 0; -self_contact 1 also guards a lone body.
   PetscBool self_contact = PETSC_TRUE;
   PetscBool self_contact_set = PETSC_FALSE;
+  // The free state's halo (free_state.hpp): a rank receives other ranks'
+  // vertices within this many of their body's longest rest tet edge of its
+  // own. 3: a tet stretched less than threefold comes whole; a huge value
+  // sends every vertex near any box (what tests compare the halo with).
+  PetscReal halo_reach = 3;
 };
 
 // Collective. Reads -ground -restitution -friction -sharp_edges -impulse_spreading -constraints
-// -edge_bounds -contact_guard -contact_gap -self_contact.
+// -edge_bounds -contact_guard -contact_gap -self_contact -contact_halo_reach.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
 // Not collective. Whether contact may need the bodies' whole meshes on every

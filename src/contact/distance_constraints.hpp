@@ -49,6 +49,12 @@ class DistanceConstraints {
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const ContactOptions &options);
   bool empty() const { return constraints_.empty(); }
   size_t size() const { return constraints_.size(); }
+  // The constrained vertices (natural, with repeats): what Resolve reads and writes.
+  std::vector<int32_t> vertices() const {
+    std::vector<int32_t> ends;
+    for (const DistanceConstraint &c : constraints_) ends.insert(ends.end(), {c.a, c.b});
+    return ends;
+  }
   // Not collective; every rank must call it on the same gathered state.
   // pinned (natural vertex; null: none): vertices that do not move, as if fixed.
   Resolution Resolve(FreeState *state, const std::vector<char> *pinned = nullptr) const;

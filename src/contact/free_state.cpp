@@ -1,60 +1,67 @@
 #include "contact/free_state.hpp"
 
+#include <algorithm>
+
+#include "contact/halo.hpp"
+
 namespace softbody {
 
 FreeState::~FreeState() {
-  VecScatterDestroy(&to_all_);
-  VecDestroy(&all_x_);
-  VecDestroy(&all_v_);
+  VecScatterDestroy(&fixed_scatter_);
+  VecDestroy(&fixed_x_);
+  VecDestroy(&fixed_v_);
 }
 
-void FreeState::SetupBodies(const Scene &scene) {
+void FreeState::SetupBodies(const Scene &scene, double reach_in_edges) {
   const int32_t V = scene.num_vertices();
   num_bodies_ = scene.bodies.size();
   body_of_.resize(V);
   x_.resize(3 * static_cast<size_t>(V));
   v_.assign(3 * static_cast<size_t>(V), 0.0);
-  body_edge_.assign(scene.bodies.size(), 0.0);
-  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+  body_edge_.assign(num_bodies_, 0.0);
+  body_reach_.assign(num_bodies_, 0.0);
+  for (size_t b = 0; b < num_bodies_; ++b) {
     const Body &body = scene.bodies[b];
-    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v) {
+    const TetMesh &mesh = body.mesh;
+    for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
       body_of_[body.first_vertex + v] = static_cast<int32_t>(b);
-      for (int c = 0; c < 3; ++c) x_[3 * (body.first_vertex + v) + c] = body.mesh.vertices(v, c);
+      for (int c = 0; c < 3; ++c) x_[3 * (body.first_vertex + v) + c] = mesh.vertices(v, c);
     }
     double length = 0;
-    const auto edges = BoundaryEdges(body.mesh);
-    for (const auto &[a, c] : edges)
-      length += (body.mesh.vertices.row(c) - body.mesh.vertices.row(a)).norm();
+    const auto edges = BoundaryEdges(mesh);
+    for (const auto &[a, c] : edges) length += (mesh.vertices.row(c) - mesh.vertices.row(a)).norm();
     body_edge_[b] = edges.empty() ? 1.0 : length / edges.size();
+    double longest = 0;
+    for (int32_t t = 0; t < mesh.num_tets(); ++t)
+      for (int i = 0; i < 4; ++i)
+        for (int j = i + 1; j < 4; ++j)
+          longest = std::max(
+              longest,
+              (mesh.vertices.row(mesh.tets(t, i)) - mesh.vertices.row(mesh.tets(t, j))).norm());
+    body_reach_[b] = reach_in_edges * longest;
   }
 }
 
 PetscErrorCode FreeState::SetupMasses(MPI_Comm comm, const DofLayout &layout, Vec lumped_mass,
-                                      bool gather) {
+                                      bool halo, bool same_body) {
   PetscFunctionBeginUser;
+  comm_ = comm;
   layout_ = &layout;
+  same_body_ = same_body;
   owned_natural_.assign(layout.natural_of_owned.begin(), layout.natural_of_owned.end());
-  inverse_mass_.assign(body_of_.size(), 0.0);
-  if (gather)
-    PetscCall(GatherInverseMasses(layout, lumped_mass));
-  else
-    PetscCall(OwnInverseMasses(layout, lumped_mass));
+  const int32_t V = static_cast<int32_t>(body_of_.size());
+  free_.assign(V, 0);
+  stamp_.assign(V, 0);
+  static_box_.assign(num_bodies_, Box());
+  for (int32_t n = 0; n < V; ++n) {
+    free_[n] = layout.PetscVertexOfNatural(n) >= 0;
+    if (!free_[n]) static_box_[body_of_[n]].Extend(position(n));
+  }
+  body_box_ = static_box_;
+  inverse_mass_.assign(V, 0.0);
+  PetscCall(OwnInverseMasses(layout, lumped_mass));
   PetscCall(SumBodyMasses(comm));
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
-// Every free vertex's inverse mass on every rank; also creates the scatter Gather uses.
-PetscErrorCode FreeState::GatherInverseMasses(const DofLayout &layout, Vec lumped_mass) {
-  PetscFunctionBeginUser;
-  PetscCall(VecScatterCreateToAll(lumped_mass, &to_all_, &all_x_));
-  PetscCall(VecDuplicate(all_x_, &all_v_));
-  PetscCall(VecScatterBegin(to_all_, lumped_mass, all_x_, INSERT_VALUES, SCATTER_FORWARD));
-  PetscCall(VecScatterEnd(to_all_, lumped_mass, all_x_, INSERT_VALUES, SCATTER_FORWARD));
-  const PetscScalar *mass;
-  PetscCall(VecGetArrayRead(all_x_, &mass));
-  for (PetscInt f = 0; f < layout.num_free(); ++f)
-    inverse_mass_[layout.natural_of_free[f]] = 1.0 / mass[3 * layout.petsc_of_free[f]];
-  PetscCall(VecRestoreArrayRead(all_x_, &mass));
+  if (halo) PetscCall(neighbours_.Setup(comm));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -81,24 +88,138 @@ PetscErrorCode FreeState::SumBodyMasses(MPI_Comm comm) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode FreeState::Gather(Vec x, Vec v, PetscReal dt) {
+PetscErrorCode FreeState::SetupFixedSet(Vec lumped_mass, const std::vector<int32_t> &naturals) {
   PetscFunctionBeginUser;
-  for (auto [from, to] : {std::pair<Vec, Vec>(x, all_x_), std::pair<Vec, Vec>(v, all_v_)}) {
-    PetscCall(VecScatterBegin(to_all_, from, to, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(to_all_, from, to, INSERT_VALUES, SCATTER_FORWARD));
-  }
+  for (const int32_t n : naturals)
+    if (free_[n]) fixed_set_.push_back(n);
+  std::sort(fixed_set_.begin(), fixed_set_.end());
+  fixed_set_.erase(std::unique(fixed_set_.begin(), fixed_set_.end()), fixed_set_.end());
+  std::vector<PetscInt> dofs;
+  for (const int32_t n : fixed_set_)
+    for (int c = 0; c < 3; ++c) dofs.push_back(3 * layout_->PetscVertexOfNatural(n) + c);
+  IS from;
+  PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(dofs.size()), dofs.data(),
+                            PETSC_COPY_VALUES, &from));
+  PetscCall(VecCreateSeq(PETSC_COMM_SELF, static_cast<PetscInt>(dofs.size()), &fixed_x_));
+  PetscCall(VecDuplicate(fixed_x_, &fixed_v_));
+  PetscCall(VecScatterCreate(lumped_mass, from, fixed_x_, nullptr, &fixed_scatter_));
+  PetscCall(ISDestroy(&from));
+  PetscCall(VecScatterBegin(fixed_scatter_, lumped_mass, fixed_x_, INSERT_VALUES, SCATTER_FORWARD));
+  PetscCall(VecScatterEnd(fixed_scatter_, lumped_mass, fixed_x_, INSERT_VALUES, SCATTER_FORWARD));
+  const PetscScalar *mass;
+  PetscCall(VecGetArrayRead(fixed_x_, &mass));
+  for (size_t k = 0; k < fixed_set_.size(); ++k) inverse_mass_[fixed_set_[k]] = 1.0 / mass[3 * k];
+  PetscCall(VecRestoreArrayRead(fixed_x_, &mass));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode FreeState::Exchange(Vec x, Vec v, PetscReal dt, const StateNeeds &needs) {
+  PetscFunctionBeginUser;
+  ++stamp_now_;
+  current_free_.clear();
+  std::vector<Box> owned_boxes;
+  PetscCall(WriteOwnedState(x, v, dt, &owned_boxes));
+  PetscCall(ReduceBodyBoxes(owned_boxes));
+  if (needs.halo) PetscCall(ExchangeHalo(owned_boxes));
+  if (needs.fixed_set) PetscCall(FetchFixedSet(x, v, dt));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode FreeState::WriteOwnedState(Vec x, Vec v, PetscReal dt, std::vector<Box> *boxes) {
+  PetscFunctionBeginUser;
+  boxes->assign(num_bodies_, Box());
   const PetscScalar *ax, *av;
-  PetscCall(VecGetArrayRead(all_x_, &ax));
-  PetscCall(VecGetArrayRead(all_v_, &av));
-  for (PetscInt f = 0; f < layout_->num_free(); ++f) {
-    const PetscInt n = layout_->natural_of_free[f], p = layout_->petsc_of_free[f];
+  PetscCall(VecGetArrayRead(x, &ax));
+  PetscCall(VecGetArrayRead(v, &av));
+  for (size_t p = 0; p < owned_natural_.size(); ++p) {
+    const int32_t n = owned_natural_[p];
     for (int c = 0; c < 3; ++c) {
       x_[3 * n + c] = ax[3 * p + c] + dt * av[3 * p + c];
       v_[3 * n + c] = av[3 * p + c];
     }
+    (*boxes)[body_of_[n]].Extend(position(n));
+    MarkCurrent(n);
   }
-  PetscCall(VecRestoreArrayRead(all_x_, &ax));
-  PetscCall(VecRestoreArrayRead(all_v_, &av));
+  PetscCall(VecRestoreArrayRead(x, &ax));
+  PetscCall(VecRestoreArrayRead(v, &av));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// MPI_MAX over (-lower, upper) of every rank's boxes.
+PetscErrorCode FreeState::ReduceBodyBoxes(const std::vector<Box> &owned_boxes) {
+  PetscFunctionBeginUser;
+  std::vector<double> bounds(6 * num_bodies_);
+  for (size_t b = 0; b < num_bodies_; ++b)
+    for (int c = 0; c < 3; ++c) {
+      bounds[6 * b + c] = -owned_boxes[b].lower[c];
+      bounds[6 * b + 3 + c] = owned_boxes[b].upper[c];
+    }
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bounds.data(), static_cast<int>(bounds.size()),
+                             MPI_DOUBLE, MPI_MAX, comm_));
+  for (size_t b = 0; b < num_bodies_; ++b) {
+    body_box_[b] = static_box_[b];
+    Box moving;
+    moving.lower = -Point(&bounds[6 * b]);
+    moving.upper = Point(&bounds[6 * b + 3]);
+    if (!moving.Empty()) body_box_[b].Extend(moving);
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
+  PetscFunctionBeginUser;
+  std::vector<RankBox> others;
+  PetscCall(GatherRankBoxes(comm_, owned_boxes, &others, &bytes_sent_));
+  std::vector<PetscMPIInt> ranks, counts;
+  std::vector<int32_t> items;
+  SelectForRanks(
+      others, owned_natural_.size(),
+      [&](int32_t p, const RankBox &box) {
+        const int32_t n = owned_natural_[p], body = body_of_[n];
+        return (same_body_ || box.body != body) &&
+               box.box().Contains(position(n), body_reach_[body]);
+      },
+      &ranks, &counts, &items);
+  std::vector<HaloVertex> records, received;
+  for (const int32_t p : items) {
+    const int32_t n = owned_natural_[p];
+    HaloVertex h{n, {}, {}, inverse_mass_[n]};
+    std::copy(&x_[3 * n], &x_[3 * n] + 3, h.x);
+    std::copy(&v_[3 * n], &v_[3 * n] + 3, h.v);
+    records.push_back(h);
+  }
+  PetscInt64 bytes;
+  PetscCall(neighbours_.Exchange(ranks, counts, records, &received, &bytes));
+  bytes_sent_ += bytes;
+  for (const HaloVertex &h : received) {
+    const int32_t n = h.natural;
+    std::copy(h.x, h.x + 3, &x_[3 * n]);
+    std::copy(h.v, h.v + 3, &v_[3 * n]);
+    inverse_mass_[n] = h.inverse_mass;
+    MarkCurrent(n);
+  }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode FreeState::FetchFixedSet(Vec x, Vec v, PetscReal dt) {
+  PetscFunctionBeginUser;
+  for (auto [from, to] : {std::pair<Vec, Vec>(x, fixed_x_), std::pair<Vec, Vec>(v, fixed_v_)}) {
+    PetscCall(VecScatterBegin(fixed_scatter_, from, to, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(fixed_scatter_, from, to, INSERT_VALUES, SCATTER_FORWARD));
+  }
+  const PetscScalar *ax, *av;
+  PetscCall(VecGetArrayRead(fixed_x_, &ax));
+  PetscCall(VecGetArrayRead(fixed_v_, &av));
+  for (size_t k = 0; k < fixed_set_.size(); ++k) {
+    const int32_t n = fixed_set_[k];
+    for (int c = 0; c < 3; ++c) {
+      x_[3 * n + c] = ax[3 * k + c] + dt * av[3 * k + c];
+      v_[3 * n + c] = av[3 * k + c];
+    }
+    MarkCurrent(n);
+  }
+  PetscCall(VecRestoreArrayRead(fixed_x_, &ax));
+  PetscCall(VecRestoreArrayRead(fixed_v_, &av));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -1,12 +1,25 @@
-// The state that contact queries read, in natural vertex order on every rank:
-// world positions (m) and velocities (m/s) of all vertices, inverse lumped
-// masses (1/kg; 0 for fixed and stray vertices), each vertex's body, and per
-// body its mean boundary edge length (m) and total lumped mass (kg).
+// The state that contact queries read, in natural vertex order: world
+// positions (m) and velocities (m/s), inverse lumped masses (1/kg; 0 for fixed
+// and stray vertices), each vertex's body, and per body its mean boundary edge
+// length (m), total lumped mass (kg) and bounding box.
 //
-// Fixed vertices keep their rest positions and zero velocity. Free vertices
-// are filled by Gather, which brings every rank's free vertices to every rank;
-// without gathering, only this rank's own vertices are read (the ground and
-// fixed bodies need no more).
+// Fixed vertices keep their rest positions and zero velocity and are always
+// current. Exchange writes this rank's own vertices and brings, when asked,
+// two kinds of other ranks' vertices (nothing else is current; queries must
+// read only current vertices, see current()):
+// - the halo: the vertices of other bodies (and, with `same_body` on, of its
+//   own bodies) that lie within reach of this rank's own vertices of a body: each rank's per-body
+//   boxes at x + dt v are gathered (a few boxes per rank), each rank sends its vertices inside
+//   another's boxes, inflated by the vertex's body's reach, point to point
+//   (neighbour_exchange.hpp): messages follow the contact zone, not the mesh;
+// - the fixed set (SetupFixedSet): vertices every rank reads whenever asked,
+//   e.g. the distance constraints' (a scatter of just them).
+// The reach of a body is -contact_halo_reach (contact_options.hpp) times its
+// longest rest tet edge: every tet and boundary triangle of another body that
+// meets this rank's box, and is stretched less than that, comes whole.
+//
+// Arrays are natural-indexed on every rank (O(vertices) memory, as the
+// replicated meshes contact still needs); the messages are O(halo).
 #pragma once
 
 #include <petscvec.h>
@@ -14,11 +27,18 @@
 #include <cstdint>
 #include <vector>
 
+#include "common/neighbour_exchange.hpp"
 #include "contact/geometry.hpp"
 #include "fem/partition.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
+
+// What an Exchange brings besides this rank's own vertices.
+struct StateNeeds {
+  bool halo = false;       // other ranks' vertices near this rank's
+  bool fixed_set = false;  // the vertices of SetupFixedSet
+};
 
 class FreeState {
  public:
@@ -27,13 +47,20 @@ class FreeState {
   FreeState &operator=(const FreeState &) = delete;
   ~FreeState();
 
-  // Not collective. Bodies, rest positions and mean boundary edge lengths.
-  void SetupBodies(const Scene &scene);
-  // Collective. Owned vertices, inverse masses (all free vertices' when
-  // `gather`, which also prepares Gather; else this rank's own) and body masses.
-  PetscErrorCode SetupMasses(MPI_Comm comm, const DofLayout &layout, Vec lumped_mass, bool gather);
-  // Collective. Free vertices at x + dt v (dt = 0: at x), velocities v, from all ranks.
-  PetscErrorCode Gather(Vec x, Vec v, PetscReal dt);
+  // Not collective. Bodies, rest positions, boundary edges and reaches
+  // (reach_in_edges: the halo's, in longest rest tet edges).
+  void SetupBodies(const Scene &scene, double reach_in_edges);
+  // Collective. Owned vertices, their inverse masses, the body masses; the halo
+  // exchange when `halo`, bringing other ranks' vertices of this rank's own
+  // bodies too when `same_body` (sharp-edge points meet a body's own tets).
+  PetscErrorCode SetupMasses(MPI_Comm comm, const DofLayout &layout, Vec lumped_mass, bool halo,
+                             bool same_body);
+  // Collective. The vertices (natural) that every Exchange with needs.fixed_set
+  // brings to every rank; their inverse masses fetched now.
+  PetscErrorCode SetupFixedSet(Vec lumped_mass, const std::vector<int32_t> &naturals);
+  // Collective. This rank's vertices at x + dt v (dt = 0: at x) and velocities
+  // v, the free bodies' boxes there, and what `needs` asks for.
+  PetscErrorCode Exchange(Vec x, Vec v, PetscReal dt, const StateNeeds &needs);
   // Not collective. Writes this rank's vertices of the world arrays into x and v.
   PetscErrorCode WriteOwned(Vec x, Vec v) const;
 
@@ -45,25 +72,65 @@ class FreeState {
   int32_t body_of(int32_t natural) const { return body_of_[natural]; }
   double edge(size_t body) const { return body_edge_[body]; }
   double mass(size_t body) const { return body_mass_[body]; }
+  // The halo's reach for the body's vertices (m).
+  double reach(size_t body) const { return body_reach_[body]; }
+  // Whether the vertex has unknowns (moves).
+  bool is_free(int32_t natural) const { return free_[natural]; }
+  // Whether the arrays hold the vertex's state of the last Exchange (fixed
+  // vertices always).
+  bool current(int32_t natural) const { return !free_[natural] || stamp_[natural] == stamp_now_; }
+  // The free vertices the last Exchange brought or wrote, owned first.
+  const std::vector<int32_t> &current_free() const { return current_free_; }
+  // A free body's box at the last Exchange's positions (all ranks' vertices).
+  const Box &body_box(size_t body) const { return body_box_[body]; }
+  // Bytes this rank sent in exchanges (halo records, boxes, fixed set), all calls.
+  PetscInt64 bytes_sent() const { return bytes_sent_; }
   // Local vertex -> natural vertex.
   const std::vector<int32_t> &owned_natural() const { return owned_natural_; }
   PetscInt local_count() const { return static_cast<PetscInt>(owned_natural_.size()); }
 
  private:
-  PetscErrorCode GatherInverseMasses(const DofLayout &layout, Vec lumped_mass);
+  // A vertex travelling in the halo.
+  struct HaloVertex {
+    int32_t natural;
+    double x[3], v[3], inverse_mass;
+  };
   PetscErrorCode OwnInverseMasses(const DofLayout &layout, Vec lumped_mass);
   PetscErrorCode SumBodyMasses(MPI_Comm comm);
+  // Writes the owned vertices; *boxes: their box per body.
+  PetscErrorCode WriteOwnedState(Vec x, Vec v, PetscReal dt, std::vector<Box> *boxes);
+  // Collective. body_box_: every rank's boxes joined, and the non-free vertices'.
+  PetscErrorCode ReduceBodyBoxes(const std::vector<Box> &owned_boxes);
+  PetscErrorCode ExchangeHalo(const std::vector<Box> &owned_boxes);
+  PetscErrorCode FetchFixedSet(Vec x, Vec v, PetscReal dt);
+  void MarkCurrent(int32_t natural) {
+    if (stamp_[natural] != stamp_now_) current_free_.push_back(natural);
+    stamp_[natural] = stamp_now_;
+  }
 
+  MPI_Comm comm_ = MPI_COMM_NULL;
   const DofLayout *layout_ = nullptr;
   size_t num_bodies_ = 0;
+  bool same_body_ = false;
   std::vector<int32_t> body_of_;        // natural vertex -> body
+  std::vector<char> free_;              // natural vertex -> has unknowns
   std::vector<int32_t> owned_natural_;  // local vertex -> natural vertex
   std::vector<double> inverse_mass_;    // natural vertex (0: fixed or stray)
-  std::vector<double> x_, v_;           // natural, 3 per vertex (free ones gathered)
-  std::vector<double> body_edge_;       // mean boundary edge length per body
-  std::vector<double> body_mass_;       // total lumped mass per body (kg)
-  VecScatter to_all_ = nullptr;
-  Vec all_x_ = nullptr, all_v_ = nullptr;
+  std::vector<double> x_, v_;           // natural, 3 per vertex
+  std::vector<uint32_t> stamp_;         // natural vertex -> exchange that wrote it
+  uint32_t stamp_now_ = 1;
+  std::vector<int32_t> current_free_;
+  std::vector<double> body_edge_;   // mean boundary edge length per body
+  std::vector<double> body_reach_;  // halo reach per body (m)
+  std::vector<double> body_mass_;   // total lumped mass per body (kg)
+  std::vector<Box> body_box_;       // per body, at the last exchange
+  std::vector<Box> static_box_;     // per body, its vertices without unknowns
+  NeighbourExchange neighbours_;
+  PetscInt64 bytes_sent_ = 0;
+  // The fixed set: its free vertices (natural) and their DOFs gathered.
+  std::vector<int32_t> fixed_set_;
+  VecScatter fixed_scatter_ = nullptr;
+  Vec fixed_x_ = nullptr, fixed_v_ = nullptr;
 };
 
 }  // namespace softbody

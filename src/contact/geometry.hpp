@@ -66,6 +66,8 @@ std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh);
 class UniformGrid {
  public:
   void Build(const std::vector<Box> &boxes);
+  // Only `items` (increasing indices into boxes; the others' boxes are not read).
+  void Build(const std::vector<Box> &boxes, const std::vector<int32_t> &items);
   bool empty() const { return item_start_.empty(); }
   // Items whose cells overlap the box around p of half-width radius (each once
   // per cell: callers may see an item more than once).
@@ -104,7 +106,7 @@ class UniformGrid {
   Eigen::Array3i cells_ = Eigen::Array3i::Zero();
   std::vector<int64_t> cell_start_;  // CSR over cells
   std::vector<int32_t> items_;
-  std::vector<int32_t> item_start_;  // marks the grid as built
+  std::vector<int32_t> item_start_;  // non-empty: the grid holds items
 };
 
 }  // namespace softbody

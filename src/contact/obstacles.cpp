@@ -1,6 +1,7 @@
 #include "contact/obstacles.hpp"
 
 #include <Eigen/Geometry>
+#include <numeric>
 
 namespace softbody {
 
@@ -15,6 +16,13 @@ constexpr double kInsideTolerance = 1e-12;
 constexpr double kBoxMargin = 1e-12;
 // Where an entry search starts: beyond the segment's fraction range [0, 1].
 constexpr double kNoCrossing = 2;
+// Closest triangles whose distances differ by less than this fraction of the
+// obstacle's mean boundary edge are a tie, broken by the lower index: a point
+// near an edge of the obstacle is nearly as close to both faces, and which one
+// round-off (1e-16 relative: another rank count, another summation order) makes
+// closer must not decide its normal. 1e-9: far above round-off in positions of
+// order 1-100 m, far below any geometric difference that matters.
+constexpr double kTieOfEdge = 1e-9;
 
 }  // namespace
 
@@ -30,9 +38,48 @@ void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool gro
 void Obstacles::SetupBodies(bool track_free) {
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (scene_->bodies[b].fixed || track_free) AddBody(b);
-  BuildBodyBoxes(true);
-  BuildGrids(fixed_tets_, fixed_triangles_, &fixed_tet_box_, &fixed_tet_grid_,
-             &fixed_triangle_grid_);
+  BuildFixedBodyBoxes();
+  std::vector<int32_t> tets(fixed_tets_.size()), triangles(fixed_triangles_.size());
+  std::iota(tets.begin(), tets.end(), 0);
+  std::iota(triangles.begin(), triangles.end(), 0);
+  std::vector<Box> triangle_boxes;
+  BinItems(fixed_tets_, tets, &fixed_tet_box_, &fixed_tet_grid_);
+  BinItems(fixed_triangles_, triangles, &triangle_boxes, &fixed_triangle_grid_);
+  if (track_free) IndexFreeItems();
+}
+
+namespace {
+
+// CSR of the items (first N entries: natural vertices) by vertex, over V
+// vertices; the vertices that `counts` rejects are left out.
+template <size_t N, class Counts>
+void IndexByVertex(const std::vector<std::array<int32_t, N>> &items, size_t corners, int32_t V,
+                   Counts counts, std::vector<int64_t> *start, std::vector<int32_t> *of_vertex) {
+  start->assign(static_cast<size_t>(V) + 1, 0);
+  for (const auto &item : items)
+    for (size_t a = 0; a < corners; ++a)
+      if (counts(item[a])) ++(*start)[item[a] + 1];
+  for (int32_t n = 0; n < V; ++n) (*start)[n + 1] += (*start)[n];
+  of_vertex->resize((*start)[V]);
+  std::vector<int64_t> next(start->begin(), start->end() - 1);
+  for (size_t t = 0; t < items.size(); ++t)
+    for (size_t a = 0; a < corners; ++a)
+      if (counts(items[t][a])) (*of_vertex)[next[items[t][a]]++] = static_cast<int32_t>(t);
+}
+
+}  // namespace
+
+void Obstacles::IndexFreeItems() {
+  const int32_t V = scene_->num_vertices();
+  auto is_free = [&](int32_t n) { return state_->is_free(n); };
+  IndexByVertex(free_tets_, 4, V, is_free, &tets_start_, &tets_of_vertex_);
+  IndexByVertex(free_triangles_, 3, V, is_free, &triangles_start_, &triangles_of_vertex_);
+  for (size_t t = 0; t < free_tets_.size(); ++t)
+    if (std::none_of(free_tets_[t].begin(), free_tets_[t].begin() + 4, is_free))
+      static_tets_.push_back(static_cast<int32_t>(t));
+  for (size_t t = 0; t < free_triangles_.size(); ++t)
+    if (std::none_of(free_triangles_[t].begin(), free_triangles_[t].begin() + 3, is_free))
+      static_triangles_.push_back(static_cast<int32_t>(t));
 }
 
 void Obstacles::AddBody(size_t b) {
@@ -51,38 +98,59 @@ void Obstacles::AddBody(size_t b) {
 }
 
 void Obstacles::MoveFreeBodies() {
-  BuildBodyBoxes(false);
+  for (size_t b = 0; b < scene_->bodies.size(); ++b)
+    if (!scene_->bodies[b].fixed) body_box_[b] = state_->body_box(b);
   free_grids_current_ = false;
 }
 
-void Obstacles::BuildBodyBoxes(bool fixed_part) {
+void Obstacles::BuildFixedBodyBoxes() {
   body_box_.resize(scene_->bodies.size());
   for (size_t b = 0; b < scene_->bodies.size(); ++b) {
     const Body &body = scene_->bodies[b];
-    if (body.fixed != fixed_part) continue;
+    if (!body.fixed) continue;
     body_box_[b] = Box();
     for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
       body_box_[b].Extend(WorldPoint(body.first_vertex + v));
   }
 }
 
-void Obstacles::BuildGrids(const std::vector<std::array<int32_t, 5>> &tets,
-                           const std::vector<std::array<int32_t, 4>> &triangles,
-                           std::vector<Box> *tet_boxes, UniformGrid *tet_grid,
-                           UniformGrid *triangle_grid) const {
-  tet_boxes->assign(tets.size(), Box());
-  for (size_t t = 0; t < tets.size(); ++t)
-    for (int a = 0; a < 4; ++a) (*tet_boxes)[t].Extend(WorldPoint(tets[t][a]));
-  tet_grid->Build(*tet_boxes);
-  std::vector<Box> boxes(triangles.size(), Box());
-  for (size_t t = 0; t < triangles.size(); ++t)
-    for (int a = 0; a < 3; ++a) boxes[t].Extend(WorldPoint(triangles[t][a]));
-  triangle_grid->Build(boxes);
+template <size_t N>
+void Obstacles::BinItems(const std::vector<std::array<int32_t, N>> &items,
+                         const std::vector<int32_t> &which, std::vector<Box> *boxes,
+                         UniformGrid *grid) const {
+  boxes->resize(items.size());
+  for (const int32_t t : which) {
+    (*boxes)[t] = Box();
+    for (size_t a = 0; a + 1 < N; ++a) (*boxes)[t].Extend(WorldPoint(items[t][a]));
+  }
+  grid->Build(*boxes, which);
+}
+
+template <size_t N>
+std::vector<int32_t> Obstacles::CurrentItems(const std::vector<std::array<int32_t, N>> &items,
+                                             const std::vector<int64_t> &start,
+                                             const std::vector<int32_t> &of_vertex,
+                                             const std::vector<int32_t> &static_items) const {
+  std::vector<int32_t> current = static_items;
+  for (const int32_t n : state_->current_free())
+    for (int64_t k = start[n]; k < start[n + 1]; ++k) {
+      const auto &item = items[of_vertex[k]];
+      if (std::all_of(item.begin(), item.begin() + (N - 1),
+                      [&](int32_t m) { return state_->current(m); }))
+        current.push_back(of_vertex[k]);
+    }
+  std::sort(current.begin(), current.end());
+  current.erase(std::unique(current.begin(), current.end()), current.end());
+  return current;
 }
 
 void Obstacles::EnsureFreeGrids() const {
   if (free_grids_current_) return;
-  BuildGrids(free_tets_, free_triangles_, &free_tet_box_, &free_tet_grid_, &free_triangle_grid_);
+  BinItems(free_tets_, CurrentItems(free_tets_, tets_start_, tets_of_vertex_, static_tets_),
+           &free_tet_box_, &free_tet_grid_);
+  BinItems(free_triangles_,
+           CurrentItems(free_triangles_, triangles_start_, triangles_of_vertex_, static_triangles_),
+           &free_triangle_box_, &free_triangle_grid_);
   free_grids_current_ = true;
   ++free_grid_builds_;
 }
@@ -104,8 +172,12 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
                        (grid.bounds().upper - p).norm() + (grid.bounds().lower - p).norm();
   double best = kUnbounded;
-  // Growing neighbourhoods until the closest point found lies within the searched one.
-  for (double radius = grid.cell_size(); best > radius && radius < 2 * limit; radius *= 2)
+  int32_t chosen = -1;
+  const double tie = kTieOfEdge * state_->edge(obstacle);
+  // Growing neighbourhoods until the closest point found lies within the one
+  // searched: every triangle nearer than it meets that neighbourhood.
+  for (double radius = grid.cell_size(), searched = 0; best > searched && searched < 2 * limit;
+       searched = radius, radius *= 2)
     grid.ForEachNear(p, radius, [&](int32_t t) {
       const auto &tri = triangles[t];
       if (tri[3] != obstacle) return;
@@ -114,8 +186,10 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
       const Point q = ClosestPointOnTriangle(p, a, b, c, &w);
       const double distance = (q - p).norm();
       const Point normal = (b - a).cross(c - a);
-      if (distance >= best || !(normal.norm() > 0)) return;
+      if (distance > best + tie || (distance >= best - tie && t >= chosen) || !(normal.norm() > 0))
+        return;
       best = distance;
+      chosen = t;
       hit->point = q;
       hit->normal = normal.normalized();
       hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
@@ -170,6 +244,7 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
   const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
   const Point direction = end - start;
   double first = kNoCrossing;
+  int32_t chosen = -1;
   grid.ForEachNear(0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(), [&](int32_t t) {
     const auto &tri = triangles[t];
     if (tri[3] != obstacle) return;
@@ -178,9 +253,10 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
     double along;
     Eigen::Vector3d w;
     if (normal.dot(direction) >= 0 || !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) ||
-        along >= first)
+        along > first || (along == first && t >= chosen))
       return;
     first = along;
+    chosen = t;
     hit->point = start + along * direction;
     hit->normal = normal.normalized();
     hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
@@ -217,17 +293,18 @@ int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
                                   const VertexObstacles &skip) const {
   const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
   const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
-  int32_t inside = -1;
+  int32_t first = -1;  // the lowest tet holding p
   (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
     const auto &tet = tets[t];
-    if (inside >= 0 || tet[4] == body || skip.Has(tet[4]) || !tet_boxes[t].Contains(p, kBoxMargin))
+    if ((first >= 0 && t >= first) || tet[4] == body || skip.Has(tet[4]) ||
+        !tet_boxes[t].Contains(p, kBoxMargin))
       return;
     if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
                     WorldPoint(tet[3]))
             .minCoeff() >= -kInsideTolerance)
-      inside = tet[4];
+      first = t;
   });
-  return inside;
+  return first >= 0 ? tets[first][4] : -1;
 }
 
 bool Obstacles::OnFixedSurface(const Point &x, const Point &direction, double min_cosine) const {

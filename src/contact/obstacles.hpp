@@ -7,7 +7,11 @@
 // once; the free bodies' boxes follow them (MoveFreeBodies) and their grids
 // are rebuilt lazily, when a query first needs them, so that a step whose
 // bodies' boxes stay apart builds none. Positions and velocities are read
-// from FreeState (world coordinates). Not collective.
+// from FreeState (world coordinates); the free grids hold only the tets and
+// triangles whose vertices are all current there (this rank's and its halo's),
+// found from the current vertices, so a rebuild costs O(local + halo). Queries
+// break ties of distance by the lower triangle or tet index, so that answers
+// do not depend on which items a rank's grid holds. Not collective.
 #pragma once
 
 #include <algorithm>
@@ -53,8 +57,8 @@ class Obstacles {
   // obstacles to each other or meet sharp edges); builds the fixed grids.
   void SetupBodies(bool track_free);
 
-  // The free bodies moved (FreeState holds their new positions): their boxes
-  // follow, their grids are stale.
+  // The free bodies moved (FreeState holds their new positions and boxes):
+  // their boxes follow, their grids are stale.
   void MoveFreeBodies();
 
   // The first obstacle other than `body` and those in `skip` that contains p
@@ -89,12 +93,20 @@ class Obstacles {
  private:
   // A body's tets and boundary triangles, as natural vertices + body.
   void AddBody(size_t b);
-  void BuildBodyBoxes(bool fixed_part);
+  void BuildFixedBodyBoxes();
+  // Each free vertex's tets and triangles (CSR), and those with no free vertex.
+  void IndexFreeItems();
+  // The free items (tets: 4 vertices, triangles: 3) whose vertices are all current.
+  template <size_t N>
+  std::vector<int32_t> CurrentItems(const std::vector<std::array<int32_t, N>> &items,
+                                    const std::vector<int64_t> &start,
+                                    const std::vector<int32_t> &of_vertex,
+                                    const std::vector<int32_t> &static_items) const;
   void EnsureFreeGrids() const;
-  // Each tet's box, and the tets' and triangles' grids, at the world positions.
-  void BuildGrids(const std::vector<std::array<int32_t, 5>> &tets,
-                  const std::vector<std::array<int32_t, 4>> &triangles, std::vector<Box> *tet_boxes,
-                  UniformGrid *tet_grid, UniformGrid *triangle_grid) const;
+  // The boxes of the listed items (`which`, increasing) at the world positions, binned.
+  template <size_t N>
+  void BinItems(const std::vector<std::array<int32_t, N>> &items, const std::vector<int32_t> &which,
+                std::vector<Box> *boxes, UniformGrid *grid) const;
   // The first body other than `body` and those in `skip` in whose tets of the
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
@@ -115,6 +127,11 @@ class Obstacles {
   std::vector<Box> body_box_;       // broad phase: each obstacle body's bounding box
   std::vector<Box> fixed_tet_box_;  // each obstacle tet's box (cheap rejection)
   mutable std::vector<Box> free_tet_box_;
+  mutable std::vector<Box> free_triangle_box_;
+  // Free items by vertex (CSR over natural vertices) and those without a free vertex.
+  std::vector<int64_t> tets_start_, triangles_start_;
+  std::vector<int32_t> tets_of_vertex_, triangles_of_vertex_;
+  std::vector<int32_t> static_tets_, static_triangles_;
 };
 
 }  // namespace softbody

@@ -60,9 +60,18 @@ bool Wanted(const CollisionQuery &q, bool same_body, const std::array<int32_t, 4
   return vertex_triangle ? (v[0] != v[1] && v[0] != v[2] && v[0] != v[3]) : !Shares(v);
 }
 
+// Whether this rank tests the pair: its lowest moving vertex is owned.
+bool Owned(const CollisionQuery &q, const std::array<int32_t, 4> &v) {
+  if (!q.owned) return true;
+  int32_t lowest = -1;
+  for (const int32_t k : v)
+    if ((*q.moving)[k] && (lowest < 0 || k < lowest)) lowest = k;
+  return lowest >= 0 && (*q.owned)[lowest];
+}
+
 void Test(const CollisionQuery &q, bool same_body, const std::array<int32_t, 4> &v,
           bool vertex_triangle, std::vector<SurfaceCollision> *out, CollisionCount *count) {
-  if (!Wanted(q, same_body, v, vertex_triangle)) return;
+  if (!Wanted(q, same_body, v, vertex_triangle) || !Owned(q, v)) return;
   ++count->candidates;
   MovingPair pair;
   for (int k = 0; k < 4; ++k) {
@@ -141,7 +150,7 @@ void GroundCollisions(const CollisionQuery &q, std::vector<SurfaceCollision> *ou
   // As ccd.hpp: the height is linear in t, so the end is the step's lowest point.
   const double separation = q.ground_y + q.tolerance.separation;
   for (int32_t v = 0; v < q.surface->num_vertices(); ++v) {
-    if (!(*q.moving)[v] || (q.changed && !(*q.changed)[v])) continue;
+    if (!(*q.moving)[v] || (q.changed && !(*q.changed)[v]) || (q.owned && !(*q.owned)[v])) continue;
     const double start = (*q.start)[v][1], end = (*q.end)[v][1];
     if (start <= separation) {
       if (end < start) ++count->close;
@@ -157,10 +166,29 @@ bool AnyMoving(const CollisionQuery &q, const std::array<int32_t, N> &vertices) 
   return std::any_of(vertices.begin(), vertices.end(), [&](int32_t v) { return (*q.moving)[v]; });
 }
 
+// The listed primitives whose vertices are all usable (all without q.usable).
+template <size_t N>
+std::vector<int32_t> Usable(const CollisionQuery &q, const std::vector<int32_t> &ids,
+                            const std::vector<std::array<int32_t, N>> &vertices) {
+  if (!q.usable) return ids;
+  std::vector<int32_t> kept;
+  for (const int32_t i : ids)
+    if (std::all_of(vertices[i].begin(), vertices[i].end(),
+                    [&](int32_t v) { return (*q.usable)[v]; }))
+      kept.push_back(i);
+  return kept;
+}
+
 std::vector<int32_t> Range(int32_t begin, int32_t end) {
   std::vector<int32_t> range(end - begin);
   for (int32_t i = begin; i < end; ++i) range[i - begin] = i;
   return range;
+}
+
+std::vector<std::array<int32_t, 1>> Singles(int32_t count) {
+  std::vector<std::array<int32_t, 1>> singles(count);
+  for (int32_t v = 0; v < count; ++v) singles[v] = {v};
+  return singles;
 }
 
 }  // namespace
@@ -190,29 +218,39 @@ std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery 
   std::vector<SurfaceCollision> out;
   const ContactSurface &s = *q.surface;
   if (q.ground) GroundCollisions(q, &out, count);
+  const std::vector<std::array<int32_t, 1>> singles =
+      q.usable ? Singles(s.num_vertices()) : std::vector<std::array<int32_t, 1>>();
+  auto vertices_of = [&](const std::vector<int32_t> &ids) {
+    return q.usable ? Usable(q, ids, singles) : ids;
+  };
+  const std::vector<int32_t> vertices = vertices_of(moving_vertices_),
+                             triangles = Usable(q, moving_triangles_, s.triangles),
+                             edges = Usable(q, moving_edges_, s.edges);
   // The moving primitives against the static ones, in the world frame.
-  const Boxes moving =
-      BoxesOf(q, moving_vertices_, moving_triangles_, moving_edges_, Point::Zero());
-  Pairs(q, Kind::kVertexTriangle, {moving_vertices_, moving.vertices},
+  const Boxes moving = BoxesOf(q, vertices, triangles, edges, Point::Zero());
+  Pairs(q, Kind::kVertexTriangle, {vertices, moving.vertices},
         {static_.triangles, static_.triangle_boxes}, static_.triangle_grid, false, false, &out,
         count);
-  Pairs(q, Kind::kTriangleVertex, {moving_triangles_, moving.triangles},
+  Pairs(q, Kind::kTriangleVertex, {triangles, moving.triangles},
         {static_.vertices, static_.vertex_boxes}, static_.vertex_grid, false, false, &out, count);
-  Pairs(q, Kind::kEdgeEdge, {moving_edges_, moving.edges}, {static_.edges, static_.edge_boxes},
+  Pairs(q, Kind::kEdgeEdge, {edges, moving.edges}, {static_.edges, static_.edge_boxes},
         static_.edge_grid, false, false, &out, count);
   // Moving bodies against each other, in the world frame.
   if (moving_bodies_.size() > 1)
-    Within(q, moving_vertices_, moving_triangles_, moving_edges_, Point::Zero(), false, &out,
-           count);
-  // Each moving body against itself, in the frame of its mean displacement.
+    Within(q, vertices, triangles, edges, Point::Zero(), false, &out, count);
+  // Each moving body against itself, in the frame of its (usable vertices') mean displacement.
   if (q.self_contact)
     for (const size_t b : moving_bodies_) {
-      const std::vector<int32_t> vertices = Range(s.vertex_start[b], s.vertex_start[b + 1]);
+      const std::vector<int32_t> body_vertices =
+          vertices_of(Range(s.vertex_start[b], s.vertex_start[b + 1]));
+      if (body_vertices.empty()) continue;
       Point shift = Point::Zero();
-      for (const int32_t v : vertices) shift += (*q.end)[v] - (*q.start)[v];
-      shift /= static_cast<double>(vertices.size());
-      Within(q, vertices, Range(s.triangle_start[b], s.triangle_start[b + 1]),
-             Range(s.edge_start[b], s.edge_start[b + 1]), shift, true, &out, count);
+      for (const int32_t v : body_vertices) shift += (*q.end)[v] - (*q.start)[v];
+      shift /= static_cast<double>(body_vertices.size());
+      Within(q, body_vertices,
+             Usable(q, Range(s.triangle_start[b], s.triangle_start[b + 1]), s.triangles),
+             Usable(q, Range(s.edge_start[b], s.edge_start[b + 1]), s.edges), shift, true, &out,
+             count);
     }
   return out;
 }

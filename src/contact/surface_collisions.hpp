@@ -36,6 +36,11 @@ struct CollisionQuery {
   double ground_y = 0;
   // Only pairs with a vertex marked here (null: all pairs).
   const std::vector<char> *changed = nullptr;
+  // In parallel: only primitives whose vertices are all marked usable (their
+  // positions current: a rank's own and its halo's), and only pairs whose
+  // lowest moving vertex is marked owned (each pair tested by one rank). Null:
+  // all.
+  const std::vector<char> *usable = nullptr, *owned = nullptr;
 };
 
 struct CollisionCount {
@@ -51,8 +56,8 @@ class SurfaceCollisionFinder {
  public:
   // query.start must hold the static vertices' positions.
   void Setup(const CollisionQuery &query);
-  // The colliding pairs, in a fixed order (vertex-ground, then by pass and
-  // primitive index): the same on every rank.
+  // The colliding pairs (in an order that depends on the grids: callers that
+  // need one sort them).
   std::vector<SurfaceCollision> Find(const CollisionQuery &query, CollisionCount *count) const;
 
  private:

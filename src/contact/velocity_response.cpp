@@ -12,8 +12,8 @@ namespace {
 // round-off): no projection.
 constexpr double kOnSurface = 1e-6;
 // Numbers per collision when collisions travel between ranks: vertex, body,
-// position (3), dv (3).
-constexpr size_t kPackedCollision = 8;
+// position (3), dv (3), the vertex's inverse mass.
+constexpr size_t kPackedCollision = 9;
 // Numbers per body describing its motion: momentum (3), kinetic energy.
 constexpr size_t kPackedMotion = 4;
 // Numbers per body that Bounce reduces: the motion at the start and now, the
@@ -215,6 +215,7 @@ PetscErrorCode VelocityResponse::AllGather(const std::vector<Collision> &local,
     packed.insert(packed.end(), {double(c.vertex), double(c.body)});
     packed.insert(packed.end(), c.position.data(), c.position.data() + 3);
     packed.insert(packed.end(), c.dv.data(), c.dv.data() + 3);
+    packed.push_back(state_->inverse_mass(c.vertex));
   }
   PetscMPIInt size, count = static_cast<PetscMPIInt>(packed.size());
   PetscCallMPI(MPI_Comm_size(comm_, &size));
@@ -227,37 +228,48 @@ PetscErrorCode VelocityResponse::AllGather(const std::vector<Collision> &local,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Each collision's weights are summed over its body's free vertices, this
+// rank's first, then over the ranks (MPI_SUM): no rank reads another's vertices.
 PetscErrorCode VelocityResponse::SpreadImpulses(const std::vector<Collision> &local, Vec v) const {
   PetscFunctionBeginUser;
   std::vector<double> all;
   PetscCall(AllGather(local, &all));
+  const size_t count = all.size() / kPackedCollision;
+  std::vector<double> totals(count, 0.0);
+  for (size_t i = 0; i < count; ++i) {
+    const double *c = &all[kPackedCollision * i];
+    totals[i] = OwnedWeights(static_cast<int32_t>(c[1]), Point(c[2], c[3], c[4]));
+  }
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, totals.data(), static_cast<int>(count), MPI_DOUBLE,
+                             MPI_SUM, comm_));
   PetscScalar *lv;
   PetscCall(VecGetArray(v, &lv));
-  for (size_t i = 0; i < all.size(); i += kPackedCollision) {
-    const int32_t vertex = static_cast<int32_t>(all[i]), body = static_cast<int32_t>(all[i + 1]);
-    const Point at(all[i + 2], all[i + 3], all[i + 4]), dv(all[i + 5], all[i + 6], all[i + 7]);
-    Spread(vertex, body, at, dv, lv);
+  for (size_t i = 0; i < count; ++i) {
+    const double *c = &all[kPackedCollision * i];
+    const Point at(c[2], c[3], c[4]), dv(c[5], c[6], c[7]);
+    Spread(static_cast<int32_t>(c[1]), at, dv / c[8], totals[i], lv);
   }
   PetscCall(VecRestoreArray(v, &lv));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-void VelocityResponse::Spread(int32_t vertex, int32_t body, const Point &at, const Point &dv,
-                              PetscScalar *v) const {
-  const Body &b = scene_->bodies[body];
-  const double l = state_->edge(body);
-  // Weights over the body's free vertices; the impulse m_c dv shared by them.
+double VelocityResponse::Weight(int32_t body, int32_t natural, const Point &at) const {
+  return 1 / std::pow(state_->edge(body) + (state_->position(natural) - at).norm(), 2);
+}
+
+double VelocityResponse::OwnedWeights(int32_t body, const Point &at) const {
   double total = 0;
-  for (int32_t k = 0; k < b.mesh.num_vertices(); ++k) {
-    const int32_t n = b.first_vertex + k;
-    if (state_->inverse_mass(n) > 0 || n == vertex)
-      total += 1 / std::pow(l + (state_->position(n) - at).norm(), 2);
-  }
-  const Point impulse = dv / state_->inverse_mass(vertex);
+  for (const int32_t n : state_->owned_natural())
+    if (state_->body_of(n) == body) total += Weight(body, n, at);
+  return total;
+}
+
+void VelocityResponse::Spread(int32_t body, const Point &at, const Point &impulse, double total,
+                              PetscScalar *v) const {
   for (PetscInt p = 0; p < state_->local_count(); ++p) {
     const int32_t n = state_->owned_natural()[p];
     if (state_->body_of(n) != body) continue;
-    const double share = 1 / std::pow(l + (state_->position(n) - at).norm(), 2) / total;
+    const double share = Weight(body, n, at) / total;
     for (int c = 0; c < 3; ++c) v[3 * p + c] += share * state_->inverse_mass(n) * impulse[c];
   }
 }

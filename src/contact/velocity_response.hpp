@@ -90,11 +90,18 @@ class VelocityResponse {
   // step's start; motion: its momentum and kinetic energy, at the start and now.
   double RigidBounce(size_t b, const Point &n, double target, const double *start,
                      const double *now) const;
-  // Every rank's collisions on every rank, packed 8 numbers each.
+  // Every rank's collisions on every rank, packed kPackedCollision numbers
+  // each: vertex, body, position, dv, the vertex's inverse mass.
   PetscErrorCode AllGather(const std::vector<Collision> &local, std::vector<double> *all) const;
-  // Adds to this rank's vertices of `body` their share of the impulse m_c dv
-  // given at `at` to vertex `vertex`.
-  void Spread(int32_t vertex, int32_t body, const Point &at, const Point &dv, PetscScalar *v) const;
+  // A free vertex's weight in spreading an impulse given at `at`: 1 / (l + r)^2,
+  // l the body's mean boundary edge, r the distance (m).
+  double Weight(int32_t body, int32_t natural, const Point &at) const;
+  // The sum of the weights of this rank's vertices of `body`.
+  double OwnedWeights(int32_t body, const Point &at) const;
+  // Adds to this rank's vertices of `body` their share of `impulse` (N s)
+  // given at `at`; total: the weights summed over all the body's free vertices.
+  void Spread(int32_t body, const Point &at, const Point &impulse, double total,
+              PetscScalar *v) const;
 
   MPI_Comm comm_ = MPI_COMM_NULL;
   const Scene *scene_ = nullptr;
