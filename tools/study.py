@@ -5,6 +5,8 @@ Runs one scene to a fixed end time T over a grid of
   time steps   dt0, dt0/2, dt0/4, ... (-study_levels of them; steps = round(T / dt)),
   modes        linear, corotational,
   integrators  -integrator be (default), bdf2, newmark, alpha (-study_integrators),
+  adaptive     integrators run with -dt_adapt at dt0 and every -tol of -study_tols
+               (-study_adaptive; a series per integrator, its points the tolerances),
   solvers      direct (config/direct.opts: CHOLMOD Cholesky), CG + GAMG
                (config/cg-gamg.opts), CG + Jacobi (config/cg-jacobi.opts); the
                iterative ones at every -ksp_rtol of -study_rtols,
@@ -12,7 +14,8 @@ Runs one scene to a fixed end time T over a grid of
 and compares the positions at T with a reference run of the same mode (by default
 dt ten times smaller than the finest level, direct solver, the largest rank
 count; integrator be when the study runs be alone, else newmark, second order:
--study_reference_integrator). Per run:
+-study_reference_integrator; with -study_reference_tol, -dt_adapt at that -tol).
+Per run:
   error_l2   ||u - u_ref|| / ||u_ref||, u = x - X over all free vertices
              (relative L2 norm of the displacement field, dimensionless),
   error_max  max_i |x_i - x_ref,i| over the free vertices (m),
@@ -26,7 +29,8 @@ Writes into -study_dir DIR (default study/):
              (least-squares slope of log error_l2 against log dt over its levels),
              the Pareto front of each mode (runs that no other run of the mode
              beats in both error and run time; errors within 0.1 % count as equal)
-             and the cheapest run per accuracy,
+             and the cheapest run per accuracy; with -study_adaptive, each
+             adaptive run against the fastest fixed-dt run reaching its error,
   study.png  error against run time (log-log), one series per configuration,
   runs/      the result files (HDF5) and logs of every run; old ones are deleted
              first, nothing is reused.
@@ -63,9 +67,11 @@ MODES = ("linear", "corotational")
 INTEGRATORS = ("be", "bdf2", "newmark", "alpha")
 # Options the study sets itself on every run; passing them after `--` would break it.
 CONTROLLED = ("-scene", "-mode", "-dt", "-dt_schedule", "-steps", "-output", "-output_every",
-              "-options_file", "-ksp_rtol", "-deform", "-integrator")
+              "-options_file", "-ksp_rtol", "-deform", "-integrator", "-dt_adapt", "-tol")
+# tol: -tol of an adaptive run (empty: fixed dt); its substeps and fills of the system matrix.
 COLUMNS = ["mode", "solver", "ranks", "dt", "rtol", "steps", "setup_s", "loop_s", "iterations",
-           "error_l2", "error_max", "status", "contact_s", "message", "integrator"]
+           "error_l2", "error_max", "status", "contact_s", "message", "integrator", "tol", "accepted_steps",
+           "rejected_steps", "system_fills"]
 SOLVER_LABELS = {"direct": "direct (CHOLMOD Cholesky)", "cg-gamg": "CG + GAMG", "cg-jacobi": "CG + Jacobi",
                  "cg-warp": "CG + warp"}
 
@@ -95,6 +101,13 @@ def parse_arguments(argv):
     add_option(parser, "study_integrators", "--integrators", dest="integrators", metavar="NAME", nargs="+",
                type=comma_list(str), default=[["be"]],
                help="time integrators, values of softbody's -integrator (default: be; all: be,bdf2,newmark,alpha)")
+    add_option(parser, "study_adaptive", "--adaptive", dest="adaptive", metavar="NAME", nargs="+",
+               type=comma_list(str), default=[[]],
+               help="integrators also run with -dt_adapt (time loop step -study_dt0) at every -study_tols "
+                    "(default: none; e.g. bdf2,newmark)")
+    add_option(parser, "study_tols", "--tols", dest="tols", metavar="TOL", nargs="+", type=comma_list(float),
+               default=[[1e-2, 1e-3, 1e-4, 1e-5, 1e-6]],
+               help="-tol values of the adaptive runs (default: 1e-2,1e-3,1e-4,1e-5,1e-6)")
     add_option(parser, "study_reference_integrator", "--reference-integrator", dest="reference_integrator",
                metavar="NAME", default=None,
                help="integrator of the reference runs (default: be when the study runs be alone, else newmark)")
@@ -108,6 +121,10 @@ def parse_arguments(argv):
                default=[[1, 2]], help="MPI rank counts (default: 1,2)")
     add_option(parser, "study_reference_dt", "--reference-dt", dest="reference_dt", metavar="DT", type=float,
                default=None, help="time step (s) of the reference runs (default: the finest level's dt / 10)")
+    add_option(parser, "study_reference_tol", "--reference-tol", dest="reference_tol", metavar="TOL", type=float,
+               default=None,
+               help="run the references with -dt_adapt at this -tol, in steps of -study_dt0 "
+                    "(-study_reference_dt is then not used; default: fixed steps)")
     add_option(parser, "study_reference_ranks", "--reference-ranks", dest="reference_ranks", metavar="N", type=int,
                default=None, help="rank count of the reference runs (default: the largest of -study_ranks)")
     add_option(parser, "study_repeat", "--repeat", dest="repeat", metavar="N", type=int, default=1,
@@ -118,6 +135,8 @@ def parse_arguments(argv):
     args = parse_with_passthrough(parser, argv)
     args.modes = flatten(args.modes)
     args.integrators = flatten(args.integrators)
+    args.adaptive = flatten(args.adaptive)
+    args.tols = sorted(flatten(args.tols), reverse=True)
     args.solvers = flatten(args.solvers)
     args.rtols = flatten(args.rtols)
     args.ranks = flatten(args.ranks)
@@ -128,7 +147,7 @@ def parse_arguments(argv):
     for mode in args.modes:
         if mode not in MODES:
             fail(f"-study_modes: unknown mode {mode!r} (choose from {', '.join(MODES)})")
-    for integrator in args.integrators + [args.reference_integrator or "be"]:
+    for integrator in args.integrators + args.adaptive + [args.reference_integrator or "be"]:
         if integrator not in INTEGRATORS:
             fail(f"-study_integrators: unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
     if args.reference_integrator is None:
@@ -139,6 +158,10 @@ def parse_arguments(argv):
         if not os.path.isfile(path):
             fail(f"-study_solvers: no preset {path}")
         args.direct[solver] = _is_direct(path)
+    if args.reference_tol is not None and not 0 < args.reference_tol < 1:
+        fail("-study_reference_tol must lie in (0, 1)")
+    if any(not 0 < t < 1 for t in args.tols):
+        fail("-study_tols must lie in (0, 1)")
     if any(r <= 0 or not math.isfinite(r) for r in args.rtols):
         fail("-study_rtols must be positive")
     if any(n < 1 for n in args.ranks):
@@ -183,7 +206,7 @@ def _is_direct(path):
 
 # ----------------------------------------------------------------------------- runs
 
-def run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator="be"):
+def run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator="be", tol=None):
     """Runs softbody once; returns a dict with status, message, attributes and final positions."""
     import h5py
     runs = os.path.join(args.study_dir, "runs")
@@ -196,9 +219,11 @@ def run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator="be"):
                "-options_file", os.path.join(CONFIG_DIR, solver + ".opts")]
     if rtol is not None:
         command += ["-ksp_rtol", repr(float(rtol))]
+    if tol is not None:
+        command += ["-dt_adapt", "-tol", repr(float(tol))]
     command += list(args.extra)
     result = {"mode": mode, "integrator": integrator, "solver": solver, "ranks": ranks, "dt": dt, "rtol": rtol,
-              "steps": steps, "status": "failed", "message": "", "name": name}
+              "steps": steps, "status": "failed", "message": "", "name": name, "tol": tol}
     for path in (out, os.path.join(runs, name + ".xdmf")):
         if os.path.exists(path):
             os.remove(path)
@@ -249,6 +274,8 @@ def run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator="be"):
     free = ~body_fixed[vertex_body]
     result.update(status="ok", setup_s=attrs.get("setup_seconds"), loop_s=attrs.get("loop_seconds"),
                   contact_s=attrs.get("contact_seconds"), iterations=attrs.get("solver_iterations"),
+                  accepted_steps=attrs.get("accepted_steps"), rejected_steps=attrs.get("rejected_steps"),
+                  system_fills=attrs.get("system_fills"),
                   positions=positions[free], rest=rest[free])
     return result
 
@@ -270,11 +297,21 @@ def add_errors(row, reference):
 # ----------------------------------------------------------------------------- analysis
 
 def config_key(row):
-    return (row["mode"], row["solver"], row["rtol"], row["ranks"], row["integrator"])
+    return (row["mode"], row["solver"], row["rtol"], row["ranks"], row["integrator"], row.get("tol") is not None)
 
 
-def config_label(solver, rtol, ranks, mode=None, integrator="be"):
-    text = f"{integrator}, " + SOLVER_LABELS.get(solver, solver)
+def series_name(integrator, adaptive):
+    return integrator + (" -dt_adapt" if adaptive else "")
+
+
+def run_name(row):
+    """The integrator of a row, with -dt_adapt and its -tol."""
+    return row["integrator"] + ("" if row.get("tol") is None else f" -dt_adapt -tol {row['tol']:g}")
+
+
+def config_label(solver, rtol, ranks, mode=None, integrator="be", tol=None):
+    text = (integrator if tol is None else f"{integrator} -dt_adapt -tol {tol:g}") + ", " \
+        + SOLVER_LABELS.get(solver, solver)
     if rtol is not None:
         text += f", rtol {rtol:g}"
     text += f", {ranks} rank" + ("s" if ranks != 1 else "")
@@ -289,7 +326,7 @@ def _good(row):
 def observed_orders(rows):
     """{config: (order or None, points used)}: least-squares slope of log error_l2 vs log dt."""
     orders = {}
-    for key in _unique(config_key(r) for r in rows):
+    for key in _unique(config_key(r) for r in rows if r.get("tol") is None):
         points = [(r["dt"], r["error_l2"]) for r in rows if config_key(r) == key and _good(r)]
         if len(points) >= 2:
             dts, errors = np.log([p[0] for p in points]), np.log([p[1] for p in points])
@@ -359,7 +396,10 @@ def write_csv(path, rows):
                              _fmt(r.get("setup_s"), ".6g"), _fmt(r.get("loop_s"), ".6g"),
                              _fmt(r.get("iterations"), ".0f"), _fmt(r.get("error_l2"), ".17g"),
                              _fmt(r.get("error_max"), ".17g"), r["status"],
-                             _fmt(r.get("contact_s"), ".6g"), r.get("message", ""), r["integrator"]])
+                             _fmt(r.get("contact_s"), ".6g"), r.get("message", ""), r["integrator"],
+                             "" if r.get("tol") is None else repr(float(r["tol"])),
+                             _fmt(r.get("accepted_steps"), ".0f"), _fmt(r.get("rejected_steps"), ".0f"),
+                             _fmt(r.get("system_fills"), ".0f")])
 
 
 def _rtol_text(rtol):
@@ -367,7 +407,7 @@ def _rtol_text(rtol):
 
 
 def _row_cells(r):
-    return [r["integrator"], SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]), str(r["ranks"]),
+    return [run_name(r), SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]), str(r["ranks"]),
             f"{r['dt']:g}", str(r["steps"]), _fmt(r.get("setup_s"), ".3f"), _fmt(r.get("loop_s"), ".3f"),
             _fmt(r.get("iterations"), ".0f"), _fmt(r.get("error_l2"), ".3e"), _fmt(r.get("error_max"), ".3e"),
             "ok" if r["status"] == "ok" else "FAILED: " + r.get("message", "").replace("|", "/")]
@@ -383,7 +423,9 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md = [f"# Work-precision study: `{args.scene}`", ""]
     md.append(f"End time T = {args.end_time:g} s; time steps {', '.join(f'{dt:g}' for dt in args.dts)} s; "
               f"modes {', '.join(args.modes)}; integrators {', '.join(args.integrators)} "
-              f"(reference: {args.reference_integrator}); solvers {', '.join(args.solvers)} "
+              + (f"and with -dt_adapt {', '.join(args.adaptive)} at -tol {', '.join(f'{t:g}' for t in args.tols)} "
+                 if args.adaptive else "")
+              + f"(reference: {args.reference_integrator}); solvers {', '.join(args.solvers)} "
               f"(iterative at -ksp_rtol {', '.join(f'{t:g}' for t in args.rtols)}); "
               f"ranks {', '.join(map(str, args.ranks))}."
               + (f" Extra options: `{' '.join(args.extra)}`." if args.extra else ""))
@@ -403,7 +445,7 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md.append("")
     md.append(_table(["mode", "integrator", "solver", "ranks", "dt (s)", "steps", "set-up (s)", "loop (s)",
                       "status"],
-                     [[ref["mode"], ref["integrator"], SOLVER_LABELS.get(ref["solver"], ref["solver"]),
+                     [[ref["mode"], run_name(ref), SOLVER_LABELS.get(ref["solver"], ref["solver"]),
                        str(ref["ranks"]),
                        f"{ref['dt']:g}", str(ref["steps"]), _fmt(ref.get("setup_s"), ".3f"),
                        _fmt(ref.get("loop_s"), ".3f"),
@@ -418,7 +460,7 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
     md.append("")
     order_rows = []
     for key, (order, used) in orders.items():
-        mode, solver, rtol, ranks, integrator = key
+        mode, solver, rtol, ranks, integrator, _ = key
         finest = [r for r in rows if config_key(r) == key and _good(r)]
         finest = min(finest, key=lambda r: r["dt"]) if finest else None
         order_rows.append([mode, integrator, SOLVER_LABELS.get(solver, solver), _rtol_text(rtol), str(ranks),
@@ -436,7 +478,7 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
         md.append(f"### {mode}")
         md.append("")
         md.append(_table(["integrator", "solver", "rtol", "ranks", "dt (s)", "loop (s)", "rel. L2", "max (m)"],
-                         [[r["integrator"], SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]),
+                         [[run_name(r), SOLVER_LABELS.get(r["solver"], r["solver"]), _rtol_text(r["rtol"]),
                            str(r["ranks"]),
                            f"{r['dt']:g}", f"{r['loop_s']:.3f}", f"{r['error_l2']:.3e}",
                            _fmt(r.get("error_max"), ".3e")] for r in fronts.get(mode, [])]))
@@ -447,16 +489,18 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
             md.append("")
             md.append(_table(["rel. L2 <=", "integrator", "solver", "rtol", "ranks", "dt (s)", "loop (s)",
                               "rel. L2"],
-                             [[f"{target:g}", r["integrator"], SOLVER_LABELS.get(r["solver"], r["solver"]),
+                             [[f"{target:g}", run_name(r), SOLVER_LABELS.get(r["solver"], r["solver"]),
                                _rtol_text(r["rtol"]), str(r["ranks"]), f"{r['dt']:g}",
                                f"{r['loop_s']:.3f}", f"{r['error_l2']:.3e}"] for target, r in cheapest]))
+    if args.adaptive:
+        md += adaptive_section(args, rows)
     failed = [r for r in rows if r["status"] != "ok"]
     md.append("")
     md.append(f"## Failed runs: {len(failed)}")
     if failed:
         md.append("")
         md.append(_table(["mode", "integrator", "solver", "rtol", "ranks", "dt (s)", "error"],
-                         [[r["mode"], r["integrator"], r["solver"], _rtol_text(r["rtol"]), str(r["ranks"]), f"{r['dt']:g}",
+                         [[r["mode"], run_name(r), r["solver"], _rtol_text(r["rtol"]), str(r["ranks"]), f"{r['dt']:g}",
                            r["message"].replace("|", "/")] for r in failed]))
     md.append("")
     md.append("## All runs")
@@ -474,6 +518,39 @@ def write_markdown(path, args, rows, references, orders, fronts, elapsed, png):
         f.write("\n".join(md))
 
 
+def fastest_fixed(rows, row):
+    """The fastest fixed-dt run of row's mode whose error is at most row's (None: none reaches it)."""
+    fitting = [r for r in rows if r["mode"] == row["mode"] and r.get("tol") is None and _good(r)
+               and r.get("loop_s") is not None and r["error_l2"] <= row["error_l2"]]
+    return min(fitting, key=lambda r: r["loop_s"]) if fitting else None
+
+
+def adaptive_section(args, rows):
+    md = ["", "## Adaptive mode (-dt_adapt)", "",
+          f"Each adaptive run takes the steps of dt = {args.dt0:g} s (frames) in substeps sized by its local "
+          "error estimate at -tol. `fixed` is the fastest fixed-dt run of the mode (any integrator and "
+          "solver) whose error is at most the adaptive run's; `ratio` = adaptive loop / that loop."]
+    for key in _unique(config_key(r) for r in rows if r.get("tol") is not None):
+        mode, solver, rtol, ranks, integrator, _ = key
+        series = sorted([r for r in rows if config_key(r) == key], key=lambda r: -r["tol"])
+        errors = [r["error_l2"] for r in series if _good(r)]
+        monotone = len(errors) == len(series) and all(b < a for a, b in zip(errors, errors[1:]))
+        md += ["", f"### {mode}: {config_label(solver, rtol, ranks, None, integrator)} -dt_adapt", "",
+               "error at T falls monotonically with -tol: " + ("yes" if monotone else "no"), ""]
+        cells = []
+        for r in series:
+            best = fastest_fixed(rows, r) if _good(r) else None
+            ratio = r["loop_s"] / best["loop_s"] if best and r.get("loop_s") and best["loop_s"] > 0 else None
+            cells.append([f"{r['tol']:g}", _fmt(r.get("accepted_steps"), ".0f"), _fmt(r.get("rejected_steps"), ".0f"),
+                          _fmt(r.get("system_fills"), ".0f"), _fmt(r.get("loop_s"), ".3f"),
+                          _fmt(r.get("error_l2"), ".3e"),
+                          f"{best['integrator']} dt {best['dt']:g}: {best['loop_s']:.3f} s" if best else "none reaches it",
+                          _fmt(ratio, ".2f")])
+        md.append(_table(["-tol", "substeps", "rejected", "A filled", "loop (s)", "rel. L2", "fixed", "ratio"],
+                         cells))
+    return md
+
+
 def write_plot(path, args, rows, fronts):
     import matplotlib
     matplotlib.use("Agg")
@@ -482,42 +559,50 @@ def write_plot(path, args, rows, fronts):
     from matplotlib.lines import Line2D
 
     modes = [m for m in args.modes]
-    solver_rtols = _unique((r["solver"], r["rtol"], r["integrator"]) for r in rows)
-    several = len(args.integrators) > 1
+    solver_rtols = _unique((r["solver"], r["rtol"], r["integrator"], r.get("tol") is not None) for r in rows)
+    several = len(args.integrators) > 1 or bool(args.adaptive)
     palette = {("direct", None): "#1f4e9c", ("cg-gamg", 1e-8): "#1a9850", ("cg-gamg", 1e-4): "#91cf60",
                ("cg-jacobi", 1e-8): "#d73027", ("cg-jacobi", 1e-4): "#fc8d59"}
     spare = iter(["#7b3294", "#c2a5cf", "#8c510a", "#dfc27d", "#01665e", "#80cdc1", "#636363"])
     # One colour per solver; with several integrators one per integrator (and solver).
-    integrator_palette = {"be": "#1f4e9c", "bdf2": "#1a9850", "newmark": "#d73027", "alpha": "#7b3294"}
+    integrator_palette = {("be", False): "#1f4e9c", ("bdf2", False): "#1a9850", ("newmark", False): "#d73027",
+                          ("alpha", False): "#7b3294", ("be", True): "#6baed6", ("bdf2", True): "#a6d96a",
+                          ("newmark", True): "#f4a582", ("alpha", True): "#c2a5cf"}
     one_solver = len(_unique(k[:2] for k in solver_rtols)) == 1
     colours = {}
     for key in solver_rtols:
         if not several:
             colour = palette.get(key[:2])
         else:
-            colour = integrator_palette.get(key[2]) if one_solver else None
+            colour = integrator_palette.get(key[2:]) if one_solver else None
         colours[key] = colour or next(spare, "#999999")
     rank_list = sorted(_unique(r["ranks"] for r in rows))
     styles = ["-", "--", ":", "-."]
     markers = ["o", "s", "^", "D"]
     rank_style = {n: (styles[i % 4], markers[i % 4]) for i, n in enumerate(rank_list)}
 
-    fig, axes = plt.subplots(1, len(modes), figsize=(6.4 * len(modes), 5.6), squeeze=False,
+    fig, axes = plt.subplots(1, len(modes), figsize=(max(6.4 * len(modes), 9.6), 5.6), squeeze=False,
                              sharey=True)
     all_errors = [r["error_l2"] for r in rows if _good(r)]
     for ax, mode in zip(axes[0], modes):
         mode_rows = [r for r in rows if r["mode"] == mode]
-        for (solver, rtol, integrator) in solver_rtols:
+        for key in solver_rtols:
+            solver, rtol, integrator, adaptive = key
             for ranks in rank_list:
                 series = sorted([r for r in mode_rows if r["solver"] == solver and r["rtol"] == rtol
-                                 and r["integrator"] == integrator and r["ranks"] == ranks and _good(r)],
-                                key=lambda r: -r["dt"])
+                                 and r["integrator"] == integrator and (r.get("tol") is not None) == adaptive
+                                 and r["ranks"] == ranks and _good(r)],
+                                key=lambda r: -(r["tol"] if adaptive else r["dt"]))
                 if not series:
                     continue
                 style, marker = rank_style[ranks]
+                marker = "*" if adaptive else marker
                 ax.plot([r["loop_s"] for r in series], [r["error_l2"] for r in series], linestyle=style,
-                        marker=marker, color=colours[(solver, rtol, integrator)], markersize=5, linewidth=1.4,
-                        markerfacecolor="white" if ranks != rank_list[0] else colours[(solver, rtol, integrator)])
+                        marker=marker, color=colours[key], markersize=8 if adaptive else 5, linewidth=1.4,
+                        markerfacecolor="white" if ranks != rank_list[0] else colours[key])
+                for r in series if adaptive and integrator == args.adaptive[0] and ranks == rank_list[-1] else []:
+                    ax.annotate(f"tol={r['tol']:g}", (r["loop_s"], r["error_l2"]), textcoords="offset points",
+                                xytext=(6, -9), fontsize=7, color=colours[key])
         front = fronts.get(mode, [])
         if front:
             xs, ys = [], []
@@ -532,11 +617,12 @@ def write_plot(path, args, rows, fronts):
                        facecolors="none", edgecolors="black", linewidths=1.0, zorder=5)
         # dt labels along the direct solver's series on the largest rank count (one per level)
         labelled = sorted([r for r in mode_rows if r["solver"] == (args.solvers[0]) and _good(r)
-                           and r["ranks"] == rank_list[-1] and r["rtol"] is None
+                           and r["ranks"] == rank_list[-1] and r["rtol"] is None and r.get("tol") is None
                            and r["integrator"] == args.integrators[0]], key=lambda r: -r["dt"])
         for r in labelled:
             ax.annotate(f"dt={r['dt']:g}", (r["loop_s"], r["error_l2"]), textcoords="offset points",
-                        xytext=(6, 3), fontsize=7, color=colours.get((r["solver"], None, r["integrator"]), "black"))
+                        xytext=(6, 3), fontsize=7, color=colours.get((r["solver"], None, r["integrator"], False),
+                                                                     "black"))
         failed = sum(1 for r in mode_rows if r["status"] != "ok")
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -556,8 +642,8 @@ def write_plot(path, args, rows, fronts):
     if all_errors:
         axes[0][0].set_ylim(min(all_errors) / 2, max(all_errors) * 2)
 
-    solver_handles = [Line2D([], [], color=colours[k], linewidth=2.5,
-                             label=(f"{k[2]}, " if several else "") + SOLVER_LABELS.get(k[0], k[0])
+    solver_handles = [Line2D([], [], color=colours[k], linewidth=2.5, marker="*" if k[3] else None,
+                             label=(f"{series_name(k[2], k[3])}, " if several else "") + SOLVER_LABELS.get(k[0], k[0])
                              + ("" if k[1] is None else f", rtol {k[1]:g}"))
                       for k in solver_rtols]
     other_handles = [Line2D([], [], color="grey", linestyle=rank_style[n][0], marker=rank_style[n][1],
@@ -566,16 +652,19 @@ def write_plot(path, args, rows, fronts):
     other_handles.append(Line2D([], [], color="black", marker="o", markersize=10, markerfacecolor="none",
                                 linestyle="-", linewidth=0.8, alpha=0.6,
                                 label="Pareto front (no run is both faster and more accurate)"))
-    legend_rows = math.ceil(len(solver_handles) / 5) + 1
-    first = fig.legend(handles=solver_handles, loc="lower center", ncol=min(len(solver_handles), 5),
+    columns = 3
+    legend_rows = math.ceil(len(solver_handles) / columns) + 1
+    first = fig.legend(handles=solver_handles, loc="lower center", ncol=min(len(solver_handles), columns),
                        fontsize=9, frameon=False, bbox_to_anchor=(0.5, 0.045))
     fig.add_artist(first)
     fig.legend(handles=other_handles, loc="lower center", ncol=len(other_handles), fontsize=9,
                frameon=False, bbox_to_anchor=(0.5, 0.0))
     fig.suptitle(f"{os.path.basename(args.scene)}: error at T = {args.end_time:g} s against run time; "
-                 f"points along a line: dt = {args.dts[0]:g} s (left) halved down to {args.dts[-1]:g} s (right)",
+                 f"\npoints along a line: dt = {args.dts[0]:g} s (left) halved down to {args.dts[-1]:g} s (right)"
+                 + (f"; -dt_adapt (stars): -tol {args.tols[0]:g} (left) to {args.tols[-1]:g}" if args.adaptive
+                    else ""),
                  fontsize=10.5)
-    fig.tight_layout(rect=(0, 0.045 * legend_rows + 0.01, 1, 0.96))
+    fig.tight_layout(rect=(0, 0.045 * legend_rows + 0.01, 1, 0.93))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -601,11 +690,19 @@ def main(argv=None):
                 for rtol in ([None] if args.direct[solver] else args.rtols):
                     for ranks in args.ranks:
                         for dt in args.dts:
-                            grid.append((mode, solver, rtol, ranks, dt, integrator))
+                            grid.append((mode, solver, rtol, ranks, dt, integrator, None))
+        for integrator in args.adaptive:
+            for solver in args.solvers:
+                for rtol in ([None] if args.direct[solver] else args.rtols):
+                    for ranks in args.ranks:
+                        for tol in args.tols:
+                            grid.append((mode, solver, rtol, ranks, args.dt0, integrator, tol))
     reference_solver = next((s for s in args.solvers if args.direct[s]), "direct")
     total = len(grid) * args.repeat + len(args.modes)
+    reference_dt = args.dt0 if args.reference_tol is not None else args.reference_dt
+    adaptive_reference = "" if args.reference_tol is None else f" -dt_adapt -tol {args.reference_tol:g}"
     print(f"study: {args.scene}, T = {args.end_time:g} s, {len(grid)} runs + {len(args.modes)} "
-          f"reference(s) (dt {args.reference_dt:g} s, {args.reference_integrator}, {reference_solver}, "
+          f"reference(s) (dt {reference_dt:g} s{adaptive_reference}, {args.reference_integrator}, {reference_solver}, "
           f"{args.reference_ranks} ranks) "
           f"into {args.study_dir}", flush=True)
 
@@ -614,9 +711,9 @@ def main(argv=None):
     for mode in args.modes:
         count += 1
         name = (f"reference_{mode}_{args.reference_integrator}_{reference_solver}_np{args.reference_ranks}"
-                f"_dt{args.reference_dt:g}")
-        ref = run_softbody(args, name, mode, reference_solver, None, args.reference_ranks, args.reference_dt,
-                           args.reference_integrator)
+                f"_dt{reference_dt:g}" + ("" if args.reference_tol is None else f"_adapt_tol{args.reference_tol:g}"))
+        ref = run_softbody(args, name, mode, reference_solver, None, args.reference_ranks, reference_dt,
+                           args.reference_integrator, args.reference_tol)
         references[mode] = ref
         print(f"[{count}/{total}] reference {mode}: "
               + (f"{ref['steps']} steps, loop {ref['loop_s']:.2f} s" if ref["status"] == "ok"
@@ -628,13 +725,13 @@ def main(argv=None):
     rows = {}
     for repetition in range(args.repeat):
         for point in (grid if repetition % 2 == 0 else grid[::-1]):
-            mode, solver, rtol, ranks, dt, integrator = point
+            mode, solver, rtol, ranks, dt, integrator, tol = point
             count += 1
             if repetition and rows[point]["status"] != "ok":
                 continue
             name = (f"{mode}_{integrator}_{solver}" + ("" if rtol is None else f"_rtol{rtol:g}")
-                    + f"_np{ranks}_dt{dt:g}")
-            row = run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator)
+                    + f"_np{ranks}_dt{dt:g}" + ("" if tol is None else f"_adapt_tol{tol:g}"))
+            row = run_softbody(args, name, mode, solver, rtol, ranks, dt, integrator, tol)
             if repetition == 0:
                 add_errors(row, references[mode])
                 if row["status"] == "ok" and references[mode]["status"] != "ok":
@@ -649,7 +746,8 @@ def main(argv=None):
                     + (f", rel. L2 {_fmt(rows[point].get('error_l2'), '.3e')}" if repetition == 0 else "")
                     if row["status"] == "ok" else "FAILED: " + row["message"])
             label = f"pass {repetition + 1}: " if args.repeat > 1 else ""
-            print(f"[{count}/{total}] {label}{config_label(solver, rtol, ranks, mode, integrator)}, dt {dt:g}: {text}",
+            print(f"[{count}/{total}] {label}{config_label(solver, rtol, ranks, mode, integrator, tol)}, dt {dt:g}: "
+                  f"{text}",
                   flush=True)
     rows = [rows[point] for point in grid]
 
@@ -671,13 +769,15 @@ def main(argv=None):
     for mode in args.modes:
         print(f"Pareto front, {mode} (fastest first):")
         for r in fronts[mode]:
-            print(f"  {config_label(r['solver'], r['rtol'], r['ranks'], None, r['integrator']):52s} dt {r['dt']:<9g} "
+            print(f"  {config_label(r['solver'], r['rtol'], r['ranks'], None, r['integrator'], r.get('tol')):52s} "
+                  f"dt {r['dt']:<9g} "
                   f"loop {r['loop_s']:8.3f} s  rel. L2 {r['error_l2']:.3e}")
     failed = [r for r in rows if r["status"] != "ok"]
     if failed:
         print(f"{len(failed)} failed run(s):")
         for r in failed:
-            print(f"  {config_label(r['solver'], r['rtol'], r['ranks'], r['mode'], r['integrator'])}, dt {r['dt']:g}: "
+            print(f"  {config_label(r['solver'], r['rtol'], r['ranks'], r['mode'], r['integrator'], r.get('tol'))}, "
+                  f"dt {r['dt']:g}: "
                   f"{r['message']}")
     print(f"wrote {csv_path}, {md_path}, {png_path} ({elapsed:.0f} s)")
     bad_references = [m for m, ref in references.items() if ref["status"] != "ok"]

@@ -87,6 +87,7 @@ std::vector<std::pair<std::string, double>> FileStatistics(const RunReport &repo
           {"rejected_steps", double(solver.rejected_steps)},
           {"min_dt", solver.accepted_steps ? solver.min_step : 0.0},
           {"max_dt", solver.max_step},
+          {"system_fills", double(solver.assemblies)},
           {"contact_seconds", contact.statistics().seconds}};
 }
 

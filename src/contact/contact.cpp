@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "common/exchange.hpp"
+
 namespace softbody {
 
 namespace {
@@ -213,35 +215,52 @@ PetscErrorCode ContactSolver::ReaimRestingContacts(Vec x0, Vec v0, PetscReal dt)
   const PetscScalar *x, *v;
   PetscCall(VecGetArrayRead(x0, &x));
   PetscCall(VecGetArrayRead(v0, &v));
-  for (const auto &[local, contact] : resting_.entries()) {
-    const Point position(&x[3 * local]), velocity(&v[3 * local]);
-    if (contact.feature >= 0)
-      ReaimFeatureContact(local, contact, velocity, dt);
-    else
-      ReaimVertexContact(local, contact, position, velocity, dt);
+  for (const auto &[local, contact] : resting_.entries())
+    if (contact.feature < 0)
+      ReaimVertexContact(local, contact, Point(&x[3 * local]), Point(&v[3 * local]), dt);
+  if (!features_.empty()) {
+    std::vector<std::array<int32_t, 2>> features;
+    PetscCall(ShareRestingFeatures(&features));
+    for (const auto &[feature, natural] : features) {
+      const PetscInt local = layout_->LocalOfNatural(natural);
+      ReaimFeatureContact(feature, natural, local,
+                          local >= 0 ? Point(&v[3 * local]) : Point(Point::Zero()), dt);
+    }
   }
   PetscCall(VecRestoreArrayRead(x0, &x));
   PetscCall(VecRestoreArrayRead(v0, &v));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The feature point against the face now closest to it, once per step: all of
-// this rank's vertices of that face (the other ranks do theirs as new
-// contacts), also those whose own contact was released (pushing only the
-// resting one would let the edge sink into the face).
-void ContactSolver::ReaimFeatureContact(PetscInt local, const Contact &contact,
+// Every rank's resting sharp-edge contacts as (feature, natural vertex),
+// sorted: each rank re-aims them all for its own vertices of the face, so a
+// face split between ranks is held as on one rank.
+PetscErrorCode ContactSolver::ShareRestingFeatures(std::vector<std::array<int32_t, 2>> *all) const {
+  PetscFunctionBeginUser;
+  std::vector<std::array<int32_t, 2>> mine;
+  for (const auto &[local, contact] : resting_.entries())
+    if (contact.feature >= 0) mine.push_back({contact.feature, contact.natural});
+  PetscCall(AllGatherRecords(comm_, mine, all));
+  std::sort(all->begin(), all->end());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The feature point against the face now closest to it, once per step, when
+// that face holds the resting vertex `natural`: all of this rank's vertices of
+// the face, also those whose own contact was released (pushing only the
+// resting one would let the edge sink into the face). local: the resting
+// vertex's on this rank (-1: another rank's), velocity its velocity (m/s).
+void ContactSolver::ReaimFeatureContact(int32_t feature, int32_t natural, PetscInt local,
                                         const Point &velocity, PetscReal dt) {
   SurfaceHit hit;
-  if (constraints_.feature_held(contact.feature) ||
-      !obstacles_.ClosestOnBody(features_.point(contact.feature), state_.body_of(contact.natural),
-                                &hit))
+  if (constraints_.feature_held(feature) ||
+      !obstacles_.ClosestOnBody(features_.point(feature), state_.body_of(natural), &hit))
     return;
   const auto &triangle = obstacles_.free_triangle(hit.triangle);
-  if (std::find(triangle.begin(), triangle.begin() + 3, contact.natural) == triangle.begin() + 3)
-    return;
-  constraints_.hold_feature(contact.feature);
-  const bool unconstrained = constraints_.feature_contact(local) < 0;
-  constraints_.ConstrainFeature(contact.feature, hit, dt, false, true);
+  if (std::find(triangle.begin(), triangle.begin() + 3, natural) == triangle.begin() + 3) return;
+  constraints_.hold_feature(feature);
+  const bool unconstrained = local >= 0 && constraints_.feature_contact(local) < 0;
+  constraints_.ConstrainFeature(feature, hit, dt, false, true);
   const bool appended = unconstrained && constraints_.feature_contact(local) >= 0;
   SurfaceHit fixed_side = hit;  // the feature's side: immobile, facing the vertex
   fixed_side.normal = -hit.normal;

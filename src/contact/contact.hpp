@@ -124,6 +124,13 @@ class ContactSolver {
   PetscErrorCode GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const;
   void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all);
 
+  // Repeating a step (-dt_adapt's rejected substeps): everything a step hands
+  // to the next is the resting contacts (BeginStep clears the rest), so a step
+  // started again from a restored copy runs as if the first attempt never
+  // happened. Not collective; the statistics keep counting the attempt.
+  RestingContacts CarriedState() const { return resting_; }
+  void RestoreCarriedState(const RestingContacts &carried) { resting_ = carried; }
+
   const ContactStatistics &statistics() const { return stats_; }
   // The guard's figures (null when it does not run).
   const GuardStatistics *guard_statistics() const {
@@ -159,8 +166,10 @@ class ContactSolver {
   // sharp-edge points, or any rank rests a sharp-edge contact.
   PetscErrorCode FeaturesNear(Vec x, Vec v, PetscReal dt, bool *near);
   PetscErrorCode ExchangeFreeState(Vec x, Vec v, PetscReal dt, const StateNeeds &needs);
-  // BeginStep's re-aiming of one resting contact.
-  void ReaimFeatureContact(PetscInt local, const Contact &contact, const Point &velocity,
+  // BeginStep's re-aiming of one resting contact; the sharp-edge ones are
+  // shared by all ranks first.
+  PetscErrorCode ShareRestingFeatures(std::vector<std::array<int32_t, 2>> *all) const;
+  void ReaimFeatureContact(int32_t feature, int32_t natural, PetscInt local, const Point &velocity,
                            PetscReal dt);
   void ReaimVertexContact(PetscInt local, const Contact &contact, const Point &position,
                           const Point &velocity, PetscReal dt);

@@ -40,12 +40,12 @@ constexpr PetscReal kEnergyRoundOff = 1e-12;
 // The iteration stalls when |g| keeps more than this fraction of its last value.
 constexpr PetscReal kStallRatio = 0.9;
 
-// -dt_adapt (AdaptiveStep). A new substep size is the old one times
+// -dt_adapt (AdaptiveStep). A new target substep size is the old one times
 // kSafety (tol / error)^(1 / (order + 1)), the customary safety factor 0.9 so
 // that the next substep passes; a rejection shrinks it by at most kMaxShrink;
 // an accepted substep grows it only when the estimate allows kGrowthThreshold
 // (A is refactorised for every new size: sizes that would grow by less stay),
-// and by at most kMaxGrowth per substep.
+// and by at most kMaxGrowth per substep (one rung of the ladder of halvings).
 constexpr PetscReal kSafety = 0.9;
 constexpr PetscReal kMaxShrink = 0.2;
 constexpr PetscReal kGrowthThreshold = 1.5;
@@ -58,8 +58,12 @@ constexpr PetscReal kSecondOrderErrorConstant = 1.0 / 6.0;
 // A substep rejected this often in a row stops the run (the error estimate
 // does not fall with the size: not a smooth motion).
 constexpr int kMaxRejections = 30;
-// The substeps end the step when less than this fraction of it remains (round-off).
-constexpr PetscReal kIntervalTolerance = 1e-10;
+// Substep sizes are the step's halvings dt / 2^k, k <= kLadderLevels (a
+// substep of dt / 2^60 is far below any the error control asks for: the
+// rejections stop the run first); elapsed time is counted exactly in units of
+// the smallest.
+constexpr int kLadderLevels = 60;
+constexpr uint64_t kLadderUnits = uint64_t(1) << kLadderLevels;
 
 }  // namespace
 
@@ -190,7 +194,7 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              nullptr, o->adaptive, &o->adaptive, nullptr));
   PetscCall(PetscOptionsReal("-tol",
                              "-dt_adapt: largest relative local error of a substep (its estimate "
-                             "over |x - X| + dt |v|)",
+                             "over |x - X| + dt max(|v0|, |v1|), dt the step of -dt)",
                              nullptr, o->tolerance, &o->tolerance, nullptr));
   PetscCall(
       PetscOptionsString("-dt_schedule",
@@ -864,6 +868,7 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
     StageScope stage(Stages().contact);
     PetscCall(contact->EndStep(x_start_, x, v, step_.position_step, reactions_, &changed));
   }
+  contact_acted_ = changed || contact->global_constraint_count() > 0;
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -927,15 +932,13 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
     PetscCall(TakeStep(x, v, contact));
     PetscFunctionReturn(PETSC_SUCCESS);
   }
-  PetscCheck(!contact || !contact->active(), PetscObjectComm((PetscObject)x), PETSC_ERR_USER_INPUT,
-             "option -dt_adapt: not available with collisions or constraints (a rejected "
-             "substep would have to restore the contact state)");
-  PetscCall(AdaptiveStep(x, v));
+  PetscCall(AdaptiveStep(x, v, contact && contact->active() ? contact : nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::SaveSubstepState(Vec x, Vec v) {
+PetscErrorCode ImplicitEuler::SaveSubstepState(Vec x, Vec v, const ContactSolver *contact) {
   PetscFunctionBeginUser;
+  if (contact) saved_contact_ = contact->CarriedState();
   PetscCall(CreateHistoryVectors());
   if (!saved_x_)
     for (Vec *vector :
@@ -951,8 +954,9 @@ PetscErrorCode ImplicitEuler::SaveSubstepState(Vec x, Vec v) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::RestoreSubstepState(Vec x, Vec v) {
+PetscErrorCode ImplicitEuler::RestoreSubstepState(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
+  if (contact) contact->RestoreCarriedState(saved_contact_);
   PetscCall(VecCopy(saved_x_, x));
   PetscCall(VecCopy(saved_v_, v));
   PetscCall(VecCopy(saved_previous_x_, previous_x_));
@@ -975,29 +979,41 @@ PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool 
     PetscCall(VecWAXPY(combined_position_, -1.0, saved_previous_v_, saved_v_));
     PetscCall(VecAXPY(combined_velocity_, -h / saved_previous_dt_, combined_position_));
   }
-  PetscReal difference, displacement, speed;
+  // The scale: the displacement plus the distance the faster of the substep's
+  // start and end velocities covers in a step of the time loop (not of the
+  // substep: a body starting from rest, an impact or a strike changes v by as
+  // much as |v| itself, and only this scale lets a smaller substep meet -tol).
+  PetscReal difference, displacement, speed, start_speed;
   PetscCall(VecNorm(combined_velocity_, NORM_2, &difference));
   PetscCall(VecWAXPY(combined_position_, -1.0, rest_, x));
   PetscCall(VecNorm(combined_position_, NORM_2, &displacement));
   PetscCall(VecNorm(v, NORM_2, &speed));
-  const PetscReal scale = displacement + h * speed;
+  PetscCall(VecNorm(saved_v_, NORM_2, &start_speed));
+  const PetscReal scale = displacement + interval_ * PetscMax(speed, start_speed);
   *estimated = scale > 0;
   *error = (second ? kSecondOrderErrorConstant : kFirstOrderErrorConstant) * h * difference /
            (scale > 0 ? scale : 1);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v) {
+int ImplicitEuler::LadderLevel(uint64_t elapsed) const {
+  int level = 0;
+  while (level < kLadderLevels &&
+         (std::ldexp(interval_, -level) > target_step_ || elapsed % (kLadderUnits >> level) != 0))
+    ++level;
+  return level;
+}
+
+PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
-  PetscReal elapsed = 0;
+  uint64_t elapsed = 0;  // in units of the smallest substep
   int rejections = 0;
-  while (interval_ - elapsed > kIntervalTolerance * interval_) {
-    // The substeps left, all of one size near the target (no new size: no refactorisation).
-    const PetscReal remaining = interval_ - elapsed;
-    dt_ = remaining / PetscMax(1.0, std::ceil(remaining / target_step_ - kIntervalTolerance));
-    PetscCall(SaveSubstepState(x, v));
+  while (elapsed < kLadderUnits) {
+    const int level = LadderLevel(elapsed);
+    dt_ = std::ldexp(interval_, -level);
+    PetscCall(SaveSubstepState(x, v, contact));
     PetscCall(PrepareStep());
-    PetscCall(TakeStep(x, v, nullptr));
+    PetscCall(TakeStep(x, v, contact));
     PetscReal error;
     bool estimated;
     PetscCall(SubstepError(x, v, &error, &estimated));
@@ -1006,7 +1022,7 @@ PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v) {
                                  ? kSafety * std::pow(options_.tolerance / error, 1 / (order + 1))
                                  : kMaxGrowth;
     if (estimated && error > options_.tolerance) {
-      PetscCall(RestoreSubstepState(x, v));
+      PetscCall(RestoreSubstepState(x, v, contact));
       ++stats_.rejected_steps;
       PetscCheck(++rejections <= kMaxRejections, PetscObjectComm((PetscObject)x),
                  PETSC_ERR_NOT_CONVERGED,
@@ -1017,8 +1033,13 @@ PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v) {
       continue;
     }
     rejections = 0;
-    elapsed += dt_;
+    elapsed += kLadderUnits >> level;
+    // A contact's velocity jump is no smooth history: the scheme restarts after
+    // it (a multistep scheme would extrapolate the jump into a rebound) and the
+    // next estimate is the first difference.
+    if (contact && contact_acted_) PositionsChanged();
     ++stats_.accepted_steps;
+    PetscCall(PetscInfo(nullptr, "-dt_adapt: substep of %.17g s accepted\n", (double)dt_));
     stats_.min_step = PetscMin(stats_.min_step, dt_);
     stats_.max_step = PetscMax(stats_.max_step, dt_);
     if (factor >= kGrowthThreshold)
@@ -1029,6 +1050,7 @@ PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v) {
 
 PetscErrorCode ImplicitEuler::TakeStep(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
+  contact_acted_ = false;
   // x, v to the scheme's x_b, u_b (backward Euler: x0, v0 as they are).
   PetscCall(PrepareStep());
   PetscCall(BeginSchemeStep(x, v));

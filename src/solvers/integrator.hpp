@@ -61,6 +61,7 @@
 
 #include <petscksp.h>
 
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
@@ -169,11 +170,14 @@ class ImplicitEuler {
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step; with
   // -dt_adapt, by substeps of the step: each is repeated with a smaller size
-  // while its local error estimate exceeds -tol (relative to |x - X| + h |v|:
+  // while its local error estimate exceeds -tol (relative to |x - X| + Dt |v|, Dt
+  // the step and |v| the larger of the substep's start and end speeds:
   // backward Euler h |v1 - v0| / 2, the second-order schemes
   // h |v1 - v0 - (h / h_prev)(v0 - v_prev)| / 6, the velocity's second difference),
-  // and the next substeps' size follows the estimate (grown only beyond a
-  // factor, so that A is refactorised seldom); not with contact. The external
+  // and the next substeps' size follows the estimate (sizes Dt / 2^k, grown
+  // only beyond a factor, so that A is refactorised seldom); with contact, a
+  // rejected substep also restores the contact's carried state, and after a
+  // substep in which the contact acted the scheme's history restarts. The external
   // force is gravity, f_ext = M g (none when g = 0). With contact (may be null):
   // solve, constrain the vertices the step would take inside obstacles, solve
   // again with the constraints until no new one appears (contact.hpp), then the
@@ -247,9 +251,17 @@ class ImplicitEuler {
   PetscErrorCode TakeStep(Vec x, Vec v, ContactSolver *contact);
   // -dt_adapt: the substeps of one step; saving and restoring the state of a
   // substep; its relative local error estimate (*estimated false: no history).
-  PetscErrorCode AdaptiveStep(Vec x, Vec v);
-  PetscErrorCode SaveSubstepState(Vec x, Vec v);
-  PetscErrorCode RestoreSubstepState(Vec x, Vec v);
+  // With contact (null: none), its carried state (the resting contacts) is
+  // saved and restored with the substep's.
+  PetscErrorCode AdaptiveStep(Vec x, Vec v, ContactSolver *contact);
+  // The substep sizes are the step's halvings dt / 2^level: a few sizes recur,
+  // so A changes (linear mode: is refactorised) only when the size moves on
+  // this ladder, and the substeps end on the step's end exactly. The level of
+  // the next substep: the largest size not above the target that `elapsed`
+  // (in units of the smallest size) is a multiple of.
+  int LadderLevel(uint64_t elapsed) const;
+  PetscErrorCode SaveSubstepState(Vec x, Vec v, const ContactSolver *contact);
+  PetscErrorCode RestoreSubstepState(Vec x, Vec v, ContactSolver *contact);
   PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);
   PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
   PetscErrorCode BeginSchemeStep(Vec x, Vec v);
@@ -303,6 +315,9 @@ class ImplicitEuler {
   // start of a substep (x, v, history) to restore after a rejection.
   PetscReal target_step_ = 0, saved_previous_dt_ = 0;
   bool saved_acceleration_valid_ = false;
+  RestingContacts saved_contact_;
+  // The last step's contact constrained a vertex or changed x or v after the solve.
+  bool contact_acted_ = false;
   Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
       saved_previous_v_ = nullptr, saved_acceleration_ = nullptr;
   // The next (during Step: this) step's coefficients; A's step sizes (h_f, h_x).

@@ -25,6 +25,9 @@ Then a study whose iterative runs cannot converge (-ksp_max_it 1) must finish
 and record those runs as failed with softbody's one-line error; its options are
 given in the other spellings the tools accept (GNU --study-modes, the older
 --solvers and --ranks, -name=value), so they are checked too.
+Last, the adaptive configuration at its smallest (bdf2 at 2 levels and with
+-dt_adapt -tol 1e-3, linear, direct, 1 rank): its row in study.csv and its
+section in study.md.
 """
 import csv
 import math
@@ -215,7 +218,32 @@ def main():
         checks.check("Failed runs: 2" in md and "did not converge" in md, "study.md lists the 2 failed runs")
     else:
         checks.check(False, "study with unconverging runs wrote study.csv\n" + result.stdout + result.stderr)
+    adaptive_study(args, checks, scene)
     checks.exit()
+
+
+def adaptive_study(args, checks, scene):
+    """The adaptive configuration at its smallest: bdf2 at two fixed levels and with -dt_adapt -tol 1e-3."""
+    study_dir = os.path.join(args.work, "study-adaptive")
+    result, seconds = run_study(args, scene, study_dir,
+                                ["-study_modes", "linear", "-study_solvers", "direct", "-study_ranks", "1",
+                                 "-study_levels", "2", "-study_integrators", "bdf2", "-study_adaptive", "bdf2",
+                                 "-study_tols", "1e-3"], PASSTHROUGH)
+    if not checks.check(result.returncode == 0, f"adaptive study exits 0 ({seconds:.1f} s)"):
+        print(result.stdout, result.stderr)
+        return
+    _, rows = read_csv(os.path.join(study_dir, "study.csv"))
+    adaptive = [r for r in rows if r["tol"] != ""]
+    fixed = [r for r in rows if r["tol"] == ""]
+    ok = (len(adaptive) == 1 and len(fixed) == 2 and adaptive[0]["status"] == "ok"
+          and float(adaptive[0]["tol"]) == 1e-3 and float(adaptive[0]["dt"]) == DTS[0]
+          and int(adaptive[0]["accepted_steps"]) >= int(adaptive[0]["steps"])
+          and math.isfinite(float(adaptive[0]["error_l2"])))
+    checks.check(ok, "study.csv: one adaptive row (bdf2, -tol 1e-3, dt = dt0, substeps >= steps, an error) "
+                     f"beside the 2 fixed-dt rows: {adaptive}")
+    md = open(os.path.join(study_dir, "study.md")).read()
+    checks.check("## Adaptive mode (-dt_adapt)" in md and "| 0.001 |" in md,
+                 "study.md has the adaptive section with the -tol 1e-3 row")
 
 
 if __name__ == "__main__":
