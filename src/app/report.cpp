@@ -64,9 +64,10 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
                         scene.num_vertices(), (long long)scene.num_tets(), held));
   PetscCall(PetscPrintf(comm,
                         "  unknowns     %" PetscInt_FMT " DOFs on %d %s (%" PetscInt_FMT
-                        " to %" PetscInt_FMT " per rank%s)\n",
+                        " to %" PetscInt_FMT " per rank%s; %s vertex order)\n",
                         3 * layout.num_free(), layout.size, layout.size == 1 ? "rank" : "ranks",
-                        min_dofs, max_dofs, PartitionNote(layout.partitioner)));
+                        min_dofs, max_dofs, PartitionNote(layout.partitioner),
+                        kVertexOrderNames[static_cast<int>(layout.vertex_order)]));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

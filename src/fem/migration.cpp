@@ -80,6 +80,35 @@ std::vector<TetRecord> PackByOwner(const MeshShare &share, const DofLayout &layo
   return records;
 }
 
+// The tet's PETSc vertices, increasing: the key the tets are sorted by for locality.
+std::array<PetscInt, 4> SortedVertices(const TetRecord &record) {
+  std::array<PetscInt, 4> v{record.vertices[0], record.vertices[1], record.vertices[2],
+                            record.vertices[3]};
+  std::sort(v.begin(), v.end());
+  return v;
+}
+
+// In tet index order; unless the vertices keep the natural order, then by their
+// sorted PETSc vertices (lexicographic, ties by tet index).
+void SortRecords(VertexOrder order, std::vector<TetRecord> *records) {
+  if (order == VertexOrder::kNatural) {
+    std::sort(records->begin(), records->end(),
+              [](const TetRecord &a, const TetRecord &b) { return a.index < b.index; });
+    return;
+  }
+  std::vector<std::pair<std::array<PetscInt, 4>, int64_t>> key(records->size());
+  std::vector<size_t> position(records->size());
+  for (size_t t = 0; t < records->size(); ++t) {
+    key[t] = {SortedVertices((*records)[t]), (*records)[t].index};
+    position[t] = t;
+  }
+  std::sort(position.begin(), position.end(),
+            [&key](size_t a, size_t b) { return key[a] < key[b]; });
+  std::vector<TetRecord> sorted(records->size());
+  for (size_t t = 0; t < position.size(); ++t) sorted[t] = (*records)[position[t]];
+  *records = std::move(sorted);
+}
+
 }  // namespace
 
 PetscErrorCode MigrateTets(MPI_Comm comm, const MeshShare &share, const DofLayout &layout,
@@ -95,8 +124,7 @@ PetscErrorCode MigrateTets(MPI_Comm comm, const MeshShare &share, const DofLayou
   }
   PetscCall(ExchangeRecords(comm, send, counts, &received));
   send = std::vector<TetRecord>();
-  std::sort(received.begin(), received.end(),
-            [](const TetRecord &a, const TetRecord &b) { return a.index < b.index; });
+  SortRecords(layout.vertex_order, &received);
   *tets = LocalTets();
   tets->index.reserve(received.size());
   tets->body.reserve(received.size());

@@ -6,8 +6,10 @@
 #include <algorithm>
 #include <limits>
 #include <numeric>
+#include <utility>
 
 #include "common/exchange.hpp"
+#include "common/options.hpp"
 
 namespace softbody {
 
@@ -85,13 +87,23 @@ PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options)
   PetscFunctionBeginUser;
   static const char *const kNames[] = {"auto", "metis", "ptscotch", "Partitioner", "", nullptr};
   PetscEnum chosen = static_cast<PetscEnum>(options->partitioner);
+  PetscEnum order = static_cast<PetscEnum>(options->vertex_order);
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kChoice, "-partitioner", kNames},
+                                     {OptionSyntax::kChoice, "-vertex_order", kVertexOrderNames}}));
   PetscOptionsBegin(comm, nullptr, "Partition of the free vertices over the ranks", nullptr);
   PetscCall(PetscOptionsEnum("-partitioner",
                              "auto (METIS on up to 2 ranks, else PT-Scotch), metis (the whole "
                              "graph on rank 0) or ptscotch (on the distributed graph)",
                              nullptr, kNames, chosen, &chosen, nullptr));
+  PetscCall(PetscOptionsEnum("-vertex_order",
+                             "order of each rank's vertices (and tets, sorted by their vertices) "
+                             "for cache locality: hilbert or morton (a space-filling curve through "
+                             "the rest positions) or natural (the mesh files' order); the output "
+                             "is in the files' order either way",
+                             nullptr, kVertexOrderNames, order, &order, nullptr));
   PetscOptionsEnd();
   options->partitioner = static_cast<Partitioner>(chosen);
+  options->vertex_order = static_cast<VertexOrder>(order);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -225,6 +237,39 @@ PetscErrorCode SpreadNumbering(MPI_Comm comm, IS numbers, MeshShare *share, DofL
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Collective. Renumbers the vertices this rank owns inside its block, along the
+// curve of `order` through their rest positions (fetched from the slabs):
+// layout->natural_of_owned is permuted and share->petsc_vertex follows.
+PetscErrorCode OrderOwnedVertices(MPI_Comm comm, VertexOrder order, MeshShare *share,
+                                  DofLayout *layout) {
+  PetscFunctionBeginUser;
+  layout->vertex_order = order;
+  if (order == VertexOrder::kNatural) PetscFunctionReturn(PETSC_SUCCESS);
+  const PetscInt owned = layout->local_count(), begin = layout->local_begin();
+  PetscSF by_petsc;  // roots: the owned vertices; leaves: the slabs' free vertices
+  PetscCall(CreateFreeVertexSF(comm, *share, share->petsc_vertex, owned, &by_petsc));
+  std::vector<std::array<double, 3>> rest(owned);
+  MPI_Datatype point;
+  PetscCallMPI(MPI_Type_contiguous(3, MPI_DOUBLE, &point));
+  PetscCallMPI(MPI_Type_commit(&point));
+  PetscCall(PetscSFReduceBegin(by_petsc, point, share->rest.data(), rest.data(), MPI_REPLACE));
+  PetscCall(PetscSFReduceEnd(by_petsc, point, share->rest.data(), rest.data(), MPI_REPLACE));
+  PetscCallMPI(MPI_Type_free(&point));
+  const std::vector<PetscInt> old_of_new = CurveOrder(rest, order);
+  std::vector<PetscInt> new_petsc(owned), natural(owned);
+  for (PetscInt k = 0; k < owned; ++k) {
+    new_petsc[old_of_new[k]] = begin + k;
+    natural[k] = layout->natural_of_owned[old_of_new[k]];
+  }
+  layout->natural_of_owned = std::move(natural);
+  PetscCall(PetscSFBcastBegin(by_petsc, MPIU_INT, new_petsc.data(), share->petsc_vertex.data(),
+                              MPI_REPLACE));
+  PetscCall(PetscSFBcastEnd(by_petsc, MPIU_INT, new_petsc.data(), share->petsc_vertex.data(),
+                            MPI_REPLACE));
+  PetscCall(PetscSFDestroy(&by_petsc));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 }  // namespace
 
 PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, MeshShare *share,
@@ -250,6 +295,7 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, Me
   PetscCall(NumberByPart(comm, part, layout, &numbers));
   PetscCall(SpreadNumbering(comm, numbers, share, layout));
   PetscCall(ISDestroy(&numbers));
+  PetscCall(OrderOwnedVertices(comm, options.vertex_order, share, layout));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -5,10 +5,11 @@
 // Their natural order ("free index") follows the scene's natural vertex order.
 // The free-vertex graph (vertices adjacent when they share a tet; vertex_graph.hpp)
 // is split into one part per rank by METIS or PT-Scotch (-partitioner); the
-// vertices are renumbered part by part, keeping the natural order inside a part,
-// so rank r owns the contiguous block [vertex_start[r], vertex_start[r+1]) of
-// "PETSc vertex" indices. DOF 3 p + c is coordinate c of PETSc vertex p (block
-// size 3).
+// vertices are renumbered part by part, so rank r owns the contiguous block
+// [vertex_start[r], vertex_start[r+1]) of "PETSc vertex" indices, and inside its
+// block in the order of -vertex_order (vertex_order.hpp): along a space-filling
+// curve through the rest positions, or the natural order. DOF 3 p + c is
+// coordinate c of PETSc vertex p (block size 3).
 #pragma once
 
 #include <petscsys.h>
@@ -17,15 +18,19 @@
 
 #include "fem/mesh_share.hpp"
 #include "fem/vertex_graph.hpp"
+#include "fem/vertex_order.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
 
 struct PartitionOptions {
   Partitioner partitioner = Partitioner::kAuto;  // -partitioner auto|metis|ptscotch
+  // -vertex_order natural|hilbert|morton: the order inside each rank's block
+  // (Hilbert: the fastest measured, docs/performance.md "Locality").
+  VertexOrder vertex_order = VertexOrder::kHilbert;
 };
 
-// Collective. Reads -partitioner.
+// Collective. Reads -partitioner and -vertex_order.
 PetscErrorCode ProcessPartitionOptions(MPI_Comm comm, PartitionOptions *options);
 
 // The partitioner's name as -partitioner spells it ("auto" for none: one rank).
@@ -43,7 +48,8 @@ struct DofLayout {
   std::vector<PetscInt> natural_of_free;  // free index -> natural vertex
   std::vector<PetscInt> petsc_of_free;    // free index -> PETSc vertex
   PetscMPIInt rank = 0, size = 1;
-  Partitioner partitioner = Partitioner::kAuto;  // the one that ran (kAuto: one rank, none)
+  Partitioner partitioner = Partitioner::kAuto;      // the one that ran (kAuto: one rank, none)
+  VertexOrder vertex_order = VertexOrder::kNatural;  // the order inside each rank's block
 
   PetscInt num_free() const { return vertex_start.back(); }
   PetscInt local_begin() const { return vertex_start[rank]; }
@@ -72,9 +78,11 @@ struct DofLayout {
 };
 
 // Collective. Numbers the free vertices (the vertices of the share's tets) in
-// natural order, partitions their graph (vertex_graph.hpp) from the share's tets
-// and numbers them part by part (PETSc's ISPartitioningToNumbering). Fills
-// share->free_index and share->petsc_vertex for the slab, and the layout.
+// natural order, partitions their graph (vertex_graph.hpp) from the share's tets,
+// numbers them part by part (PETSc's ISPartitioningToNumbering) and then, inside
+// each rank's block, in options.vertex_order of their rest positions (O(local):
+// each rank orders the vertices it owns). Fills share->free_index and
+// share->petsc_vertex for the slab, and the layout.
 PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, MeshShare *share,
                               DofLayout *layout);
 

@@ -195,6 +195,8 @@ def main():
         option("-steps", "1.5", ["integer", "1.5"]),
         option("-dt", "inf", ["finite", "inf"]),
         option("-mode", "foo", ["not one of", "foo"]),
+        option("-vertex_order", "foo", ["not one of", "foo"]),
+        option("-partitioner", "foo", ["not one of", "foo"]),
         # (PETSc's own parse of these ended in a traceback and exit 139)
         option("-sharp_edges", "maybe", ["true or false", "maybe"]),
         option("-impulse_spreading", "2", ["true or false"]),

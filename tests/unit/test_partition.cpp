@@ -12,21 +12,32 @@
 //   blocks (which cuts the beam across its long side: an independent, easily computed
 //   baseline any partitioner must beat).
 // - BuildDofLayout numbers the free vertices (those of free tets: a stray vertex is not)
-//   as a serial count here does, part by part, natural order inside a part;
-//   natural_of_owned and the slabs' lookups agree with the global arrays.
-// - MigrateTets brings every free tet with an owned vertex, and only those, in tet
-//   order, with its PETSc vertices and rest positions (checked against the scene).
+//   as a serial count here does, part by part, natural order inside a part with
+//   -vertex_order natural; natural_of_owned and the slabs' lookups agree with the
+//   global arrays.
+// - With the Hilbert order (METIS, whose partition is reproducible, unlike
+//   PT-Scotch's in Debian's build): the same parts, each rank's owned vertices renumbered
+//   inside its block so that their Hilbert indices (in the bounding cube of the
+//   rank's owned rest positions, computed here from the scene) never decrease; the
+//   lookups agree as above.
+// - MigrateTets brings every free tet with an owned vertex, and only those, with its
+//   PETSc vertices and rest positions (checked against the scene): in tet order with
+//   the natural order, sorted by their sorted PETSc vertices with the Hilbert order.
 #include <gtest/gtest.h>
 #include <petscsys.h>
 
 #include <algorithm>
+#include <array>
+#include <cstdint>
 #include <set>
+#include <utility>
 #include <vector>
 
 #include "box_mesh.hpp"
 #include "fem/migration.hpp"
 #include "fem/partition.hpp"
 #include "fem/vertex_graph.hpp"
+#include "fem/vertex_order.hpp"
 #include "io/scene.hpp"
 #include "petsc_environment.hpp"
 
@@ -200,9 +211,11 @@ struct BuiltLayout {
   MeshShare share;
   DofLayout layout;
   PetscErrorCode status;
-  BuiltLayout(const Scene &scene, Partitioner partitioner)
+  BuiltLayout(const Scene &scene, Partitioner partitioner,
+              VertexOrder order = VertexOrder::kNatural)
       : share(ShareScene(scene, Rank(), Size())),
-        status(BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions{partitioner}, &share, &layout)) {
+        status(BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions{partitioner, order}, &share,
+                              &layout)) {
     if (status == 0) status = ReplicateNumbering(PETSC_COMM_WORLD, share, &layout);
   }
 };
@@ -239,6 +252,91 @@ TEST(DofLayout, NumberedPartByPartInNaturalOrder) {
       EXPECT_EQ(built.share.petsc_vertex[i], layout.PetscVertexOfNatural(natural));
     }
   }
+}
+
+// The rest position of a natural vertex of the scene.
+std::array<double, 3> RestOfNatural(const Scene &scene, PetscInt natural) {
+  const Body &body = scene.bodies[BodyOfNatural(scene, natural)];
+  const auto row = body.mesh.vertices.row(natural - body.first_vertex);
+  return {row(0), row(1), row(2)};
+}
+
+TEST(DofLayout, HilbertOrderInsideEachRanksBlock) {
+  const Scene scene = ThreeBoxesWithStrayVertex();
+  BuiltLayout natural(scene, Partitioner::kMetis, VertexOrder::kNatural);
+  BuiltLayout hilbert(scene, Partitioner::kMetis, VertexOrder::kHilbert);
+  ASSERT_EQ(natural.status, 0);
+  ASSERT_EQ(hilbert.status, 0);
+  const DofLayout &layout = hilbert.layout;
+  EXPECT_EQ(layout.vertex_order, VertexOrder::kHilbert);
+  EXPECT_EQ(layout.vertex_start, natural.layout.vertex_start) << "the parts changed";
+  std::vector<PetscInt> mine = layout.natural_of_owned, before = natural.layout.natural_of_owned;
+  std::sort(mine.begin(), mine.end());
+  EXPECT_EQ(mine, before) << "another set of owned vertices";
+  const PetscInt owned = layout.local_count();
+  for (PetscInt i = 0; i < owned; ++i)
+    EXPECT_EQ(layout.PetscVertexOfNatural(layout.natural_of_owned[i]), layout.local_begin() + i);
+  for (PetscInt i = 0; i < hilbert.share.slab_size(); ++i)
+    EXPECT_EQ(hilbert.share.petsc_vertex[i],
+              layout.PetscVertexOfNatural(hilbert.share.first_vertex + i));
+  // Hilbert indices of the owned vertices in the bounding cube of their rest positions.
+  std::array<double, 3> lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (PetscInt natural_vertex : layout.natural_of_owned)
+    for (int c = 0; c < 3; ++c) {
+      lo[c] = std::min(lo[c], RestOfNatural(scene, natural_vertex)[c]);
+      hi[c] = std::max(hi[c], RestOfNatural(scene, natural_vertex)[c]);
+    }
+  const double side = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  const double cells_per_metre = ((1u << kCurveBits) - 1) / side;  // as CurveOrder scales
+  uint64_t previous = 0;
+  for (PetscInt i = 0; i < owned; ++i) {
+    const std::array<double, 3> X = RestOfNatural(scene, layout.natural_of_owned[i]);
+    std::array<uint32_t, 3> cell;
+    for (int c = 0; c < 3; ++c) cell[c] = static_cast<uint32_t>((X[c] - lo[c]) * cells_per_metre);
+    const uint64_t index = HilbertIndex(cell, kCurveBits);
+    EXPECT_GE(index, previous) << "owned vertex " << i;
+    previous = index;
+  }
+}
+
+// The tets of the Hilbert order: those of the natural order, each once, sorted by
+// their sorted PETSc vertices (ties by tet index), with the new PETSc vertices.
+TEST(MigrateTets, SortedByTheirVerticesInTheHilbertOrder) {
+  const Scene scene = ThreeBoxesWithStrayVertex();
+  BuiltLayout natural(scene, Partitioner::kMetis, VertexOrder::kNatural);
+  BuiltLayout hilbert(scene, Partitioner::kMetis, VertexOrder::kHilbert);
+  ASSERT_EQ(natural.status, 0);
+  ASSERT_EQ(hilbert.status, 0);
+  LocalTets by_index, sorted;
+  ASSERT_EQ(MigrateTets(PETSC_COMM_WORLD, natural.share, natural.layout, &by_index), 0);
+  ASSERT_EQ(MigrateTets(PETSC_COMM_WORLD, hilbert.share, hilbert.layout, &sorted), 0);
+  ASSERT_EQ(sorted.size(), by_index.size());
+  std::vector<std::pair<std::array<PetscInt, 4>, int64_t>> keys;
+  for (size_t t = 0; t < sorted.size(); ++t) {
+    // The same tet, found by its index, with the vertices renumbered.
+    const size_t k =
+        std::lower_bound(by_index.index.begin(), by_index.index.end(), sorted.index[t]) -
+        by_index.index.begin();
+    ASSERT_LT(k, by_index.size());
+    ASSERT_EQ(by_index.index[k], sorted.index[t]);
+    EXPECT_EQ(sorted.body[t], by_index.body[k]);
+    for (int a = 0; a < 4; ++a) {
+      const PetscInt natural_vertex =
+          natural.layout.natural_of_free[std::find(natural.layout.petsc_of_free.begin(),
+                                                   natural.layout.petsc_of_free.end(),
+                                                   by_index.vertices[k][a]) -
+                                         natural.layout.petsc_of_free.begin()];
+      EXPECT_EQ(sorted.vertices[t][a], hilbert.layout.PetscVertexOfNatural(natural_vertex));
+      EXPECT_EQ(sorted.rest[t].row(a), by_index.rest[k].row(a));
+    }
+    std::array<PetscInt, 4> v = sorted.vertices[t];
+    std::sort(v.begin(), v.end());
+    keys.emplace_back(v, sorted.index[t]);
+  }
+  EXPECT_TRUE(std::is_sorted(keys.begin(), keys.end()));
+  std::vector<int64_t> indices = sorted.index;
+  std::sort(indices.begin(), indices.end());
+  EXPECT_EQ(indices, by_index.index) << "repeated or missing tets";
 }
 
 // Every free tet with an owned vertex arrives once, in tet order, with its
