@@ -101,12 +101,9 @@ PetscErrorCode CollisionGuard::ExchangeHalo() {
     boxes[surface_.body[v]].Extend(start_[v]);
     boxes[surface_.body[v]].Extend(end_[v]);
   }
-  std::vector<RankBox> others;
-  PetscCall(GatherRankBoxes(comm_, boxes, &others, &bytes_sent_));
-  std::vector<PetscMPIInt> ranks, counts;
-  std::vector<int32_t> items;
-  SelectForRanks(
-      others, owned_.size(),
+  HaloPlan plan;
+  PetscCall(PlanHalo(
+      comm_, boxes, owned_.size(),
       [&](int32_t i, const RankBox &box) {
         const int32_t v = owned_[i].first;
         Box motion;
@@ -117,16 +114,16 @@ PetscErrorCode CollisionGuard::ExchangeHalo() {
         motion.upper.array() += reach;
         return motion.Overlaps(box.box());
       },
-      &ranks, &counts, &items);
+      &plan, &bytes_sent_));
   std::vector<HaloVertex> records, received;
-  for (const int32_t i : items) {
+  for (const int32_t i : plan.items) {
     const int32_t v = owned_[i].first;
     HaloVertex h{v, {}, {}, mass_[v]};
     for (int c = 0; c < 3; ++c) h.start[c] = start_[v][c], h.end[c] = end_[v][c];
     records.push_back(h);
   }
   PetscInt64 bytes;
-  PetscCall(neighbours_.Exchange(ranks, counts, records, &received, &bytes));
+  PetscCall(neighbours_.Exchange(plan.ranks, plan.counts, records, &received, &bytes));
   bytes_sent_ += bytes;
   for (const HaloVertex &h : received) {
     start_[h.vertex] = Point(h.start);

@@ -168,20 +168,17 @@ PetscErrorCode FreeState::ReduceBodyBoxes(const std::vector<Box> &owned_boxes) {
 
 PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
   PetscFunctionBeginUser;
-  std::vector<RankBox> others;
-  PetscCall(GatherRankBoxes(comm_, owned_boxes, &others, &bytes_sent_));
-  std::vector<PetscMPIInt> ranks, counts;
-  std::vector<int32_t> items;
-  SelectForRanks(
-      others, owned_natural_.size(),
+  HaloPlan plan;
+  PetscCall(PlanHalo(
+      comm_, owned_boxes, owned_natural_.size(),
       [&](int32_t p, const RankBox &box) {
         const int32_t n = owned_natural_[p], body = body_of_[n];
         return (same_body_ || box.body != body) &&
                box.box().Contains(position(n), body_reach_[body]);
       },
-      &ranks, &counts, &items);
+      &plan, &bytes_sent_));
   std::vector<HaloVertex> records, received;
-  for (const int32_t p : items) {
+  for (const int32_t p : plan.items) {
     const int32_t n = owned_natural_[p];
     HaloVertex h{n, {}, {}, inverse_mass_[n]};
     std::copy(&x_[3 * n], &x_[3 * n] + 3, h.x);
@@ -189,7 +186,7 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
     records.push_back(h);
   }
   PetscInt64 bytes;
-  PetscCall(neighbours_.Exchange(ranks, counts, records, &received, &bytes));
+  PetscCall(neighbours_.Exchange(plan.ranks, plan.counts, records, &received, &bytes));
   bytes_sent_ += bytes;
   for (const HaloVertex &h : received) {
     const int32_t n = h.natural;

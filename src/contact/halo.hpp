@@ -56,4 +56,20 @@ void SelectForRanks(const std::vector<RankBox> &others, size_t num_items, Wants 
   }
 }
 
+// Collective. The halo's plan in one call: GatherRankBoxes with this rank's
+// boxes `mine`, then SelectForRanks over its num_items items.
+struct HaloPlan {
+  std::vector<PetscMPIInt> ranks, counts;
+  std::vector<int32_t> items;
+};
+template <class Wants>
+PetscErrorCode PlanHalo(MPI_Comm comm, const std::vector<Box> &mine, size_t num_items, Wants wants,
+                        HaloPlan *plan, PetscInt64 *bytes_sent) {
+  PetscFunctionBeginUser;
+  std::vector<RankBox> others;
+  PetscCall(GatherRankBoxes(comm, mine, &others, bytes_sent));
+  SelectForRanks(others, num_items, wants, &plan->ranks, &plan->counts, &plan->items);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 }  // namespace softbody
