@@ -97,26 +97,20 @@ std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh) {
 }
 
 void UniformGrid::Build(const std::vector<Box> &boxes) {
-  std::vector<int32_t> items(boxes.size());
-  for (size_t item = 0; item < boxes.size(); ++item) items[item] = static_cast<int32_t>(item);
-  Build(boxes, items);
-}
-
-void UniformGrid::Build(const std::vector<Box> &boxes, const std::vector<int32_t> &items) {
   bounds_ = Box();
   double edge_sum = 0;
-  for (const int32_t item : items) {
-    bounds_.Extend(boxes[item]);
-    edge_sum += (boxes[item].upper - boxes[item].lower).sum() / 3;
+  for (const Box &b : boxes) {
+    bounds_.Extend(b);
+    edge_sum += (b.upper - b.lower).sum() / 3;
   }
   item_start_.clear();  // empty until items are binned
   cell_start_.clear();
   items_.clear();
-  if (items.empty()) return;
+  if (boxes.empty()) return;
   item_start_.assign(1, 0);
   const Eigen::Array3d extent = (bounds_.upper - bounds_.lower).array();
-  h_ = std::max(edge_sum / items.size(), kMinCellFraction * std::max(1.0, extent.maxCoeff()));
-  const double max_cells = kMaxCellsPerItem * items.size() + kMaxCellsPerItem;
+  h_ = std::max(edge_sum / boxes.size(), kMinCellFraction * std::max(1.0, extent.maxCoeff()));
+  const double max_cells = kMaxCellsPerItem * boxes.size() + kMaxCellsPerItem;
   while ((extent / h_ + 1).prod() > max_cells) h_ *= 1.5;
   cells_ = (extent / h_).floor().cast<int>() + 1;
   // Count, then fill (CSR).
@@ -128,7 +122,7 @@ void UniformGrid::Build(const std::vector<Box> &boxes, const std::vector<int32_t
       items_.resize(cell_start_.back());
       next.assign(cell_start_.begin(), cell_start_.end() - 1);
     }
-    for (const int32_t item : items) {
+    for (size_t item = 0; item < boxes.size(); ++item) {
       const Eigen::Array3i lo = CellOf(boxes[item].lower.array()),
                            hi = CellOf(boxes[item].upper.array());
       for (int k = lo[2]; k <= hi[2]; ++k)
@@ -138,7 +132,7 @@ void UniformGrid::Build(const std::vector<Box> &boxes, const std::vector<int32_t
             if (pass == 0)
               ++cell_start_[cell + 1];
             else
-              items_[next[cell]++] = item;
+              items_[next[cell]++] = static_cast<int32_t>(item);
           }
     }
   }

@@ -66,8 +66,6 @@ std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh);
 class UniformGrid {
  public:
   void Build(const std::vector<Box> &boxes);
-  // Only `items` (increasing indices into boxes; the others' boxes are not read).
-  void Build(const std::vector<Box> &boxes, const std::vector<int32_t> &items);
   bool empty() const { return item_start_.empty(); }
   // Items whose cells overlap the box around p of half-width radius (each once
   // per cell: callers may see an item more than once).

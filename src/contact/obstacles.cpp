@@ -42,9 +42,8 @@ void Obstacles::SetupBodies(bool track_free) {
   std::vector<int32_t> tets(fixed_tets_.size()), triangles(fixed_triangles_.size());
   std::iota(tets.begin(), tets.end(), 0);
   std::iota(triangles.begin(), triangles.end(), 0);
-  std::vector<Box> triangle_boxes;
-  BinItems(fixed_tets_, tets, &fixed_tet_box_, &fixed_tet_grid_);
-  BinItems(fixed_triangles_, triangles, &triangle_boxes, &fixed_triangle_grid_);
+  BinItems(fixed_tets_, tets, &fixed_tets_bin_);
+  BinItems(fixed_triangles_, triangles, &fixed_triangles_bin_);
   if (track_free) IndexFreeItems();
 }
 
@@ -116,14 +115,12 @@ void Obstacles::BuildFixedBodyBoxes() {
 
 template <size_t N>
 void Obstacles::BinItems(const std::vector<std::array<int32_t, N>> &items,
-                         const std::vector<int32_t> &which, std::vector<Box> *boxes,
-                         UniformGrid *grid) const {
-  boxes->resize(items.size());
-  for (const int32_t t : which) {
-    (*boxes)[t] = Box();
-    for (size_t a = 0; a + 1 < N; ++a) (*boxes)[t].Extend(WorldPoint(items[t][a]));
-  }
-  grid->Build(*boxes, which);
+                         const std::vector<int32_t> &which, Binned *bin) const {
+  bin->ids = which;
+  bin->boxes.assign(which.size(), Box());
+  for (size_t slot = 0; slot < which.size(); ++slot)
+    for (size_t a = 0; a + 1 < N; ++a) bin->boxes[slot].Extend(WorldPoint(items[which[slot]][a]));
+  bin->grid.Build(bin->boxes);
 }
 
 template <size_t N>
@@ -147,10 +144,10 @@ std::vector<int32_t> Obstacles::CurrentItems(const std::vector<std::array<int32_
 void Obstacles::EnsureFreeGrids() const {
   if (free_grids_current_) return;
   BinItems(free_tets_, CurrentItems(free_tets_, tets_start_, tets_of_vertex_, static_tets_),
-           &free_tet_box_, &free_tet_grid_);
+           &free_tets_bin_);
   BinItems(free_triangles_,
            CurrentItems(free_triangles_, triangles_start_, triangles_of_vertex_, static_triangles_),
-           &free_triangle_box_, &free_triangle_grid_);
+           &free_triangles_bin_);
   free_grids_current_ = true;
   ++free_grid_builds_;
 }
@@ -167,7 +164,8 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
   const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
-  const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
+  const Binned &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
+  const UniformGrid &grid = bin.grid;
   if (grid.empty()) return false;
   const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
                        (grid.bounds().upper - p).norm() + (grid.bounds().lower - p).norm();
@@ -178,7 +176,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   // searched: every triangle nearer than it meets that neighbourhood.
   for (double radius = grid.cell_size(), searched = 0; best > searched && searched < 2 * limit;
        searched = radius, radius *= 2)
-    grid.ForEachNear(p, radius, [&](int32_t t) {
+    bin.ForEachNear(p, radius, [&](int32_t t, const Box &) {
       const auto &tri = triangles[t];
       if (tri[3] != obstacle) return;
       const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
@@ -207,15 +205,15 @@ bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
   const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
-  const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
   bool inside = false;
-  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
-    const auto &tet = tets[t];
-    if (inside || tet[4] != obstacle || !tet_boxes[t].Contains(p, kBoxMargin)) return;
-    inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
-                         WorldPoint(tet[3]))
-                 .minCoeff() >= -kInsideTolerance;
-  });
+  (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
+      .ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
+        const auto &tet = tets[t];
+        if (inside || tet[4] != obstacle || !box.Contains(p, kBoxMargin)) return;
+        inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                             WorldPoint(tet[3]))
+                     .minCoeff() >= -kInsideTolerance;
+      });
   return inside;
 }
 
@@ -223,9 +221,9 @@ bool Obstacles::LocateInFreeBody(const Point &p, int32_t body, double margin,
                                  Point *velocity) const {
   EnsureFreeGrids();
   bool found = false;
-  free_tet_grid_.ForEachNear(p, 0.0, [&](int32_t t) {
+  free_tets_bin_.ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
     const auto &tet = free_tets_[t];
-    if (found || tet[4] != body || !free_tet_box_[t].Contains(p, kBoxMargin)) return;
+    if (found || tet[4] != body || !box.Contains(p, kBoxMargin)) return;
     const Eigen::Vector4d w = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]),
                                           WorldPoint(tet[2]), WorldPoint(tet[3]));
     if (!(w.minCoeff() > margin)) return;
@@ -241,32 +239,35 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
   const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
-  const UniformGrid &grid = fixed_part ? fixed_triangle_grid_ : free_triangle_grid_;
+  const Binned &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const Point direction = end - start;
   double first = kNoCrossing;
   int32_t chosen = -1;
-  grid.ForEachNear(0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(), [&](int32_t t) {
-    const auto &tri = triangles[t];
-    if (tri[3] != obstacle) return;
-    const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
-    const Point normal = (b - a).cross(c - a);
-    double along;
-    Eigen::Vector3d w;
-    if (normal.dot(direction) >= 0 || !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) ||
-        along > first || (along == first && t >= chosen))
-      return;
-    first = along;
-    chosen = t;
-    hit->point = start + along * direction;
-    hit->normal = normal.normalized();
-    hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
-                    w[2] * state_->velocity(tri[2]);
-    hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) + w[1] * state_->inverse_mass(tri[1]) +
-                        w[2] * state_->inverse_mass(tri[2]);
-    hit->body = obstacle;
-    hit->triangle = t;
-    hit->weights = w;
-  });
+  bin.ForEachNear(
+      0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(), [&](int32_t t, const Box &) {
+        const auto &tri = triangles[t];
+        if (tri[3] != obstacle) return;
+        const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
+        const Point normal = (b - a).cross(c - a);
+        double along;
+        Eigen::Vector3d w;
+        if (normal.dot(direction) >= 0 ||
+            !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) || along > first ||
+            (along == first && t >= chosen))
+          return;
+        first = along;
+        chosen = t;
+        hit->point = start + along * direction;
+        hit->normal = normal.normalized();
+        hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
+                        w[2] * state_->velocity(tri[2]);
+        hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) +
+                            w[1] * state_->inverse_mass(tri[1]) +
+                            w[2] * state_->inverse_mass(tri[2]);
+        hit->body = obstacle;
+        hit->triangle = t;
+        hit->weights = w;
+      });
   return first <= 1;
 }
 
@@ -292,18 +293,18 @@ bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstac
 int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
                                   const VertexObstacles &skip) const {
   const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
-  const auto &tet_boxes = fixed_part ? fixed_tet_box_ : free_tet_box_;
   int32_t first = -1;  // the lowest tet holding p
-  (fixed_part ? fixed_tet_grid_ : free_tet_grid_).ForEachNear(p, 0.0, [&](int32_t t) {
-    const auto &tet = tets[t];
-    if ((first >= 0 && t >= first) || tet[4] == body || skip.Has(tet[4]) ||
-        !tet_boxes[t].Contains(p, kBoxMargin) || (!fixed_part && Separating(body, tet[4])))
-      return;
-    if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
-                    WorldPoint(tet[3]))
-            .minCoeff() >= -kInsideTolerance)
-      first = t;
-  });
+  (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
+      .ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
+        const auto &tet = tets[t];
+        if ((first >= 0 && t >= first) || tet[4] == body || skip.Has(tet[4]) ||
+            !box.Contains(p, kBoxMargin) || (!fixed_part && Separating(body, tet[4])))
+          return;
+        if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                        WorldPoint(tet[3]))
+                .minCoeff() >= -kInsideTolerance)
+          first = t;
+      });
   return first >= 0 ? tets[first][4] : -1;
 }
 

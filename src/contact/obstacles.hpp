@@ -107,10 +107,23 @@ class Obstacles {
                                     const std::vector<int32_t> &of_vertex,
                                     const std::vector<int32_t> &static_items) const;
   void EnsureFreeGrids() const;
-  // The boxes of the listed items (`which`, increasing) at the world positions, binned.
+  // Items (tets or triangles) binned in a uniform grid over their boxes: the
+  // grid holds slots, ids[slot] the item and boxes[slot] its box. Only the
+  // binned items' boxes are kept, so a free grid costs O(local + halo).
+  struct Binned {
+    std::vector<int32_t> ids;
+    std::vector<Box> boxes;
+    UniformGrid grid;
+    // visit(item, box) for the items whose cells meet the box around p of half-width radius.
+    template <typename Visit>
+    void ForEachNear(const Point &p, double radius, Visit visit) const {
+      grid.ForEachNear(p, radius, [&](int32_t slot) { visit(ids[slot], boxes[slot]); });
+    }
+  };
+  // The listed items (`which`, increasing) binned at the world positions.
   template <size_t N>
   void BinItems(const std::vector<std::array<int32_t, N>> &items, const std::vector<int32_t> &which,
-                std::vector<Box> *boxes, UniformGrid *grid) const;
+                Binned *bin) const;
   // The first body other than `body` and those in `skip` in whose tets of the
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
@@ -126,15 +139,12 @@ class Obstacles {
   double ground_margin_ = 0;  // in mean boundary edges of the point's body
   std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
   std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
-  UniformGrid fixed_tet_grid_, fixed_triangle_grid_;
-  mutable UniformGrid free_tet_grid_, free_triangle_grid_;
+  Binned fixed_tets_bin_, fixed_triangles_bin_;
+  mutable Binned free_tets_bin_, free_triangles_bin_;
   mutable bool free_grids_current_ = false;
   mutable PetscInt free_grid_builds_ = 0;
   std::vector<std::pair<size_t, size_t>> separating_;  // (a < b), SetSeparating
-  std::vector<Box> body_box_;       // broad phase: each obstacle body's bounding box
-  std::vector<Box> fixed_tet_box_;  // each obstacle tet's box (cheap rejection)
-  mutable std::vector<Box> free_tet_box_;
-  mutable std::vector<Box> free_triangle_box_;
+  std::vector<Box> body_box_;  // broad phase: each obstacle body's bounding box
   // Free items by vertex (CSR over natural vertices) and those without a free vertex.
   std::vector<int64_t> tets_start_, triangles_start_;
   std::vector<int32_t> tets_of_vertex_, triangles_of_vertex_;
