@@ -13,7 +13,7 @@ each in the modes -scale_modes (linear, corotational) and with -scale_contact
   on   the same tets as two bodies of half the height stacked along y, under
        gravity (0, -9.81, 0) m/s^2 on a ground at y = 0: the lower one rests
        on the ground, the upper one falls onto it (two free bodies that can
-       meet: the contact path that gathers the free state on every rank).
+       meet: the contact path whose halos follow the bodies).
 
 Every point is run twice, -steps 1 and -steps 1 + S (S = -scale_steps); the long
 run minus the short one, over S, is the traffic of a step, the short run is the
@@ -24,10 +24,10 @@ set-up's (with the first step). Measured from outside the program:
     the time of each softbody log stage (src/app/log_stages.hpp);
   - Open MPI's monitoring components (pml_monitoring_enable 2, one file per rank):
     the bytes and messages each rank sends inside collectives (reductions,
-    broadcasts, the gathers of contact), and, for the record, point-to-point
-    messages outside persistent requests. (Open MPI 4.1's monitoring does not
-    count messages on persistent requests, which PETSc's halo exchanges use; hence
-    PETSc's own count for those. softbody itself makes no point-to-point calls.)
+    broadcasts, the boxes contact gathers), and the point-to-point messages
+    outside persistent requests: softbody's own contact halos. (Open MPI 4.1's
+    monitoring does not count messages on persistent requests, which PETSc's halo
+    exchanges use; hence PETSc's own count for those.)
   - softbody's run summary: the time loop per step.
 Ranks are oversubscribed on a machine with fewer cores: memory and message
 volume are what the program does; times are only rough.
@@ -122,7 +122,8 @@ COLUMNS = ["series", "mode", "contact", "ranks", "tets", "vertices", "tets_per_r
            "setup_s", "assembly_s", "factorisation_s", "contact_s", "loop_s_per_step", "setup_bytes_mean",
            "step_bytes_max", "step_bytes_mean", "step_bytes_min", "step_msgs_mean",
            "step_p2p_bytes_max", "step_p2p_bytes_mean", "step_p2p_bytes_min",
-           "step_coll_bytes_max", "step_coll_bytes_mean", "step_coll_bytes_min", "step_mpi_p2p_bytes_mean",
+           "step_coll_bytes_max", "step_coll_bytes_mean", "step_coll_bytes_min", "step_mpi_p2p_bytes_max",
+           "step_mpi_p2p_bytes_mean", "step_mpi_p2p_bytes_min",
            "load_avg", "status", "message"]
 RANK_COLUMNS = ["series", "mode", "contact", "ranks", "tets", "rank", "mem_mb", "setup_coll_bytes",
                 "step_coll_bytes", "step_coll_msgs", "step_mpi_p2p_bytes", "step_mpi_p2p_msgs"]
@@ -502,12 +503,20 @@ def fill_measurements(args, row, results, rank_rows):
     coll_msgs = np.array([r["step_coll_msgs"] for r in per_rank])
     for key in ("max", "min", "mean"):
         row[f"step_p2p_bytes_{key}"] = step(long_log[f"p2p_bytes_{key}"], short_log[f"p2p_bytes_{key}"])
+    mpi_p2p = np.array([r["step_mpi_p2p_bytes"] for r in per_rank])
+    mpi_p2p_msgs = np.array([r["step_mpi_p2p_msgs"] for r in per_rank])
     row.update(step_coll_bytes_max=coll.max(), step_coll_bytes_mean=coll.mean(), step_coll_bytes_min=coll.min(),
-               step_mpi_p2p_bytes_mean=float(np.mean([r["step_mpi_p2p_bytes"] for r in per_rank])),
-               step_msgs_mean=step(long_log["p2p_msgs_mean"], short_log["p2p_msgs_mean"]) + coll_msgs.mean(),
+               step_mpi_p2p_bytes_max=mpi_p2p.max(), step_mpi_p2p_bytes_mean=mpi_p2p.mean(),
+               step_mpi_p2p_bytes_min=mpi_p2p.min(),
+               step_msgs_mean=step(long_log["p2p_msgs_mean"], short_log["p2p_msgs_mean"]) + coll_msgs.mean()
+               + mpi_p2p_msgs.mean(),
                setup_bytes_mean=short_log["p2p_bytes_mean"] + np.mean([r["setup_coll_bytes"] for r in per_rank]))
+    # Bytes of a rank: PETSc's (persistent requests), the collectives' and softbody's
+    # own point-to-point (the contact halos, non-persistent; PETSc sends almost
+    # nothing on non-persistent requests: 18 kB per step at 8 ranks before the halos).
     for key in ("max", "min", "mean"):
-        row[f"step_bytes_{key}"] = row[f"step_p2p_bytes_{key}"] + row[f"step_coll_bytes_{key}"]
+        row[f"step_bytes_{key}"] = (row[f"step_p2p_bytes_{key}"] + row[f"step_coll_bytes_{key}"]
+                                    + row[f"step_mpi_p2p_bytes_{key}"])
 
 
 # ----------------------------------------------------------------------------- model
