@@ -8,10 +8,11 @@
 // two kinds of other ranks' vertices (nothing else is current; queries must
 // read only current vertices, see current()):
 // - the halo: the vertices of other bodies (and, with `same_body` on, of its
-//   own bodies) that lie within reach of this rank's own vertices of a body: each rank's per-body
-//   boxes at x + dt v are gathered (a few boxes per rank), each rank sends its vertices inside
-//   another's boxes, inflated by the vertex's body's reach, point to point
-//   (neighbour_exchange.hpp): messages follow the contact zone, not the mesh;
+//   own bodies) that lie within reach of this rank's own vertices of a body.
+//   Each rank's per-body boxes at x + dt v are gathered (a few boxes per rank,
+//   halo.hpp); each rank sends its vertices inside another's boxes, grown by
+//   the vertex's body's reach, point to point (neighbour_exchange.hpp), so the
+//   messages follow the contact zone, not the mesh;
 // - the fixed set (SetupFixedSet): vertices every rank reads whenever asked,
 //   e.g. the distance constraints' (a scatter of just them).
 // The reach of a body is -contact_halo_reach (contact_options.hpp) times its
