@@ -279,7 +279,8 @@ void ContactSolver::ReaimFeatureContact(int32_t feature, int32_t natural, PetscI
 void ContactSolver::ReaimVertexContact(PetscInt local, const Contact &contact,
                                        const Point &position, const Point &velocity, PetscReal dt) {
   SurfaceHit hit;
-  if (!obstacles_.ClosestOnBody(position + dt * velocity, contact.body, &hit)) return;
+  if (!obstacles_.ContactOnBody(position + dt * velocity, contact.natural, contact.body, &hit))
+    return;
   constraints_.Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt,
                          hit, false);
   if (options_.friction > 0)

@@ -121,6 +121,10 @@ class ContactConstraints {
   // The normal velocity that takes x0 to target, limited for a vertex already inside.
   double RecoveryVelocity(int32_t natural, const Point &x0, const Point &target, PetscReal dt,
                           const SurfaceHit &hit) const;
+  // Against a free body: *constraint becomes two-sided (projected_solve.hpp),
+  // on the relative normal velocity of the vertex and the hit's face point.
+  void MakeTwoSided(int32_t natural, const Point &x0, PetscReal dt, const SurfaceHit &hit,
+                    VelocityConstraint *constraint) const;
   // Which vertices of the triangle a feature contact moves.
   std::array<bool, 3> MovingVertices(const std::array<int32_t, 4> &triangle, const SurfaceHit &hit,
                                      const Point &m) const;

@@ -51,7 +51,10 @@ std::vector<Collision> VelocityResponse::Respond(const ContactConstraints &const
                           ContactVelocityChange(contact, constraint, reactions[i],
                                                 friction_in_solve[i], position, velocity)});
     // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
-    if (reactions[i] >= 0 && !(options_.restitution > 0 && contact.impact))
+    // A two-sided contact is an inequality: one that did not push this step
+    // is found again if its vertex sinks.
+    const bool pushes = constraint.two_sided ? reactions[i] > 0 : reactions[i] >= 0;
+    if (pushes && !(options_.restitution > 0 && contact.impact))
       resting->Add(constraint.vertex, contact);
   }
   return collisions;
@@ -67,11 +70,14 @@ Point VelocityResponse::ContactVelocityChange(const Contact &contact,
                                               bool friction_in_solve, const Point &position,
                                               const Point &velocity) const {
   const Point &n = constraint.normal;
-  Point dv = (contact.normal_velocity - n.dot(velocity)) * n;
+  // A two-sided contact's solve gave both sides their equal and opposite
+  // impulses: setting one side's normal velocity would break that balance.
+  Point dv = constraint.two_sided ? Point(Point::Zero())
+                                  : Point((contact.normal_velocity - n.dot(velocity)) * n);
   SurfaceHit hit;
   const double limit = options_.friction * std::max(reaction, 0.0);
   if (!friction_in_solve && options_.friction > 0 &&
-      obstacles_->ClosestOnBody(position, contact.body, &hit)) {
+      obstacles_->ContactOnBody(position, contact.natural, contact.body, &hit)) {
     const Point relative = velocity - hit.velocity;
     const Point tangential = relative - n.dot(relative) * n;
     const double slip = tangential.norm(), grip = limit * state_->inverse_mass(contact.natural);
@@ -89,7 +95,8 @@ PetscInt VelocityResponse::ProjectRemaining(
     SurfaceHit hit;
     // Only vertices truly inside: the ground's margin (within half the contact
     // gap above it) is for the constraints, and lifting such a vertex adds energy.
-    if (!obstacles_->FindPenetration(position, state_->body_of(natural), VertexObstacles(), &hit) ||
+    if (!obstacles_->FindPenetration(position, state_->body_of(natural), VertexObstacles(), &hit,
+                                     natural) ||
         hit.normal.dot(position - hit.point) >= 0 ||
         !ShouldProject(local, natural, position, hit, constraints))
       continue;
