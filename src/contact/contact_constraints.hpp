@@ -6,12 +6,18 @@
 //   n . v = n . (s - x0) / dt,
 // s its closest surface point (against a fixed body, where its path enters it)
 // and n that surface's outward normal, so that it ends the step on the
-// surface; against a free body s is the plane where the two sides meet, the
-// overlap split by inverse mass. A vertex already inside at the start of the
-// step leaves at most kMaxRecoveryPerStep edge lengths per step faster than
-// the obstacle; more than that deep inside another free body, it only stops
-// sinking. The contact leaves with the two sides' momentum-weighted normal
-// velocity (Contact::normal_velocity).
+// surface. Against a free body the constraint is two-sided
+// (projected_solve.hpp): n . (v - sum_k w_k v_k) >= c on the relative normal
+// velocity of the vertex and the face point (w its barycentric weights), which
+// takes the vertex from its start height above the face to the gap; the two
+// bodies get equal and opposite impulses; the face is the closest one facing
+// the vertex (Obstacles::ContactOnBody), and a vertex within the ground's
+// margin outside another free body is constrained too. A vertex already inside
+// at the start of the step leaves at most kMaxRecoveryPerStep edge lengths per
+// step faster than the obstacle; more than that deep inside another free body,
+// it only stops sinking. A one-sided contact leaves with the two sides'
+// momentum-weighted normal velocity (Contact::normal_velocity); a two-sided one
+// with the solve's.
 //
 // Feature contact: a fixed body's sharp-edge point p (SharpFeatures) that the
 // solve would take into a free body's surface triangle (closest point q,
@@ -150,8 +156,8 @@ class ContactConstraints {
   std::vector<char> released_;                // per contact: left the solve (ReleasePulling)
   std::vector<PetscReal> release_reaction_;   // per contact: its reaction when released
   size_t num_released_ = 0;
-  std::vector<VelocityConstraint> held_;  // the held vertices' three axis constraints
-  std::vector<ptrdiff_t> held_slot_;      // per local vertex: its first in held_ (-1: none)
+  std::vector<VelocityConstraint> held_;            // the held vertices' three axis constraints
+  std::vector<ptrdiff_t> held_slot_;  // per local vertex: its first in held_ (-1: none)
   std::vector<VelocityConstraint> solve_constraints_;  // normals not released, tangents, held
   PetscInt global_count_ = 0;
 };
