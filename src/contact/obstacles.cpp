@@ -24,6 +24,11 @@ constexpr double kNoCrossing = 2;
 // closer must not decide its normal. 1e-9: far above round-off in positions of
 // order 1-100 m, far below any geometric difference that matters.
 constexpr double kTieOfEdge = 1e-9;
+// ContactOnBody blends the normal only for a point at most this many of its
+// body's mean boundary edges from the face (a resting contact): the blend
+// reads the triangles around the face's vertices, which a deep point's halo
+// (-contact_halo_reach) need not hold on every rank count.
+constexpr double kBlendReach = 0.1;
 
 }  // namespace
 
@@ -362,8 +367,10 @@ bool Obstacles::ContactOnBody(const Point &p, int32_t natural, int32_t obstacle,
   if (obstacle < 0 || scene_->bodies[obstacle].fixed) return true;
   const Point own = VertexNormal(natural);
   if (!(own.norm() > 0)) return true;
+  const double edge = state_->edge(state_->body_of(natural));
+  const bool shallow = (hit->point - p).norm() <= kBlendReach * edge;
   if (hit->normal.dot(own) < 0) {
-    BlendFacingNormal(own, hit);
+    if (shallow) BlendFacingNormal(own, hit);
     return true;
   }
   const double reach =
@@ -393,7 +400,7 @@ bool Obstacles::ContactOnBody(const Point &p, int32_t natural, int32_t obstacle,
     hit->triangle = t;
     hit->weights = w;
   });
-  BlendFacingNormal(own, hit);
+  if (shallow) BlendFacingNormal(own, hit);
   return true;
 }
 

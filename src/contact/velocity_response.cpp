@@ -11,6 +11,11 @@ namespace {
 // length to the surface ended the step on it (its constraint held, up to
 // round-off): no projection.
 constexpr double kOnSurface = 1e-6;
+// A two-sided contact rests into the next step when its impulse would change
+// its vertex's velocity by more than this (m/s): smaller ones are the
+// round-off of the solve (another rank count, another factorisation), and
+// must not decide which contacts the next step starts with.
+constexpr double kRestingSpeed = 1e-9;
 // Numbers per collision when collisions travel between ranks: vertex, body,
 // position (3), dv (3), the vertex's inverse mass.
 constexpr size_t kPackedCollision = 9;
@@ -53,7 +58,9 @@ std::vector<Collision> VelocityResponse::Respond(const ContactConstraints &const
     // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
     // A two-sided contact is an inequality: one that did not push this step
     // is found again if its vertex sinks.
-    const bool pushes = constraint.two_sided ? reactions[i] > 0 : reactions[i] >= 0;
+    const bool pushes = constraint.two_sided
+                            ? reactions[i] * state_->inverse_mass(contact.natural) > kRestingSpeed
+                            : reactions[i] >= 0;
     if (pushes && !(options_.restitution > 0 && contact.impact))
       resting->Add(constraint.vertex, contact);
   }
