@@ -156,8 +156,8 @@ class ContactConstraints {
   std::vector<char> released_;                // per contact: left the solve (ReleasePulling)
   std::vector<PetscReal> release_reaction_;   // per contact: its reaction when released
   size_t num_released_ = 0;
-  std::vector<VelocityConstraint> held_;            // the held vertices' three axis constraints
-  std::vector<ptrdiff_t> held_slot_;  // per local vertex: its first in held_ (-1: none)
+  std::vector<VelocityConstraint> held_;  // the held vertices' three axis constraints
+  std::vector<ptrdiff_t> held_slot_;      // per local vertex: its first in held_ (-1: none)
   std::vector<VelocityConstraint> solve_constraints_;  // normals not released, tangents, held
   PetscInt global_count_ = 0;
 };
