@@ -70,6 +70,14 @@ struct ContactStatistics {
   PetscReal max_constraint_violation = 0;  // relative, after resolution
 };
 
+// Bytes of contact's O(scene) arrays on one rank (ContactSolver::scene_bytes).
+struct ContactSceneBytes {
+  int64_t free_state = 0;  // FreeState's natural-indexed arrays
+  int64_t obstacles = 0;   // the bodies' tets and triangles, indexed by vertex
+  int64_t guard = 0;       // the collision guard's surface arrays
+  int64_t separation = 0;  // OverlapSeparation's surfaces and fetched positions
+};
+
 class ContactSolver {
  public:
   ContactSolver() = default;
@@ -141,6 +149,12 @@ class ContactSolver {
   // Not collective. Bytes this rank sent in the free state's exchanges, and for the guard.
   PetscInt64 exchange_bytes() const { return state_.bytes_sent(); }
   PetscInt64 guard_bytes() const { return guard_on_ ? guard_.bytes_sent() : 0; }
+  // Not collective. Bytes this rank holds of the whole scene for contact (the
+  // O(scene) arrays; its own and halo shares not counted), by part.
+  ContactSceneBytes scene_bytes() const {
+    return {state_.SceneBytes(), obstacles_.SceneBytes(), guard_.SceneBytes(),
+            separation_.SceneBytes()};
+  }
   // Not collective. How often this rank built the free bodies' grids (only
   // when a vertex came within another free body's box or a fixed body's sharp
   // edge within a free body's).

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "common/held_bytes.hpp"
 #include "contact/halo.hpp"
 
 namespace softbody {
@@ -10,6 +11,11 @@ FreeState::~FreeState() {
   VecScatterDestroy(&fixed_scatter_);
   VecDestroy(&fixed_x_);
   VecDestroy(&fixed_v_);
+}
+
+int64_t FreeState::SceneBytes() const {
+  return HeldBytes(body_of_) + HeldBytes(free_) + HeldBytes(inverse_mass_) + HeldBytes(x_) +
+         HeldBytes(v_) + HeldBytes(stamp_);
 }
 
 void FreeState::SetupBodies(const Scene &scene, double reach_in_edges) {

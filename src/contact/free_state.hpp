@@ -88,6 +88,8 @@ class FreeState {
   PetscInt64 bytes_sent() const { return bytes_sent_; }
   // Local vertex -> natural vertex.
   const std::vector<int32_t> &owned_natural() const { return owned_natural_; }
+  // Bytes of the natural-indexed arrays (O(scene vertices) on every rank).
+  int64_t SceneBytes() const;
   PetscInt local_count() const { return static_cast<PetscInt>(owned_natural_.size()); }
 
  private:

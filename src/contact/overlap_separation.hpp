@@ -30,6 +30,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/held_bytes.hpp"
 #include "contact/free_state.hpp"
 #include "contact/obstacles.hpp"
 #include "fem/partition.hpp"
@@ -58,6 +59,11 @@ class OverlapSeparation {
 
   // Steps taken while some pair was separating; pairs found at the start.
   PetscInt steps() const { return steps_; }
+  // Bytes of the natural-indexed arrays and the surfaces (O(scene) on every rank).
+  int64_t SceneBytes() const {
+    return HeldBytes(edges_) + HeldBytes(triangles_) + HeldBytes(on_surface_) +
+           HeldBytes(positions_);
+  }
   size_t initial_pairs() const { return initial_pairs_; }
 
  private:
