@@ -59,7 +59,9 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
   const char *held = scene.read_in_slabs ? "; mesh read in slabs by every rank"
                      : layout.size == 1  ? ""
                      : scene.meshes_held ? "; meshes whole on every rank"
-                                         : "; meshes read on rank 0, then held in slabs";
+                     : scene.meshes_released
+                         ? "; meshes whole on every rank until contact's set-up, then released"
+                         : "; meshes read on rank 0, then held in slabs";
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets(), held));
