@@ -85,7 +85,9 @@ class ContactSolver {
   ContactSolver &operator=(const ContactSolver &) = delete;
 
   // Collective. Builds only what the scene and options need. scene and layout
-  // must outlive the solver; lumped_mass: per DOF (kg), PETSc order.
+  // must outlive the solver; lumped_mass: per DOF (kg), PETSc order. The
+  // bodies' meshes are read here only: the caller may release them after
+  // (Scene::ReleaseMeshes); the counts, flags and first vertices stay read.
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
                        const ContactOptions &options);
   // Anything to resolve at all.

@@ -19,8 +19,8 @@
 // longest rest tet edge: every tet and boundary triangle of another body that
 // meets this rank's box, and is stretched less than that, comes whole.
 //
-// Arrays are natural-indexed on every rank (O(vertices) memory, as the
-// replicated meshes contact still needs); the messages are O(halo).
+// Arrays are natural-indexed on every rank (O(vertices) memory, SceneBytes;
+// built from the whole meshes at set-up); the messages are O(halo).
 #pragma once
 
 #include <petscvec.h>
