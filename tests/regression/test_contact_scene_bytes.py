@@ -13,8 +13,9 @@ triangles per box counted here as the faces that one tet only names):
     entry (4 B), per boundary triangle 3 vertices and body (16 B) and one index
     entry (4 B), and two CSR starts of 8 B per scene vertex, plus one:
     24 T + 20 F + 16 (V + 1) over the scene, within the summary's 3 digits (1 %);
-(c) the free state: 65 B per scene vertex (body 4, free flag 1, inverse mass 8,
-    position 24, velocity 24, stamp 4), within 1 %.
+(c) the free state: 9 B per scene vertex (body 4, free flag 1, slot 4; positions,
+    velocities and masses are kept per slot, for this rank's own and received
+    vertices only), within 1 %.
 """
 import os
 import re
@@ -87,8 +88,8 @@ def main():
         checks.check(close(parts["obstacles"], expected),
                      f"{ranks} ranks: obstacles {parts['obstacles']:.0f} B, expected 24 T + 20 F + 16 (V + 1) = "
                      f"{expected} B (T {T}, F {F}, V {V})")
-        checks.check(close(parts["free_state"], 65 * V),
-                     f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 65 V = {65 * V} B")
+        checks.check(close(parts["free_state"], 9 * V),
+                     f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 9 V = {9 * V} B")
     checks.exit()
 
 
