@@ -76,8 +76,8 @@ class CollisionGuard {
   // *moved: zones moved vertices (the same on every rank).
   PetscErrorCode Probe(Vec x0, Vec x, bool *moved);
   // Not collective. After Probe: this rank's vertices the zones moved, as
-  // (local vertex, velocity (end - start) / dt).
-  std::vector<std::pair<PetscInt, Point>> MovedVelocities(PetscReal dt) const;
+  // (local vertex, the zone's end position).
+  std::vector<std::pair<PetscInt, Point>> MovedEnds() const;
   // Collective. Probe, then the moved vertices written: x = the zone's end
   // position, v = (x - x0) / dt; *changed as Probe's *moved.
   PetscErrorCode Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
