@@ -34,6 +34,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/held_bytes.hpp"
 #include "common/neighbour_exchange.hpp"
 #include "contact/contact_options.hpp"
 #include "contact/contact_surface.hpp"
@@ -87,6 +88,13 @@ class CollisionGuard {
   const GuardStatistics &statistics() const { return stats_; }
   // Not collective. Bytes this rank sent (halo, boxes, its colliding pairs), all probes.
   PetscInt64 bytes_sent() const { return bytes_sent_; }
+  // Bytes of the per-surface-vertex arrays (every body's surface, on every rank).
+  int64_t SceneBytes() const {
+    return HeldBytes(surface_.natural) + HeldBytes(surface_.body) + HeldBytes(surface_.triangles) +
+           HeldBytes(surface_.edges) + HeldBytes(owned_mask_) + HeldBytes(usable_) +
+           HeldBytes(moving_) + HeldBytes(mass_) + HeldBytes(rest_) + HeldBytes(start_) +
+           HeldBytes(end_) + HeldBytes(moved_);
+  }
   double separation() const { return query_.tolerance.separation; }
   std::string Description() const;
 

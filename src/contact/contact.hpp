@@ -84,6 +84,14 @@ struct StepMotion {
   bool mean_velocity_differs = false;
 };
 
+// Bytes of contact's O(scene) arrays on one rank (ContactSolver::scene_bytes).
+struct ContactSceneBytes {
+  int64_t free_state = 0;  // FreeState's natural-indexed arrays (its slot map)
+  int64_t obstacles = 0;   // the bodies' tets and triangles, indexed by vertex
+  int64_t guard = 0;       // the collision guard's surface arrays
+  int64_t separation = 0;  // OverlapSeparation's surfaces and fetched positions
+};
+
 class ContactSolver {
  public:
   ContactSolver() = default;
@@ -91,7 +99,9 @@ class ContactSolver {
   ContactSolver &operator=(const ContactSolver &) = delete;
 
   // Collective. Builds only what the scene and options need. scene and layout
-  // must outlive the solver; lumped_mass: per DOF (kg), PETSc order.
+  // must outlive the solver; lumped_mass: per DOF (kg), PETSc order. The
+  // bodies' meshes are read here only: the caller may release them after
+  // (Scene::ReleaseMeshes); the counts, flags and first vertices stay read.
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
                        const ContactOptions &options);
   // Anything to resolve at all.
@@ -156,6 +166,12 @@ class ContactSolver {
   // Not collective. Bytes this rank sent in the free state's exchanges, and for the guard.
   PetscInt64 exchange_bytes() const { return state_.bytes_sent(); }
   PetscInt64 guard_bytes() const { return guard_on_ ? guard_.bytes_sent() : 0; }
+  // Not collective. Bytes this rank holds of the whole scene for contact (the
+  // O(scene) arrays; its own and halo shares not counted), by part.
+  ContactSceneBytes scene_bytes() const {
+    return {state_.SceneBytes(), obstacles_.SceneBytes(), guard_.SceneBytes(),
+            separation_.SceneBytes()};
+  }
   // Not collective. How often this rank built the free bodies' grids (only
   // when a vertex came within another free body's box or a fixed body's sharp
   // edge within a free body's).
