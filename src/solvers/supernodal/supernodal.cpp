@@ -15,6 +15,7 @@
 
 #include "common/exchange.hpp"
 #include "common/large_array.hpp"
+#include "solvers/supernodal/tiled_factor.hpp"
 
 // LAPACK / BLAS (Fortran interface): the separator's dense Schur complement.
 extern "C" {
@@ -320,9 +321,9 @@ struct Supernodal {
   SupernodalOrdering ordering = kOrderingBest;
   SupernodalPrecision precision = kDouble;
   SupernodalLimits limits;
-  PackedFactor<float> single;
-  cholmod_dense *solution = nullptr, *work_y = nullptr, *work_e = nullptr;  // cholmod_solve2's
-  Split split;                                                              // more than one rank
+  PackedFactor<float> single;  // one rank, single precision
+  TiledFactor full;            // one rank, double precision
+  Split split;                 // more than one rank
   double stored = 0, nonzeros = 0, flops = 0;
   // The last set-up met a matrix that is not (numerically) positive definite:
   // decided on all ranks together; the PC then reports PC_FACTOR_NUMERIC_ZEROPIVOT
@@ -336,9 +337,6 @@ PetscErrorCode ReleaseFactor(Supernodal *s) {
   if (s->started) {
     cholmod_free_factor(&s->factor, &s->common);
     cholmod_free_factor(&s->split.factor, &s->common);
-    cholmod_free_dense(&s->solution, &s->common);
-    cholmod_free_dense(&s->work_y, &s->common);
-    cholmod_free_dense(&s->work_e, &s->common);
     cholmod_finish(&s->common);
     s->started = false;
   }
@@ -554,10 +552,11 @@ PetscErrorCode SetUpOneRank(Supernodal *s, Mat A, bool new_pattern) {
   s->stored = static_cast<double>(s->factor->xsize);
   s->nonzeros = s->common.lnz;
   s->flops = s->common.fl;
-  if (s->precision == kSingle) {
+  if (s->precision == kSingle)
     s->single.From(s->factor);
-    PetscCall(DropValues(s, s->factor));
-  }
+  else
+    s->full.From(s->factor);
+  PetscCall(DropValues(s, s->factor));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -928,25 +927,6 @@ PetscErrorCode PCSetUp_Supernodal(PC pc) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// One rank, double precision: x = A^-1 b by CHOLMOD's own solve (BLAS-2 per
-// supernode), which streams the double factor fastest.
-PetscErrorCode CholmodSolve(Supernodal *s, PetscInt n, const PetscScalar *b, PetscScalar *x) {
-  PetscFunctionBeginUser;
-  cholmod_dense dense;
-  std::memset(&dense, 0, sizeof(dense));
-  dense.nrow = dense.d = dense.nzmax = n;
-  dense.ncol = 1;
-  dense.x = const_cast<PetscScalar *>(b);
-  dense.xtype = CHOLMOD_REAL;
-  dense.dtype = CHOLMOD_DOUBLE;
-  const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr,
-                                &s->work_y, &s->work_e, &s->common);
-  PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)",
-             s->common.status);
-  std::memcpy(x, s->solution->x, sizeof(PetscScalar) * n);
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
   PetscFunctionBeginUser;
   Supernodal *s = static_cast<Supernodal *>(pc->data);
@@ -969,9 +949,7 @@ PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
   } else if (s->precision == kSingle) {
     s->single.Solve(rhs, out);
   } else {
-    PetscInt n;
-    PetscCall(VecGetLocalSize(b, &n));
-    PetscCall(CholmodSolve(s, n, rhs, out));
+    s->full.Solve(rhs, out);
   }
   PetscCall(VecRestoreArrayWrite(x, &out));
   PetscCall(VecRestoreArrayRead(b, &rhs));
@@ -1093,12 +1071,10 @@ PetscErrorCode PCSupernodalPredict(PC pc, SupernodalPrediction *prediction) {
                                        prediction->separator <= s->limits.max_separator);
   if (prediction->analysed) {
     PetscCall(MatGetNonzeroState(pc->pmat, &s->pattern_state));  // the set-up reuses the analysis
-    // The numeric factor in double and its copy in the solves' precision (one
-    // rank in double: CHOLMOD's own, no copy) beside the separator's blocks.
-    const bool copy = size > 1 || s->precision == kSingle;
-    prediction->bytes =
-        prediction->factor_entries * (kCholmodBytesPerEntry + (copy ? bytes_per_entry : 0)) +
-        prediction->separator_bytes;
+    // The numeric factor in double and its copy in the solves' precision
+    // (CHOLMOD's values are dropped after the copy) beside the separator's blocks.
+    prediction->bytes = prediction->factor_entries * (kCholmodBytesPerEntry + bytes_per_entry) +
+                        prediction->separator_bytes;
   } else {
     prediction->bytes = prediction->separator_bytes;
   }
