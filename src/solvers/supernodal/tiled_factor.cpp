@@ -71,6 +71,24 @@ void BackwardPanel(const double *c, int tiles, const double *inverse, double *z)
   }
 }
 
+// sum_i a[i] b[i] over i < count, in four vector lanes and four independent sums.
+double Dot(const double *a, const double *b, int count) {
+  Vector4 s0 = Broadcast(0.0), s1 = s0;
+  int i = 0;
+  for (; i + 8 <= count; i += 8) {
+    s0 += Load(a + i) * Load(b + i);
+    s1 += Load(a + i + 4) * Load(b + i + 4);
+  }
+  if (i + 4 <= count) {
+    s0 += Load(a + i) * Load(b + i);
+    i += 4;
+  }
+  s0 += s1;
+  double sum = (s0[0] + s0[1]) + (s0[2] + s0[3]);
+  for (; i < count; ++i) sum += a[i] * b[i];
+  return sum;
+}
+
 }  // namespace
 
 size_t TiledFactor::PanelEntries(int columns, int height) {
@@ -172,9 +190,7 @@ void TiledFactor::BackwardSupernode(int k) {
   for (int j = panels * kPanel; j < columns; ++j) c += height - j;
   for (int j = columns - 1; j >= panels * kPanel; --j) {  // plain columns, last first
     c -= height - j;
-    double sum = 0;
-    for (int i = j + 1; i < height; ++i) sum += c[i - j] * z[i];
-    z[j] = (z[j] - sum) * inverse[j];
+    z[j] = (z[j] - Dot(c + 1, z + j + 1, height - j - 1)) * inverse[j];
   }
   c = panels_end;
   for (int j = (panels - 1) * kPanel; j >= 0; j -= kPanel) {
