@@ -12,7 +12,9 @@ constexpr int kTile = kPanel * kPanel;  // entries of a tile
 
 // Four doubles in one vector register (GCC/Clang vector extension: AVX, or two
 // SSE registers on a plain x86-64 build); loaded and stored by memcpy, which
-// compiles to one vector move.
+// compiles to one vector move. The helpers are internal and inlined, so GCC's
+// note that such arguments change the ABI without AVX does not concern them.
+#pragma GCC diagnostic ignored "-Wpsabi"
 typedef double Vector4 __attribute__((vector_size(4 * sizeof(double))));
 
 inline Vector4 Load(const double *p) {
@@ -20,7 +22,7 @@ inline Vector4 Load(const double *p) {
   std::memcpy(&v, p, sizeof(v));
   return v;
 }
-inline void Store(double *p, Vector4 v) {
+inline void Store(double *p, const Vector4 &v) {
   std::memcpy(p, &v, sizeof(v));
 }
 inline Vector4 Broadcast(double a) {
