@@ -2,14 +2,17 @@
 // of the same matrix: softbody's tiled copy of CHOLMOD's factor
 // (TiledFactor, double precision) on matrices whose supernodes have whole
 // panels of four columns and plain columns left over, solving out of place
-// and in place; and the PC "supernodal" (one rank) in double and in single
-// precision.
+// and in place, and its sweeps stopped at a column inside a supernode (as the
+// split factor's interior); and the PC "supernodal" in double and in single
+// precision, on one rank and split on two.
+// Runs on ranks: 1 2
 #include <cholmod.h>
 #include <gtest/gtest.h>
 #include <petscksp.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -79,6 +82,7 @@ std::vector<double> DenseSolve(std::vector<double> a, std::vector<double> b) {
 double RelativeDifference(const std::vector<double> &x, const std::vector<double> &reference) {
   double difference = 0, largest = 0;
   for (size_t i = 0; i < x.size(); ++i) {
+    if (!std::isfinite(x[i])) return std::numeric_limits<double>::infinity();
     difference = std::max(difference, std::fabs(x[i] - reference[i]));
     largest = std::max(largest, std::fabs(reference[i]));
   }
@@ -148,6 +152,107 @@ TEST(TiledFactor, SolvesLikeDenseCholesky) {
     cholmod_free_factor(&L, &common);
     cholmod_finish(&common);
   }
+}
+
+TEST(TiledFactor, SweepsStoppedInsideASupernode) {
+  const int grid = 6, dofs = 3, n = grid * grid * grid * dofs;
+  const std::vector<double> a = GridDense(grid, dofs, 17u);
+  cholmod_common common;
+  cholmod_start(&common);
+  common.supernodal = CHOLMOD_SUPERNODAL;
+  cholmod_factor *L = CholmodFactor(a, n, &common);
+  // The limit: inside the widest supernode, past one whole panel and inside the next.
+  const int *super = static_cast<const int *>(L->super);
+  size_t widest = 0;
+  for (size_t k = 0; k < L->nsuper; ++k)
+    if (super[k + 1] - super[k] > super[widest + 1] - super[widest]) widest = k;
+  ASSERT_GE(super[widest + 1] - super[widest], 2 * TiledFactor::kPanel);
+  const int limit = super[widest] + TiledFactor::kPanel + 2;
+  TiledFactor whole, cut;
+  whole.From(L);
+  cut.From(L, limit);
+  EXPECT_EQ(cut.EntriesBefore(n), whole.EntriesBefore(n));
+  const std::vector<double> b = RandomVector(n, 23u);
+  std::vector<double> x(n);
+  whole.Solve(b.data(), x.data());
+  // Forward over the columns before the limit, then the rows from the limit on
+  // set to the solution's: the backward sweep must give the solution's others.
+  double *y = cut.y();
+  const int *permutation = cut.permutation();
+  for (int i = 0; i < n; ++i) y[i] = b[permutation[i]];
+  cut.Forward(limit);
+  for (int i = limit; i < n; ++i) y[i] = x[permutation[i]];
+  cut.Backward(limit);
+  std::vector<double> interior(limit), reference(limit);
+  for (int i = 0; i < limit; ++i) {
+    interior[i] = y[i];
+    reference[i] = x[permutation[i]];
+  }
+  EXPECT_LT(RelativeDifference(interior, reference), kDoubleTolerance);
+  // The whole solve through both pieces of the cut supernode.
+  std::vector<double> through_cut(n);
+  cut.Solve(b.data(), through_cut.data());
+  EXPECT_LT(RelativeDifference(through_cut, x), kDoubleTolerance);
+  cholmod_free_factor(&L, &common);
+  cholmod_finish(&common);
+}
+
+TEST(SupernodalPC, SolvesLikeDenseCholeskyOnOneRankAndSplit) {
+  const int grid = 6, dofs = 3, n = grid * grid * grid * dofs;
+  const std::vector<double> a = GridDense(grid, dofs, 5u);
+  const std::vector<double> b = RandomVector(n, 9u);
+  const std::vector<double> reference = DenseSolve(a, b);
+  Mat A;
+  ASSERT_EQ(MatCreateAIJ(PETSC_COMM_WORLD, PETSC_DECIDE, PETSC_DECIDE, n, n, 7 * dofs, nullptr,
+                         7 * dofs, nullptr, &A),
+            PETSC_SUCCESS);
+  PetscInt begin, end;
+  ASSERT_EQ(MatGetOwnershipRange(A, &begin, &end), PETSC_SUCCESS);
+  for (PetscInt r = begin; r < end; ++r)
+    for (int c = 0; c < n; ++c)
+      if (a[static_cast<size_t>(r) * n + c] != 0.0)
+        ASSERT_EQ(MatSetValue(A, r, c, a[static_cast<size_t>(r) * n + c], INSERT_VALUES),
+                  PETSC_SUCCESS);
+  ASSERT_EQ(MatAssemblyBegin(A, MAT_FINAL_ASSEMBLY), PETSC_SUCCESS);
+  ASSERT_EQ(MatAssemblyEnd(A, MAT_FINAL_ASSEMBLY), PETSC_SUCCESS);
+  ASSERT_EQ(RegisterPreconditioners(), PETSC_SUCCESS);
+  for (const bool single : {false, true}) {
+    KSP ksp;
+    PC pc;
+    ASSERT_EQ(KSPCreate(PETSC_COMM_WORLD, &ksp), PETSC_SUCCESS);
+    ASSERT_EQ(KSPSetOperators(ksp, A, A), PETSC_SUCCESS);
+    ASSERT_EQ(KSPSetType(ksp, KSPPREONLY), PETSC_SUCCESS);
+    ASSERT_EQ(KSPGetPC(ksp, &pc), PETSC_SUCCESS);
+    ASSERT_EQ(PCSetType(pc, kPCSupernodal), PETSC_SUCCESS);
+    ASSERT_EQ(PCSupernodalSetSinglePrecision(pc, single), PETSC_SUCCESS);
+    ASSERT_EQ(KSPSetFromOptions(ksp), PETSC_SUCCESS);
+    SupernodalPrediction prediction;
+    ASSERT_EQ(PCSupernodalPredict(pc, &prediction), PETSC_SUCCESS);
+    EXPECT_EQ(prediction.separator > 0, Size() > 1);  // split on several ranks
+    Vec bv, xv, all;
+    VecScatter gather;
+    ASSERT_EQ(MatCreateVecs(A, &xv, &bv), PETSC_SUCCESS);
+    for (PetscInt r = begin; r < end; ++r)
+      ASSERT_EQ(VecSetValue(bv, r, b[r], INSERT_VALUES), PETSC_SUCCESS);
+    ASSERT_EQ(VecAssemblyBegin(bv), PETSC_SUCCESS);
+    ASSERT_EQ(VecAssemblyEnd(bv), PETSC_SUCCESS);
+    ASSERT_EQ(KSPSolve(ksp, bv, xv), PETSC_SUCCESS);
+    ASSERT_EQ(VecScatterCreateToAll(xv, &gather, &all), PETSC_SUCCESS);
+    ASSERT_EQ(VecScatterBegin(gather, xv, all, INSERT_VALUES, SCATTER_FORWARD), PETSC_SUCCESS);
+    ASSERT_EQ(VecScatterEnd(gather, xv, all, INSERT_VALUES, SCATTER_FORWARD), PETSC_SUCCESS);
+    const double *solution;
+    ASSERT_EQ(VecGetArrayRead(all, &solution), PETSC_SUCCESS);
+    const std::vector<double> x(solution, solution + n);
+    ASSERT_EQ(VecRestoreArrayRead(all, &solution), PETSC_SUCCESS);
+    EXPECT_LT(RelativeDifference(x, reference), single ? kSingleTolerance : kDoubleTolerance)
+        << (single ? "single" : "double") << " on " << Size() << " rank(s)";
+    VecScatterDestroy(&gather);
+    VecDestroy(&all);
+    VecDestroy(&bv);
+    VecDestroy(&xv);
+    KSPDestroy(&ksp);
+  }
+  MatDestroy(&A);
 }
 
 TEST(SupernodalPC, OneRankSolvesLikeDenseCholesky) {

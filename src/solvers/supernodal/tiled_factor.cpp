@@ -106,40 +106,68 @@ size_t TiledFactor::SupernodeEntries(int columns, int height) {
   return (entries + kPanel - 1) / kPanel * kPanel;  // the next supernode's panels stay aligned
 }
 
-void TiledFactor::From(const cholmod_factor *L) {
+void TiledFactor::From(const cholmod_factor *L, int limit) {
   n_ = static_cast<int>(L->n);
-  supernodes_ = static_cast<int>(L->nsuper);
   const int *perm = static_cast<const int *>(L->Perm), *super = static_cast<const int *>(L->super),
-            *pi = static_cast<const int *>(L->pi), *s = static_cast<const int *>(L->s);
+            *pi = static_cast<const int *>(L->pi), *s = static_cast<const int *>(L->s),
+            *px = static_cast<const int *>(L->px);
+  const double *x = static_cast<const double *>(L->x);
   permutation_.assign(perm, perm + n_);
-  first_column_.assign(super, super + supernodes_ + 1);
-  row_start_.assign(pi, pi + supernodes_ + 1);
-  rows_.assign(s, s + pi[supernodes_]);
+  first_column_.assign(1, 0);
+  row_start_.assign(1, 0);
+  rows_.clear();
+  // Per stored supernode: its first value in CHOLMOD's x and CHOLMOD's height.
+  std::vector<size_t> source;
+  std::vector<int> stride;
+  for (size_t k = 0; k < L->nsuper; ++k) {
+    const int height = pi[k + 1] - pi[k];
+    const int cut = super[k] < limit && limit < super[k + 1] ? limit : super[k + 1];
+    for (int first = super[k]; first < super[k + 1];) {
+      const int last = first < cut ? cut : super[k + 1], skip = first - super[k];
+      first_column_.push_back(last);
+      rows_.insert(rows_.end(), s + pi[k] + skip, s + pi[k + 1]);
+      row_start_.push_back(static_cast<int>(rows_.size()));
+      source.push_back(px[k] + static_cast<size_t>(skip) * height + skip);
+      stride.push_back(height);
+      first = last;
+    }
+  }
+  supernodes_ = static_cast<int>(source.size());
   value_start_.resize(supernodes_ + 1);
   size_t entries = 0;
   int largest = 0;
   for (int k = 0; k < supernodes_; ++k) {
-    const int height = pi[k + 1] - pi[k];
+    const int height = row_start_[k + 1] - row_start_[k];
     value_start_[k] = entries;
-    entries += SupernodeEntries(super[k + 1] - super[k], height);
+    entries += SupernodeEntries(first_column_[k + 1] - first_column_[k], height);
     largest = std::max(largest, height);
   }
   value_start_[supernodes_] = entries;
   values_.resize(entries);
   inverse_diagonal_.resize(n_);
-  for (int k = 0; k < supernodes_; ++k) CopySupernode(L, k);
+  for (int k = 0; k < supernodes_; ++k) CopySupernode(x + source[k], stride[k], k);
   y_.assign(n_, 0.0);
   work_.assign(largest + kPanel, 0.0);
 }
 
-// Supernode k's values from CHOLMOD's column-major block (height x columns).
-void TiledFactor::CopySupernode(const cholmod_factor *L, int k) {
+double TiledFactor::EntriesBefore(int limit) const {
+  double entries = 0;
+  for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k) {
+    const int columns = std::min(first_column_[k + 1], limit) - first_column_[k];
+    const int height = row_start_[k + 1] - row_start_[k];
+    for (int j = 0; j < columns; ++j) entries += height - j;
+  }
+  return entries;
+}
+
+// Stored supernode k's values from CHOLMOD's column-major block: x[j * stride +
+// i] is its entry (i, j), row i of its rows, column j of its columns.
+void TiledFactor::CopySupernode(const double *x, int stride, int k) {
   const int columns = first_column_[k + 1] - first_column_[k],
             height = row_start_[k + 1] - row_start_[k];
-  const double *x = static_cast<const double *>(L->x) + static_cast<const int *>(L->px)[k];
-  // L's entry (i, j) of the supernode, zero above the diagonal and below the last row.
+  // The entry (i, j), zero above the diagonal and below the last row.
   auto entry = [&](int i, int j) {
-    return i >= j && i < height ? x[static_cast<size_t>(j) * height + i] : 0.0;
+    return i >= j && i < height ? x[static_cast<size_t>(j) * stride + i] : 0.0;
   };
   for (int j = 0; j < columns; ++j) inverse_diagonal_[first_column_[k] + j] = 1.0 / entry(j, j);
   double *out = values_.data() + value_start_[k];
@@ -202,10 +230,19 @@ void TiledFactor::BackwardSupernode(int k) {
   for (int i = 0; i < columns; ++i) y_[first + i] = z[i];
 }
 
+void TiledFactor::Forward(int limit) {
+  for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k) ForwardSupernode(k);
+}
+
+void TiledFactor::Backward(int limit) {
+  for (int k = supernodes_ - 1; k >= 0; --k)
+    if (first_column_[k] < limit) BackwardSupernode(k);
+}
+
 void TiledFactor::Solve(const double *b, double *x) {
   for (int i = 0; i < n_; ++i) y_[i] = b[permutation_[i]];
-  for (int k = 0; k < supernodes_; ++k) ForwardSupernode(k);
-  for (int k = supernodes_ - 1; k >= 0; --k) BackwardSupernode(k);
+  Forward(n_);
+  Backward(n_);
   for (int i = 0; i < n_; ++i) x[permutation_[i]] = y_[i];
 }
 

@@ -19,11 +19,16 @@
 // vector before its columns and scattered back after them, the only indirect
 // accesses; the vectors (n doubles) stay in cache while the factor streams
 // from memory. A solve allocates nothing.
+//
+// The sweeps can stop at a column `limit` (the interior of a split factor,
+// supernodal.cpp's Split): a supernode that straddles it is stored as two, its
+// columns before the limit and those after (with the rows below them).
 #pragma once
 
 #include <cholmod.h>
 
 #include <cstddef>
+#include <limits>
 #include <vector>
 
 #include "common/large_array.hpp"
@@ -35,24 +40,38 @@ class TiledFactor {
   // Columns per panel, and rows per tile: one vector of four doubles.
   static constexpr int kPanel = 4;
 
-  // Copies CHOLMOD's factor L (supernodal, real, double; its values present).
-  void From(const cholmod_factor *L);
+  // Copies CHOLMOD's factor L (supernodal, real, double; its values present),
+  // with a supernode boundary at column `limit` (none when limit >= n).
+  void From(const cholmod_factor *L, int limit = std::numeric_limits<int>::max());
   // x = A^-1 b (b and x of size n, in A's order; they may be the same array).
   void Solve(const double *b, double *x);
+  // On y() (the permuted vector, size n): y <- L^-1 y over the columns
+  // j < limit (their updates reach every row), and y <- L^-T y over the
+  // columns j < limit with the others' y taken as known; limit must be n or
+  // the limit given to From.
+  void Forward(int limit);
+  void Backward(int limit);
+  double *y() { return y_.data(); }
+  // L's permutation: y[i] is row permutation()[i] of A's vectors.
+  const int *permutation() const { return permutation_.data(); }
   // Entries a pair of sweeps streams (with the tiles' zeros): the factor's bytes / 8.
   double StoredEntries() const { return static_cast<double>(values_.size()); }
+  // CHOLMOD's entries (explicit zeros included, tiles' padding not) of the
+  // columns before `limit`, each from its diagonal down.
+  double EntriesBefore(int limit) const;
   int size() const { return n_; }
 
  private:
   // Entries of the panels of a supernode (columns, height), without its plain columns.
   static size_t PanelEntries(int columns, int height);
   static size_t SupernodeEntries(int columns, int height);
-  void CopySupernode(const cholmod_factor *L, int k);
+  void CopySupernode(const double *x, int stride, int k);
   void ForwardSupernode(int k);
   void BackwardSupernode(int k);
 
   int n_ = 0, supernodes_ = 0;
-  std::vector<int> permutation_, first_column_, row_start_, rows_;  // CHOLMOD's Perm, super, pi, s
+  // CHOLMOD's Perm, and its super, pi and s with straddling supernodes split at the limit.
+  std::vector<int> permutation_, first_column_, row_start_, rows_;
   std::vector<size_t> value_start_;  // per supernode: its first value, a multiple of kPanel
   LargeArray<double> values_;
   std::vector<double> inverse_diagonal_;  // per column: 1 / L_jj
