@@ -306,7 +306,7 @@ struct Split {
   Mat *local = nullptr;                   // M_r
   cholmod_factor *factor = nullptr;       // symbolic (values dropped after the copy)
   PackedFactor<float> single;
-  PackedFactor<double> full;
+  TiledFactor full;                 // split at the interior's end
   DenseFactor<float> dense_single;  // rank 0
   DenseFactor<double> dense_full;
   std::vector<double> separator_values;  // n_S: right-hand side, then solution
@@ -743,7 +743,7 @@ PetscErrorCode KeepLocalFactor(Supernodal *s, std::vector<double> *schur, double
     p.single.From(p.factor);
     *entries = p.single.EntriesBefore(interior);
   } else {
-    p.full.From(p.factor);
+    p.full.From(p.factor, interior);
     *entries = p.full.EntriesBefore(interior);
   }
   *flops = s->common.fl;
@@ -857,48 +857,64 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// The permuted vector of a factor's sweeps, and its permutation.
 template <typename Real>
-PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, PackedFactor<Real> &factor,
-                          const DenseFactor<Real> &dense, const PetscScalar *b, PetscScalar *x) {
+Real *SweepVector(PackedFactor<Real> &factor) {
+  return factor.y.data();
+}
+double *SweepVector(TiledFactor &factor) {
+  return factor.y();
+}
+template <typename Real>
+const int *Permutation(const PackedFactor<Real> &factor) {
+  return factor.permutation.data();
+}
+const int *Permutation(const TiledFactor &factor) {
+  return factor.permutation();
+}
+
+template <typename Factor, typename Real>
+PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, Factor &factor, const DenseFactor<Real> &dense,
+                          const PetscScalar *b, PetscScalar *x) {
   PetscFunctionBeginUser;
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
   const int interior = static_cast<int>(p.interior);
+  Real *y = SweepVector(factor);
+  const int *permutation = Permutation(factor);
   for (PetscInt l = 0; l < n; ++l) p.local_b[l] = 0.0;
   for (PetscInt l = 0; l < n; ++l)
     if (p.owned_position[l] >= 0) p.local_b[l] = b[p.owned_position[l]];
   // Forward over the interior; the separator rows collect -L_S,I L_I^-1 b_I.
   if (n > 0) {
-    for (PetscInt i = 0; i < interior; ++i)
-      factor.y[i] = static_cast<Real>(p.local_b[factor.permutation[i]]);
-    for (PetscInt i = interior; i < n; ++i) factor.y[i] = 0;
+    for (PetscInt i = 0; i < interior; ++i) y[i] = static_cast<Real>(p.local_b[permutation[i]]);
+    for (PetscInt i = interior; i < n; ++i) y[i] = 0;
     factor.Forward(interior);
   }
   for (PetscInt k = 0; k < p.separator; ++k) {
     const PetscInt l = p.separator_local[k];
-    p.separator_values[k] =
-        static_cast<double>(factor.y[interior + k]) + p.local_b[l];  // b_S where owned
+    p.separator_values[k] = static_cast<double>(y[interior + k]) + p.local_b[l];  // b_S where owned
   }
   if (p.separator > 0) {
     PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : p.separator_values.data(),
                             p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE,
                             MPI_SUM, 0, comm));
     if (rank == 0) {
-      std::vector<Real> y(p.separator_values.begin(), p.separator_values.end());
-      dense.Solve(y.data());
-      std::copy(y.begin(), y.end(), p.separator_values.begin());
+      std::vector<Real> solved(p.separator_values.begin(), p.separator_values.end());
+      dense.Solve(solved.data());
+      std::copy(solved.begin(), solved.end(), p.separator_values.begin());
     }
     PetscCallMPI(
         MPI_Bcast(p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE, 0, comm));
   }
   if (n > 0) {
     for (PetscInt k = 0; k < p.separator; ++k)
-      factor.y[interior + k] = static_cast<Real>(p.separator_values[k]);
+      y[interior + k] = static_cast<Real>(p.separator_values[k]);
     factor.Backward(interior);
     for (PetscInt i = 0; i < n; ++i) {
-      const PetscInt l = factor.permutation[i];
-      if (p.owned_position[l] >= 0) x[p.owned_position[l]] = factor.y[i];
+      const PetscInt l = permutation[i];
+      if (p.owned_position[l] >= 0) x[p.owned_position[l]] = y[i];
     }
   }
   for (PetscInt k = 0; k < p.separator; ++k) {  // the separator exactly as broadcast
