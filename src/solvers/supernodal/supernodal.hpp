@@ -9,7 +9,8 @@
 //
 // One rank: CHOLMOD's factor copied into softbody's streaming layout with its
 // own sweeps (tiled_factor.hpp; double precision), or a single-precision packed
-// copy (half the bytes); CHOLMOD's values are dropped after the copy.
+// copy (half the bytes); CHOLMOD's values are dropped after the copy. The split
+// factor's pieces on several ranks are copied alike.
 // Several ranks: the factor is split at a separator (the DOFs coupled to a
 // higher rank): every rank factors the piece of A of its own interior plus the
 // separator, rank 0 the separator's dense Schur complement, and a solve sweeps

@@ -1,5 +1,6 @@
 // A supernodal Cholesky factor in the layout its two triangular sweeps stream,
-// and the solve x = A^-1 b with it (double precision, one rank). Not collective.
+// and the solve x = A^-1 b with it (double precision: one rank's factor, or a
+// rank's piece of the split factor). Not collective.
 //
 // CHOLMOD's factor L of P A P^T, A = P^T L L^T P (supernode k: columns
 // [first, first + columns) of L, `height` rows each, the diagonal block on top,
