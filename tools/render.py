@@ -522,11 +522,15 @@ class VirtualDisplay:
 
     def _start(self, xvfb, number):
         """Starts Xvfb on :number; True once it accepts clients (it writes the number to the
-        -displayfd pipe then), False when it exits first (the number was taken meanwhile)."""
+        -displayfd pipe then), False when it exits first (the number was taken meanwhile).
+        -noreset: by default Xvfb resets itself whenever its last client disconnects, and a
+        client connecting during the reset (a child render reusing this display right after
+        _display_works() closed its probe connection) dies with SIGABRT inside GLX, about one
+        render in ten on a loaded machine."""
         read_end, write_end = os.pipe()
         self.process = subprocess.Popen(
             [xvfb, ":%d" % number, "-displayfd", str(write_end), "-screen", "0", "640x480x24",
-             "-nolisten", "tcp"],
+             "-noreset", "-nolisten", "tcp"],
             pass_fds=(write_end,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             preexec_fn=_die_with_parent)
         os.close(write_end)

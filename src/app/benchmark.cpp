@@ -28,6 +28,9 @@ constexpr double kProductBytesPerNonzero = 12.0;
 constexpr double kFactorSweepsPerSolve = 2.0;
 // Bytes a refill of A writes per nonzero (corotational mode): its 8-byte value.
 constexpr double kRefillBytesPerNonzero = 8.0;
+// Vectors of n doubles a product or a solve moves at least: its input, read,
+// and its output, written.
+constexpr double kVectorsPerOperation = 2.0;
 
 }  // namespace
 
@@ -148,6 +151,7 @@ PetscErrorCode FactorNonzeros(PC pc, double *nonzeros, int *bytes_per_entry) {
 // behind the preconditioner, and whether the solve is direct (preonly).
 struct SystemSizes {
   double matrix_nonzeros = 0, factor_nonzeros = 0;
+  double rows = 0;       // n, the system's global size
   int factor_bytes = 8;  // bytes per factor entry read by a solve
   PetscBool preonly = PETSC_FALSE;
 };
@@ -157,6 +161,9 @@ PetscErrorCode MeasureSystem(ImplicitEuler *integrator, SystemSizes *sizes) {
   MatInfo info;
   PetscCall(MatGetInfo(integrator->system_matrix(), MAT_GLOBAL_SUM, &info));
   sizes->matrix_nonzeros = info.nz_used;
+  PetscInt rows;
+  PetscCall(MatGetSize(integrator->system_matrix(), &rows, nullptr));
+  sizes->rows = static_cast<double>(rows);
   PC pc;
   PetscCall(KSPGetPC(integrator->solver(), &pc));
   PetscCall(FactorNonzeros(pc, &sizes->factor_nonzeros, &sizes->factor_bytes));
@@ -174,6 +181,7 @@ double StepTrafficBytes(const SystemSizes &sizes, bool corotational, double iter
                     : (sizes.factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
   return kProductBytesPerNonzero * sizes.matrix_nonzeros * products +
          kFactorSweepsPerSolve * sizes.factor_bytes * sizes.factor_nonzeros * factor_solves +
+         kVectorsPerOperation * sizeof(double) * sizes.rows * (products + factor_solves) +
          (corotational ? kRefillBytesPerNonzero * sizes.matrix_nonzeros : 0.0);
 }
 

@@ -22,7 +22,9 @@
 //                   CG iteration otherwise), 2 x 8 bytes per nonzero of L per
 //                   solve with it (a forward and a backward sweep; 2 x 4 for a
 //                   single-precision factor), 8 bytes per nonzero of A per
-//                   refill (corotational); vectors not counted
+//                   refill (corotational), and per product or solve its input
+//                   and output vector (2 x 8 bytes per DOF); the rest of the
+//                   step's vector work not counted
 //   bound_fraction  bound_s / step_s
 // Rank 0 prints them as one line, "softbody bench: name=value ...", and they go
 // into the result file as root attributes.

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "app/run_control.hpp"
+#include "common/held_bytes.hpp"
 #include "common/number_format.hpp"
 
 namespace softbody {
@@ -58,7 +59,9 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
   const char *held = scene.read_in_slabs ? "; mesh read in slabs by every rank"
                      : layout.size == 1  ? ""
                      : scene.meshes_held ? "; meshes whole on every rank"
-                                         : "; meshes read on rank 0, then held in slabs";
+                     : scene.meshes_released
+                         ? "; meshes whole on every rank until contact's set-up, then released"
+                         : "; meshes read on rank 0, then held in slabs";
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets(), held));
@@ -165,6 +168,34 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
                           (double)c.max_constraint_violation));
   PetscCall(PetscPrintf(comm, "\n"));
   PetscCall(PrintGuard(comm, contact.guard_statistics(), contact.guard_bytes()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. "  whole scene ..." line, with contact: the largest rank's bytes
+// of each O(scene) structure it holds at the end of the run (replicated on
+// every rank, unlike its own and halo shares), and their sum per scene vertex.
+PetscErrorCode PrintSceneBytes(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
+                               const ContactSolver &contact) {
+  PetscFunctionBeginUser;
+  if (!contact.active()) PetscFunctionReturn(PETSC_SUCCESS);
+  const ContactSceneBytes c = contact.scene_bytes();
+  int64_t meshes = HeldBytes(scene.initial_velocities);
+  for (const Body &body : scene.bodies)
+    meshes += HeldBytes(body.mesh.vertices) + HeldBytes(body.mesh.tets);
+  const int64_t numbering = HeldBytes(layout.free_of_natural) + HeldBytes(layout.natural_of_free) +
+                            HeldBytes(layout.petsc_of_free);
+  int64_t bytes[] = {meshes, numbering, c.free_state, c.obstacles, c.guard, c.separation, 0};
+  constexpr int kParts = 6;
+  for (int k = 0; k < kParts; ++k) bytes[kParts] += bytes[k];
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bytes, kParts + 1, MPI_INT64_T, MPI_MAX, comm));
+  const double MB = 1e6;
+  PetscCall(PetscPrintf(comm,
+                        "  whole scene  held per rank, largest rank: meshes %.3g MB, numbering "
+                        "%.3g MB; contact's free state %.3g MB, obstacles %.3g MB, guard %.3g MB, "
+                        "overlap separation %.3g MB; %.3g MB in all, %.0f B per scene vertex\n",
+                        bytes[0] / MB, bytes[1] / MB, bytes[2] / MB, bytes[3] / MB, bytes[4] / MB,
+                        bytes[5] / MB, bytes[kParts] / MB,
+                        double(bytes[kParts]) / std::max<int32_t>(1, scene.num_vertices())));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -331,6 +362,7 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
   PetscCall(PrintSceneAndUnknowns(comm, scene, layout, bodies));
   PetscCall(PrintModel(comm, integration, solver, report));
   PetscCall(PrintContact(comm, contact));
+  PetscCall(PrintSceneBytes(comm, scene, layout, contact));
   PetscCall(PrintLeftOut(comm, scene, layout, integration, output, contact, bodies));
   PetscCall(PrintSolver(comm, ksp, integration, solver));
   PetscCall(PrintTimesAndEnergy(comm, integration, output, contact, report));

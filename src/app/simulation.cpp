@@ -217,13 +217,19 @@ PetscErrorCode Simulation::OpenOutput() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once);
-// collision structures and constraints, only as far as the scene needs them.
+// Collision structures and constraints, only as far as the scene needs them;
+// A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once).
 PetscErrorCode Simulation::SetUpSolvers() {
   PetscFunctionBeginUser;
   IntegratorOptions &integration = options_.integration;
   dt_first_ = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start_.time);
+  // Contact first: it builds its structures from the whole meshes, which no
+  // rank keeps after it, so the solver's set-up runs without them.
+  options_.contact.gravity = integration.gravity.norm();
+  PetscCall(contact_.Setup(comm_, scene_, layout_, state_.lumped_mass, options_.contact));
+  // Contact has built its structures from the whole meshes; nothing reads them later.
+  if (scene_.meshes_held) scene_.ReleaseMeshes();
   if (has_unknowns()) {
     PetscCall(integrator_.Setup(comm_, scene_, layout_, std::move(tets_), elements_,
                                 state_.rest_positions, state_.lumped_mass, integration));
@@ -234,8 +240,6 @@ PetscErrorCode Simulation::SetUpSolvers() {
     PetscCall(ExportMatrices(options_.output.matrix_dir, layout_, elements_,
                              integration.shear_scale, state_.lumped_mass, integration.alpha,
                              integration.beta));
-  options_.contact.gravity = integration.gravity.norm();
-  PetscCall(contact_.Setup(comm_, scene_, layout_, state_.lumped_mass, options_.contact));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

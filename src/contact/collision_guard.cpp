@@ -154,9 +154,9 @@ std::vector<std::pair<PetscInt, int32_t>> CollisionGuard::OwnedMoved() const {
   return owned;
 }
 
-std::vector<std::pair<PetscInt, Point>> CollisionGuard::MovedVelocities(PetscReal dt) const {
+std::vector<std::pair<PetscInt, Point>> CollisionGuard::MovedEnds() const {
   std::vector<std::pair<PetscInt, Point>> moved;
-  for (const auto &[local, s] : OwnedMoved()) moved.push_back({local, (end_[s] - start_[s]) / dt});
+  for (const auto &[local, s] : OwnedMoved()) moved.push_back({local, end_[s]});
   return moved;
 }
 

@@ -34,6 +34,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/held_bytes.hpp"
 #include "common/neighbour_exchange.hpp"
 #include "contact/contact_options.hpp"
 #include "contact/contact_surface.hpp"
@@ -75,8 +76,8 @@ class CollisionGuard {
   // *moved: zones moved vertices (the same on every rank).
   PetscErrorCode Probe(Vec x0, Vec x, bool *moved);
   // Not collective. After Probe: this rank's vertices the zones moved, as
-  // (local vertex, velocity (end - start) / dt).
-  std::vector<std::pair<PetscInt, Point>> MovedVelocities(PetscReal dt) const;
+  // (local vertex, the zone's end position).
+  std::vector<std::pair<PetscInt, Point>> MovedEnds() const;
   // Collective. Probe, then the moved vertices written: x = the zone's end
   // position, v = (x - x0) / dt; *changed as Probe's *moved.
   PetscErrorCode Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
@@ -87,6 +88,13 @@ class CollisionGuard {
   const GuardStatistics &statistics() const { return stats_; }
   // Not collective. Bytes this rank sent (halo, boxes, its colliding pairs), all probes.
   PetscInt64 bytes_sent() const { return bytes_sent_; }
+  // Bytes of the per-surface-vertex arrays (every body's surface, on every rank).
+  int64_t SceneBytes() const {
+    return HeldBytes(surface_.natural) + HeldBytes(surface_.body) + HeldBytes(surface_.triangles) +
+           HeldBytes(surface_.edges) + HeldBytes(owned_mask_) + HeldBytes(usable_) +
+           HeldBytes(moving_) + HeldBytes(mass_) + HeldBytes(rest_) + HeldBytes(start_) +
+           HeldBytes(end_) + HeldBytes(moved_);
+  }
   double separation() const { return query_.tolerance.separation; }
   std::string Description() const;
 

@@ -200,18 +200,19 @@ PetscErrorCode ContactSolver::ExchangeFreeState(Vec x, Vec v, PetscReal dt,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::BeginStep(Vec x0, Vec v0, PetscReal dt) {
+PetscErrorCode ContactSolver::BeginStep(const StepMotion &motion, Vec u0) {
   PetscFunctionBeginUser;
   Timing timing(this);
   friction_.Clear();
-  constraints_.Clear(kBounceSpeedInGravitySteps * options_.gravity * dt);
+  constraints_.Clear(kBounceSpeedInGravitySteps * options_.gravity * motion.h);
   holding_ = false;
+  held_.clear();
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
-  if (options_.restitution > 0) PetscCall(response_.RecordStart(v0));
-  if (free_obstacles_ && !overlaps_checked_) PetscCall(FindOverlaps(x0));
+  if (options_.restitution > 0) PetscCall(response_.RecordStart(u0));
+  if (free_obstacles_ && !overlaps_checked_) PetscCall(FindOverlaps(motion.start));
   // Obstacles where they will be if they keep their velocity.
-  PetscCall(Refresh(x0, v0, dt, true));
-  PetscCall(ReaimRestingContacts(x0, v0, dt));
+  PetscCall(Refresh(motion.base, u0, motion.h, true));
+  PetscCall(ReaimRestingContacts(motion.base, u0, motion.h));
   PetscCall(constraints_.Combine(comm_, friction_.tangents()));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -287,16 +288,16 @@ void ContactSolver::ReaimVertexContact(PetscInt local, const Contact &contact,
     friction_.Stick(local, velocity, hit, constraints_.contacts().size() - 1);
 }
 
-PetscErrorCode ContactSolver::AddPenetrations(Vec x0, Vec v, PetscReal dt, bool *added) {
+PetscErrorCode ContactSolver::AddPenetrations(const StepMotion &motion, Vec u, bool *added) {
   PetscFunctionBeginUser;
   Timing timing(this);
   *added = false;
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
-  PetscCall(Refresh(x0, v, dt, true));
+  PetscCall(Refresh(motion.base, u, motion.h, true));
   PetscInt local_found[2] = {0, 0}, all_found[2];
-  PetscCall(AddVertexPenetrations(x0, v, dt, &local_found[0]));
+  PetscCall(AddVertexPenetrations(motion.base, u, motion.h, &local_found[0]));
   // Feature points: every rank sees all (gathered positions) and constrains its own vertices.
-  if (features_near_) local_found[1] = constraints_.AddFeaturePenetrations(dt);
+  if (features_near_) local_found[1] = constraints_.AddFeaturePenetrations(motion.h);
   PetscCallMPI(MPIU_Allreduce(local_found, all_found, 2, MPIU_INT, MPI_SUM, comm_));
   stats_.collisions += all_found[0];
   stats_.feature_contacts += all_found[1];
@@ -339,7 +340,7 @@ PetscErrorCode ContactSolver::ReleaseSlipping(const std::vector<PetscReal> &reac
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::HoldGuardedVertices(Vec x0, Vec x, PetscReal dt,
+PetscErrorCode ContactSolver::HoldGuardedVertices(const StepMotion &motion, Vec x,
                                                   const std::vector<PetscReal> &reactions,
                                                   bool *held) {
   PetscFunctionBeginUser;
@@ -347,10 +348,15 @@ PetscErrorCode ContactSolver::HoldGuardedVertices(Vec x0, Vec x, PetscReal dt,
   *held = false;
   if (!guard_on_) PetscFunctionReturn(PETSC_SUCCESS);
   bool moved;
-  PetscCall(guard_.Probe(x0, x, &moved));
+  PetscCall(guard_.Probe(motion.start, x, &moved));
   if (moved) {
-    for (const auto &[local, velocity] : guard_.MovedVelocities(dt))
-      constraints_.Hold(local, velocity);
+    const PetscScalar *base;
+    PetscCall(VecGetArrayRead(motion.base, &base));
+    for (const auto &[local, end] : guard_.MovedEnds()) {
+      constraints_.Hold(local, (end - Point(&base[3 * local])) / motion.h);
+      held_.push_back(local);
+    }
+    PetscCall(VecRestoreArrayRead(motion.base, &base));
     holding_ = true;
   }
   // Once vertices are held, contacts aimed at the first prediction may pull.
@@ -361,19 +367,39 @@ PetscErrorCode ContactSolver::HoldGuardedVertices(Vec x0, Vec x, PetscReal dt,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
+PetscErrorCode ContactSolver::EndStep(const StepMotion &motion, Vec x, Vec v,
                                       const std::vector<PetscReal> &reactions, bool *changed) {
   PetscFunctionBeginUser;
   Timing timing(this);
   *changed = false;
   if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
+  if (motion.mean_velocity_differs && holding_) {
+    PetscCall(EndHeldWithMeanVelocity(motion, x, v));
+    *changed = true;
+  }
   if (ground_ || body_obstacles_) PetscCall(RespondToContacts(x, v, reactions, changed));
   if (!distance_.empty()) {
     PetscCall(ResolveDistanceConstraints(x, v, nullptr));
     *changed = true;
   }
-  if (guard_on_) PetscCall(Guard(x0, x, v, dt, changed));
+  if (guard_on_) PetscCall(Guard(motion.start, x, v, motion.dt, changed));
   if (separation_.active()) PetscCall(SeparateOverlaps(x, changed));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::EndHeldWithMeanVelocity(const StepMotion &motion, Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  const PetscScalar *start, *end;
+  PetscScalar *velocity;
+  PetscCall(VecGetArrayRead(motion.start, &start));
+  PetscCall(VecGetArrayRead(x, &end));
+  PetscCall(VecGetArray(v, &velocity));
+  for (const PetscInt local : held_)
+    for (int c = 0; c < 3; ++c)
+      velocity[3 * local + c] = (end[3 * local + c] - start[3 * local + c]) / motion.dt;
+  PetscCall(VecRestoreArrayRead(motion.start, &start));
+  PetscCall(VecRestoreArrayRead(x, &end));
+  PetscCall(VecRestoreArray(v, &velocity));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -437,7 +463,7 @@ PetscErrorCode ContactSolver::RespondToContacts(Vec x, Vec v,
   if (options_.restitution > 0) PetscCall(response_.Bounce(constraints_, by_contact, v));
   PetscInt local_changes = static_cast<PetscInt>(collisions.size()), changes;
   PetscCallMPI(MPIU_Allreduce(&local_changes, &changes, 1, MPIU_INT, MPI_SUM, comm_));
-  *changed = changes > 0;
+  *changed = *changed || changes > 0;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

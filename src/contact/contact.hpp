@@ -70,6 +70,28 @@ struct ContactStatistics {
   PetscReal max_constraint_violation = 0;  // relative, after resolution
 };
 
+// A step's motion as contact sees it (PETSc-order vectors): the surfaces move
+// straight from `start` (the step's start positions x_n) to x1 = base + h u,
+// u the step's unknown velocity (m/s): constraints act on u through this map.
+// Backward Euler: base = start, h = dt, u = v1. Other schemes (time_scheme.hpp)
+// have their own base and h, and an end velocity v1 that is not u: a vertex
+// the guard held or moved then ends with the mean velocity (x1 - x_n) / dt,
+// which `mean_velocity_differs` asks for.
+struct StepMotion {
+  Vec start = nullptr, base = nullptr;
+  PetscReal h = 0;   // s
+  PetscReal dt = 0;  // the whole step (s)
+  bool mean_velocity_differs = false;
+};
+
+// Bytes of contact's O(scene) arrays on one rank (ContactSolver::scene_bytes).
+struct ContactSceneBytes {
+  int64_t free_state = 0;  // FreeState's natural-indexed arrays (its slot map)
+  int64_t obstacles = 0;   // the bodies' tets and triangles, indexed by vertex
+  int64_t guard = 0;       // the collision guard's surface arrays
+  int64_t separation = 0;  // OverlapSeparation's surfaces and fetched positions
+};
+
 class ContactSolver {
  public:
   ContactSolver() = default;
@@ -77,7 +99,9 @@ class ContactSolver {
   ContactSolver &operator=(const ContactSolver &) = delete;
 
   // Collective. Builds only what the scene and options need. scene and layout
-  // must outlive the solver; lumped_mass: per DOF (kg), PETSc order.
+  // must outlive the solver; lumped_mass: per DOF (kg), PETSc order. The
+  // bodies' meshes are read here only: the caller may release them after
+  // (Scene::ReleaseMeshes); the counts, flags and first vertices stay read.
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
                        const ContactOptions &options);
   // Anything to resolve at all.
@@ -85,11 +109,11 @@ class ContactSolver {
 
   // The step's contact protocol (collective calls):
   // 1. BeginStep: the resting contacts of the last step, re-aimed at the surface
-  //    for positions x0 (v0: the obstacles' velocities) and step dt.
-  PetscErrorCode BeginStep(Vec x0, Vec v0, PetscReal dt);
-  // 2. After a solve giving v: constrains every unconstrained vertex that
-  //    x0 + dt v puts inside an obstacle; *added tells any rank added one.
-  PetscErrorCode AddPenetrations(Vec x0, Vec v, PetscReal dt, bool *added);
+  //    for the end positions base + h u0 (u0: the obstacles' velocities).
+  PetscErrorCode BeginStep(const StepMotion &motion, Vec u0);
+  // 2. After a solve giving u: constrains every unconstrained vertex that
+  //    base + h u puts inside an obstacle; *added tells any rank added one.
+  PetscErrorCode AddPenetrations(const StepMotion &motion, Vec u, bool *added);
   // The constraints for the solve (owned vertices, local numbering): one normal
   // per contact, in contact order, then two tangents per sticking contact; and
   // how many there are on all ranks (the same on every rank: decides
@@ -103,19 +127,20 @@ class ContactSolver {
   //    entries), friction.hpp; with friction, contacts that pull leave the
   //    solve; *released tells any rank changed anything.
   PetscErrorCode ReleaseSlipping(const std::vector<PetscReal> &reactions, Vec rhs, bool *released);
-  // 2c. After the solves, on x = x0 + dt v: when the collision guard would move
-  //    vertices (collision_guard.hpp), their velocities are prescribed for the
-  //    rest of the step, contacts that pull (reactions from the last solve)
-  //    are released, and *held tells the step to solve again, so the body
-  //    answers them; the guard after the step (EndStep) has the last word.
-  PetscErrorCode HoldGuardedVertices(Vec x0, Vec x, PetscReal dt,
+  // 2c. After the solves, on x = base + h u: when the collision guard would move
+  //    vertices (collision_guard.hpp) on the motion from start to x, their
+  //    unknowns are prescribed for the rest of the step, contacts that pull
+  //    (reactions from the last solve) are released, and *held tells the step
+  //    to solve again, so the body answers them; the guard after the step
+  //    (EndStep) has the last word.
+  PetscErrorCode HoldGuardedVertices(const StepMotion &motion, Vec x,
                                      const std::vector<PetscReal> &reactions, bool *held);
-  // 3. After x1 = x0 + dt v1 with the constraints' reactions: velocity response,
-  //    impulse spreading, resting contacts for the next step, last-resort
-  //    projection, distance constraints, and last the collision guard
-  //    (collision_guard.hpp) on the motion from x0 to x. *changed: x or v
-  //    modified here.
-  PetscErrorCode EndStep(Vec x0, Vec x, Vec v, PetscReal dt,
+  // 3. After the step's x1, v1 with the constraints' reactions: velocity
+  //    response, impulse spreading, resting contacts for the next step,
+  //    last-resort projection, distance constraints, and last the collision
+  //    guard (collision_guard.hpp) on the motion from start to x. *changed: x or
+  //    v modified here.
+  PetscErrorCode EndStep(const StepMotion &motion, Vec x, Vec v,
                          const std::vector<PetscReal> &reactions, bool *changed);
 
   // Checkpoints: the resting contacts carried into the next step, as (natural
@@ -141,6 +166,12 @@ class ContactSolver {
   // Not collective. Bytes this rank sent in the free state's exchanges, and for the guard.
   PetscInt64 exchange_bytes() const { return state_.bytes_sent(); }
   PetscInt64 guard_bytes() const { return guard_on_ ? guard_.bytes_sent() : 0; }
+  // Not collective. Bytes this rank holds of the whole scene for contact (the
+  // O(scene) arrays; its own and halo shares not counted), by part.
+  ContactSceneBytes scene_bytes() const {
+    return {state_.SceneBytes(), obstacles_.SceneBytes(), guard_.SceneBytes(),
+            separation_.SceneBytes()};
+  }
   // Not collective. How often this rank built the free bodies' grids (only
   // when a vertex came within another free body's box or a fixed body's sharp
   // edge within a free body's).
@@ -190,6 +221,9 @@ class ContactSolver {
   // The guard, and with distance constraints, the constraints again with the
   // vertices it moved pinned, then the guard again (it has the last word).
   PetscErrorCode Guard(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
+  // With mean_velocity_differs: the vertices held in this step end with the
+  // mean velocity (x1 - x_n) / dt (the guard writes it for those it moves).
+  PetscErrorCode EndHeldWithMeanVelocity(const StepMotion &motion, Vec x, Vec v);
 
   // Times a public method: the "Contact" event of -log_view and stats_.seconds.
   class Timing {
@@ -211,6 +245,7 @@ class ContactSolver {
   bool free_obstacles_ = false;   // free bodies are obstacles to each other
   bool guard_on_ = false;         // the collision guard runs after each step
   bool holding_ = false;          // this step's solves hold vertices for the guard
+  std::vector<PetscInt> held_;    // the local vertices held (repeats possible)
   bool track_free_ = false;       // the free bodies' grids are needed (free or feature obstacles)
   bool exchange_always_ = false;  // every call exchanges (free obstacles, constraints, spreading)
   bool features_near_ = false;    // this call's sharp-edge contacts need the free state

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "common/held_bytes.hpp"
 #include "contact/halo.hpp"
 
 namespace softbody {
@@ -12,21 +13,39 @@ FreeState::~FreeState() {
   VecDestroy(&fixed_v_);
 }
 
+int64_t FreeState::SceneBytes() const {
+  return HeldBytes(body_of_) + HeldBytes(free_) + HeldBytes(slot_);
+}
+
+int32_t FreeState::Slot(int32_t natural) {
+  int32_t &s = slot_[natural];
+  if (s >= 0) return s;
+  s = static_cast<int32_t>(stamp_.size());
+  x_.insert(x_.end(), 3, kNoPosition);
+  v_.insert(v_.end(), 3, 0.0);
+  inverse_mass_.push_back(0.0);
+  stamp_.push_back(0);
+  return s;
+}
+
+Point FreeState::RestPosition(int32_t natural) const {
+  const Body &body = scene_->bodies[body_of_[natural]];
+  return body.mesh.vertices.row(natural - body.first_vertex).transpose();
+}
+
 void FreeState::SetupBodies(const Scene &scene, double reach_in_edges) {
   const int32_t V = scene.num_vertices();
+  scene_ = &scene;
   num_bodies_ = scene.bodies.size();
   body_of_.resize(V);
-  x_.resize(3 * static_cast<size_t>(V));
-  v_.assign(3 * static_cast<size_t>(V), 0.0);
+  slot_.assign(V, -1);
   body_edge_.assign(num_bodies_, 0.0);
   body_reach_.assign(num_bodies_, 0.0);
   for (size_t b = 0; b < num_bodies_; ++b) {
     const Body &body = scene.bodies[b];
     const TetMesh &mesh = body.mesh;
-    for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
+    for (int32_t v = 0; v < mesh.num_vertices(); ++v)
       body_of_[body.first_vertex + v] = static_cast<int32_t>(b);
-      for (int c = 0; c < 3; ++c) x_[3 * (body.first_vertex + v) + c] = mesh.vertices(v, c);
-    }
     double length = 0;
     const auto edges = BoundaryEdges(mesh);
     for (const auto &[a, c] : edges) length += (mesh.vertices.row(c) - mesh.vertices.row(a)).norm();
@@ -51,14 +70,15 @@ PetscErrorCode FreeState::SetupMasses(MPI_Comm comm, const DofLayout &layout, Ve
   owned_natural_.assign(layout.natural_of_owned.begin(), layout.natural_of_owned.end());
   const int32_t V = static_cast<int32_t>(body_of_.size());
   free_.assign(V, 0);
-  stamp_.assign(V, 0);
   static_box_.assign(num_bodies_, Box());
   for (int32_t n = 0; n < V; ++n) {
     free_[n] = layout.PetscVertexOfNatural(n) >= 0;
-    if (!free_[n]) static_box_[body_of_[n]].Extend(position(n));
+    if (free_[n]) continue;
+    position_ref(n) = RestPosition(n);
+    static_box_[body_of_[n]].Extend(position(n));
   }
+  for (const int32_t n : owned_natural_) position_ref(n) = RestPosition(n);
   body_box_ = static_box_;
-  inverse_mass_.assign(V, 0.0);
   PetscCall(OwnInverseMasses(layout, lumped_mass));
   PetscCall(SumBodyMasses(comm));
   if (halo) PetscCall(neighbours_.Setup(comm));
@@ -71,7 +91,7 @@ PetscErrorCode FreeState::OwnInverseMasses(const DofLayout &layout, Vec lumped_m
   const PetscScalar *mass;
   PetscCall(VecGetArrayRead(lumped_mass, &mass));
   for (PetscInt local = 0; local < layout.local_count(); ++local)
-    inverse_mass_[layout.natural_of_owned[local]] = 1.0 / mass[3 * local];
+    inverse_mass_[Slot(layout.natural_of_owned[local])] = 1.0 / mass[3 * local];
   PetscCall(VecRestoreArrayRead(lumped_mass, &mass));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -81,7 +101,7 @@ PetscErrorCode FreeState::SumBodyMasses(MPI_Comm comm) {
   PetscFunctionBeginUser;
   std::vector<double> owned_mass(num_bodies_, 0.0);
   for (const int32_t natural : owned_natural_)
-    owned_mass[body_of_[natural]] += 1.0 / inverse_mass_[natural];
+    owned_mass[body_of_[natural]] += 1.0 / inverse_mass(natural);
   body_mass_.resize(num_bodies_);
   PetscCallMPI(MPI_Allreduce(owned_mass.data(), body_mass_.data(),
                              static_cast<int>(owned_mass.size()), MPI_DOUBLE, MPI_SUM, comm));
@@ -108,7 +128,10 @@ PetscErrorCode FreeState::SetupFixedSet(Vec lumped_mass, const std::vector<int32
   PetscCall(VecScatterEnd(fixed_scatter_, lumped_mass, fixed_x_, INSERT_VALUES, SCATTER_FORWARD));
   const PetscScalar *mass;
   PetscCall(VecGetArrayRead(fixed_x_, &mass));
-  for (size_t k = 0; k < fixed_set_.size(); ++k) inverse_mass_[fixed_set_[k]] = 1.0 / mass[3 * k];
+  for (size_t k = 0; k < fixed_set_.size(); ++k) {
+    position_ref(fixed_set_[k]) = RestPosition(fixed_set_[k]);
+    inverse_mass_[Slot(fixed_set_[k])] = 1.0 / mass[3 * k];
+  }
   PetscCall(VecRestoreArrayRead(fixed_x_, &mass));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -132,10 +155,10 @@ PetscErrorCode FreeState::WriteOwnedState(Vec x, Vec v, PetscReal dt, std::vecto
   PetscCall(VecGetArrayRead(x, &ax));
   PetscCall(VecGetArrayRead(v, &av));
   for (size_t p = 0; p < owned_natural_.size(); ++p) {
-    const int32_t n = owned_natural_[p];
+    const int32_t n = owned_natural_[p], s = Slot(n);
     for (int c = 0; c < 3; ++c) {
-      x_[3 * n + c] = ax[3 * p + c] + dt * av[3 * p + c];
-      v_[3 * n + c] = av[3 * p + c];
+      x_[3 * s + c] = ax[3 * p + c] + dt * av[3 * p + c];
+      v_[3 * s + c] = av[3 * p + c];
     }
     (*boxes)[body_of_[n]].Extend(position(n));
     MarkCurrent(n);
@@ -179,20 +202,20 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
       &plan, &bytes_sent_));
   std::vector<HaloVertex> records, received;
   for (const int32_t p : plan.items) {
-    const int32_t n = owned_natural_[p];
-    HaloVertex h{n, {}, {}, inverse_mass_[n]};
-    std::copy(&x_[3 * n], &x_[3 * n] + 3, h.x);
-    std::copy(&v_[3 * n], &v_[3 * n] + 3, h.v);
+    const int32_t n = owned_natural_[p], s = slot_[n];
+    HaloVertex h{n, {}, {}, inverse_mass_[s]};
+    std::copy(&x_[3 * s], &x_[3 * s] + 3, h.x);
+    std::copy(&v_[3 * s], &v_[3 * s] + 3, h.v);
     records.push_back(h);
   }
   PetscInt64 bytes;
   PetscCall(neighbours_.Exchange(plan.ranks, plan.counts, records, &received, &bytes));
   bytes_sent_ += bytes;
   for (const HaloVertex &h : received) {
-    const int32_t n = h.natural;
-    std::copy(h.x, h.x + 3, &x_[3 * n]);
-    std::copy(h.v, h.v + 3, &v_[3 * n]);
-    inverse_mass_[n] = h.inverse_mass;
+    const int32_t n = h.natural, s = Slot(n);
+    std::copy(h.x, h.x + 3, &x_[3 * s]);
+    std::copy(h.v, h.v + 3, &v_[3 * s]);
+    inverse_mass_[s] = h.inverse_mass;
     MarkCurrent(n);
   }
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -208,10 +231,10 @@ PetscErrorCode FreeState::FetchFixedSet(Vec x, Vec v, PetscReal dt) {
   PetscCall(VecGetArrayRead(fixed_x_, &ax));
   PetscCall(VecGetArrayRead(fixed_v_, &av));
   for (size_t k = 0; k < fixed_set_.size(); ++k) {
-    const int32_t n = fixed_set_[k];
+    const int32_t n = fixed_set_[k], s = Slot(n);
     for (int c = 0; c < 3; ++c) {
-      x_[3 * n + c] = ax[3 * k + c] + dt * av[3 * k + c];
-      v_[3 * n + c] = av[3 * k + c];
+      x_[3 * s + c] = ax[3 * k + c] + dt * av[3 * k + c];
+      v_[3 * s + c] = av[3 * k + c];
     }
     MarkCurrent(n);
   }
@@ -227,8 +250,8 @@ PetscErrorCode FreeState::WriteOwned(Vec x, Vec v) const {
   PetscCall(VecGetArray(v, &lv));
   for (PetscInt p = 0; p < local_count(); ++p)
     for (int c = 0; c < 3; ++c) {
-      lx[3 * p + c] = x_[3 * owned_natural_[p] + c];
-      lv[3 * p + c] = v_[3 * owned_natural_[p] + c];
+      lx[3 * p + c] = x_[3 * slot_[owned_natural_[p]] + c];
+      lv[3 * p + c] = v_[3 * slot_[owned_natural_[p]] + c];
     }
   PetscCall(VecRestoreArray(x, &lx));
   PetscCall(VecRestoreArray(v, &lv));

@@ -19,13 +19,17 @@
 // longest rest tet edge: every tet and boundary triangle of another body that
 // meets this rank's box, and is stretched less than that, comes whole.
 //
-// Arrays are natural-indexed on every rank (O(vertices) memory, as the
-// replicated meshes contact still needs); the messages are O(halo).
+// Positions, velocities and inverse masses are kept per slot: for this rank's
+// own vertices, those it received and those without unknowns (rest positions
+// from the whole meshes at set-up), O(local + halo + fixed); the map from
+// natural vertex to slot, the body and the free flag stay natural-indexed on
+// every rank (9 B per scene vertex, SceneBytes); the messages are O(halo).
 #pragma once
 
 #include <petscvec.h>
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "common/neighbour_exchange.hpp"
@@ -65,11 +69,26 @@ class FreeState {
   // Not collective. Writes this rank's vertices of the world arrays into x and v.
   PetscErrorCode WriteOwned(Vec x, Vec v) const;
 
-  Point position(int32_t natural) const { return Point(&x_[3 * natural]); }
-  Point velocity(int32_t natural) const { return Point(&v_[3 * natural]); }
-  Eigen::Map<Point> position_ref(int32_t natural) { return Eigen::Map<Point>(&x_[3 * natural]); }
-  Eigen::Map<Point> velocity_ref(int32_t natural) { return Eigen::Map<Point>(&v_[3 * natural]); }
-  double inverse_mass(int32_t natural) const { return inverse_mass_[natural]; }
+  // A vertex that was never current on this rank has no position (NaN), zero
+  // velocity and zero inverse mass.
+  Point position(int32_t natural) const {
+    const int32_t s = slot_[natural];
+    return s < 0 ? Point::Constant(kNoPosition) : Point(&x_[3 * s]);
+  }
+  Point velocity(int32_t natural) const {
+    const int32_t s = slot_[natural];
+    return s < 0 ? Point::Zero() : Point(&v_[3 * s]);
+  }
+  Eigen::Map<Point> position_ref(int32_t natural) {
+    return Eigen::Map<Point>(&x_[3 * Slot(natural)]);
+  }
+  Eigen::Map<Point> velocity_ref(int32_t natural) {
+    return Eigen::Map<Point>(&v_[3 * Slot(natural)]);
+  }
+  double inverse_mass(int32_t natural) const {
+    const int32_t s = slot_[natural];
+    return s < 0 ? 0.0 : inverse_mass_[s];
+  }
   int32_t body_of(int32_t natural) const { return body_of_[natural]; }
   double edge(size_t body) const { return body_edge_[body]; }
   double mass(size_t body) const { return body_mass_[body]; }
@@ -79,7 +98,9 @@ class FreeState {
   bool is_free(int32_t natural) const { return free_[natural]; }
   // Whether the arrays hold the vertex's state of the last Exchange (fixed
   // vertices always).
-  bool current(int32_t natural) const { return !free_[natural] || stamp_[natural] == stamp_now_; }
+  bool current(int32_t natural) const {
+    return !free_[natural] || (slot_[natural] >= 0 && stamp_[slot_[natural]] == stamp_now_);
+  }
   // The free vertices the last Exchange brought or wrote, owned first.
   const std::vector<int32_t> &current_free() const { return current_free_; }
   // A free body's box at the last Exchange's positions (all ranks' vertices).
@@ -88,6 +109,8 @@ class FreeState {
   PetscInt64 bytes_sent() const { return bytes_sent_; }
   // Local vertex -> natural vertex.
   const std::vector<int32_t> &owned_natural() const { return owned_natural_; }
+  // Bytes of the natural-indexed arrays (O(scene vertices) on every rank).
+  int64_t SceneBytes() const;
   PetscInt local_count() const { return static_cast<PetscInt>(owned_natural_.size()); }
 
  private:
@@ -104,21 +127,32 @@ class FreeState {
   PetscErrorCode ReduceBodyBoxes(const std::vector<Box> &owned_boxes);
   PetscErrorCode ExchangeHalo(const std::vector<Box> &owned_boxes);
   PetscErrorCode FetchFixedSet(Vec x, Vec v, PetscReal dt);
+  // The vertex's slot in the per-slot arrays, given on first use (position
+  // NaN, velocity and inverse mass 0 until written).
+  int32_t Slot(int32_t natural);
   void MarkCurrent(int32_t natural) {
-    if (stamp_[natural] != stamp_now_) current_free_.push_back(natural);
-    stamp_[natural] = stamp_now_;
+    const int32_t s = Slot(natural);
+    if (stamp_[s] != stamp_now_) current_free_.push_back(natural);
+    stamp_[s] = stamp_now_;
   }
+  // The rest position of a vertex from the scene's meshes (set-up only).
+  Point RestPosition(int32_t natural) const;
 
+  static constexpr double kNoPosition = std::numeric_limits<double>::quiet_NaN();
   MPI_Comm comm_ = MPI_COMM_NULL;
   const DofLayout *layout_ = nullptr;
+  const Scene *scene_ = nullptr;  // its meshes read during the set-up only
   size_t num_bodies_ = 0;
   bool same_body_ = false;
   std::vector<int32_t> body_of_;        // natural vertex -> body
   std::vector<char> free_;              // natural vertex -> has unknowns
   std::vector<int32_t> owned_natural_;  // local vertex -> natural vertex
-  std::vector<double> inverse_mass_;    // natural vertex (0: fixed or stray)
-  std::vector<double> x_, v_;           // natural, 3 per vertex
-  std::vector<uint32_t> stamp_;         // natural vertex -> exchange that wrote it
+  // Per-slot state: only the vertices this rank owns, has received or reads
+  // whatever the exchange (those without unknowns, the fixed set) have a slot.
+  std::vector<int32_t> slot_;         // natural vertex -> slot, -1: none yet
+  std::vector<double> inverse_mass_;  // per slot (0: fixed or stray)
+  std::vector<double> x_, v_;         // per slot, 3 each
+  std::vector<uint32_t> stamp_;       // per slot: the exchange that wrote it
   uint32_t stamp_now_ = 1;
   std::vector<int32_t> current_free_;
   std::vector<double> body_edge_;   // mean boundary edge length per body

@@ -1,8 +1,11 @@
 #include "contact/obstacles.hpp"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <numeric>
+
+#include "common/held_bytes.hpp"
 
 namespace softbody {
 
@@ -41,9 +44,24 @@ void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool gro
   ground_margin_ = ground_margin;
 }
 
+int64_t Obstacles::SceneBytes() const {
+  return HeldBytes(fixed_tets_) + HeldBytes(free_tets_) + HeldBytes(fixed_triangles_) +
+         HeldBytes(free_triangles_) + HeldBytes(tets_start_) + HeldBytes(triangles_start_) +
+         HeldBytes(tets_of_vertex_) + HeldBytes(triangles_of_vertex_) + HeldBytes(static_tets_) +
+         HeldBytes(static_triangles_);
+}
+
 void Obstacles::SetupBodies(bool track_free) {
+  // Exact sizes: the lists hold every tet of the scene's obstacle bodies.
+  size_t fixed_tets = 0, free_tets = 0;
+  for (const Body &body : scene_->bodies)
+    (body.fixed ? fixed_tets : free_tets) += body.fixed || track_free ? body.num_tets() : 0;
+  fixed_tets_.reserve(fixed_tets);
+  free_tets_.reserve(free_tets);
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (scene_->bodies[b].fixed || track_free) AddBody(b);
+  fixed_triangles_.shrink_to_fit();
+  free_triangles_.shrink_to_fit();
   BuildFixedBodyBoxes();
   std::vector<int32_t> tets(fixed_tets_.size()), triangles(fixed_triangles_.size());
   std::iota(tets.begin(), tets.end(), 0);
@@ -56,20 +74,25 @@ void Obstacles::SetupBodies(bool track_free) {
 namespace {
 
 // CSR of the items (first N entries: natural vertices) by vertex, over V
-// vertices; the vertices that `counts` rejects are left out.
+// vertices: each item once, under its first corner that `counts` accepts (an
+// item whose corners are all current has that corner current, so visiting the
+// current vertices' lists finds it; one entry per item instead of one per
+// corner). Items with no such corner are left out.
 template <size_t N, class Counts>
 void IndexByVertex(const std::vector<std::array<int32_t, N>> &items, size_t corners, int32_t V,
                    Counts counts, std::vector<int64_t> *start, std::vector<int32_t> *of_vertex) {
+  auto key = [&](const std::array<int32_t, N> &item) {
+    const auto corner = std::find_if(item.begin(), item.begin() + corners, counts);
+    return corner == item.begin() + corners ? -1 : *corner;
+  };
   start->assign(static_cast<size_t>(V) + 1, 0);
   for (const auto &item : items)
-    for (size_t a = 0; a < corners; ++a)
-      if (counts(item[a])) ++(*start)[item[a] + 1];
+    if (const int32_t n = key(item); n >= 0) ++(*start)[n + 1];
   for (int32_t n = 0; n < V; ++n) (*start)[n + 1] += (*start)[n];
   of_vertex->resize((*start)[V]);
   std::vector<int64_t> next(start->begin(), start->end() - 1);
   for (size_t t = 0; t < items.size(); ++t)
-    for (size_t a = 0; a < corners; ++a)
-      if (counts(items[t][a])) (*of_vertex)[next[items[t][a]]++] = static_cast<int32_t>(t);
+    if (const int32_t n = key(items[t]); n >= 0) (*of_vertex)[next[n]++] = static_cast<int32_t>(t);
 }
 
 }  // namespace
@@ -320,15 +343,23 @@ bool Obstacles::NearFreeBody(const Point &p, int32_t natural, const VertexObstac
 }
 
 // sum_t angle_t n_t over the current free triangles t at `natural` whose
-// normal n_t satisfies keep(n_t).
+// normal n_t satisfies keep(n_t), in increasing triangle order. The ring comes
+// from the triangle grid (a triangle's box holds its corners): the index by
+// vertex lists each triangle under one corner only.
 template <class Keep>
 Point Obstacles::AngleWeightedNormal(int32_t natural, Keep keep) const {
   Point sum = Point::Zero();
-  if (triangles_start_.empty()) return sum;
-  for (int64_t i = triangles_start_[natural]; i < triangles_start_[natural + 1]; ++i) {
-    const auto &tri = free_triangles_[triangles_of_vertex_[i]];
-    if (!std::all_of(tri.begin(), tri.begin() + 3, [&](int32_t m) { return state_->current(m); }))
-      continue;
+  if (!state_->current(natural)) return sum;
+  EnsureFreeGrids();
+  std::vector<int32_t> ring;
+  free_triangles_bin_.ForEachNear(WorldPoint(natural), 0, [&](int32_t t, const Box &) {
+    const auto &tri = free_triangles_[t];
+    if (std::find(tri.begin(), tri.begin() + 3, natural) != tri.begin() + 3) ring.push_back(t);
+  });
+  std::sort(ring.begin(), ring.end());
+  ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+  for (const int32_t t : ring) {
+    const auto &tri = free_triangles_[t];
     const int k = tri[0] == natural ? 0 : tri[1] == natural ? 1 : 2;
     const Point a = WorldPoint(tri[k]), b = WorldPoint(tri[(k + 1) % 3]),
                 c = WorldPoint(tri[(k + 2) % 3]);

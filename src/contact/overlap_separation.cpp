@@ -24,8 +24,6 @@ void OverlapSeparation::Setup(MPI_Comm comm, const Scene &scene, const FreeState
   obstacles_ = obstacles;
   edges_.resize(scene.bodies.size());
   triangles_.resize(scene.bodies.size());
-  on_surface_.assign(scene.num_vertices(), 0);
-  positions_.assign(3 * static_cast<size_t>(scene.num_vertices()), 0.0);
   box_.assign(scene.bodies.size(), Box());
   centroid_.assign(scene.bodies.size(), Point::Zero());
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
@@ -34,13 +32,35 @@ void OverlapSeparation::Setup(MPI_Comm comm, const Scene &scene, const FreeState
     for (const auto &[u, w] : BoundaryEdges(body.mesh))
       edges_[b].push_back({body.first_vertex + u, body.first_vertex + w});
     const auto boundary = BoundaryTriangles(body.mesh);
-    for (Eigen::Index f = 0; f < boundary.rows(); ++f) {
+    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
       triangles_[b].push_back({body.first_vertex + boundary(f, 0),
                                body.first_vertex + boundary(f, 1),
                                body.first_vertex + boundary(f, 2)});
-      for (int k = 0; k < 3; ++k) on_surface_[body.first_vertex + boundary(f, k)] = 1;
-    }
   }
+  NumberSurface();
+}
+
+// surface_ from the edges' and triangles' natural vertices, which then name
+// surface indices.
+void OverlapSeparation::NumberSurface() {
+  for (size_t b = 0; b < edges_.size(); ++b) {
+    for (const auto &[u, w] : edges_[b]) surface_.insert(surface_.end(), {u, w});
+    for (const auto &t : triangles_[b]) surface_.insert(surface_.end(), t.begin(), t.end());
+  }
+  std::sort(surface_.begin(), surface_.end());
+  surface_.erase(std::unique(surface_.begin(), surface_.end()), surface_.end());
+  surface_.shrink_to_fit();
+  for (size_t b = 0; b < edges_.size(); ++b) {
+    for (auto &[u, w] : edges_[b]) u = SurfaceIndex(u), w = SurfaceIndex(w);
+    for (auto &t : triangles_[b])
+      for (int32_t &n : t) n = SurfaceIndex(n);
+  }
+  positions_.assign(3 * surface_.size(), 0.0);
+}
+
+int32_t OverlapSeparation::SurfaceIndex(int32_t natural) const {
+  const auto at = std::lower_bound(surface_.begin(), surface_.end(), natural);
+  return at != surface_.end() && *at == natural ? static_cast<int32_t>(at - surface_.begin()) : -1;
 }
 
 PetscErrorCode OverlapSeparation::FindOverlaps(Vec x, size_t *found) {
@@ -106,7 +126,7 @@ PetscErrorCode OverlapSeparation::Fetch(Vec x, const std::vector<char> &bodies) 
       for (int c = 0; c < 3; ++c) moments[4 * b + c] += lx[3 * p + c] / w;
       moments[4 * b + 3] += 1 / w;
     }
-    if (on_surface_[natural])
+    if (SurfaceIndex(natural) >= 0)
       packed.insert(packed.end(), {double(natural), lx[3 * p], lx[3 * p + 1], lx[3 * p + 2]});
   }
   PetscCall(VecRestoreArrayRead(x, &lx));
@@ -127,8 +147,9 @@ PetscErrorCode OverlapSeparation::Fetch(Vec x, const std::vector<char> &bodies) 
   }
   for (size_t i = 0; i < all.size(); i += kPackedVertex) {
     const int32_t natural = static_cast<int32_t>(all[i]);
-    for (int c = 0; c < 3; ++c) positions_[3 * natural + c] = all[i + 1 + c];
-    box_[state_->body_of(natural)].Extend(At(natural));
+    const int32_t surface = SurfaceIndex(natural);
+    for (int c = 0; c < 3; ++c) positions_[3 * surface + c] = all[i + 1 + c];
+    box_[state_->body_of(natural)].Extend(At(surface));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }

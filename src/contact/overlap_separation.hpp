@@ -30,6 +30,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/held_bytes.hpp"
 #include "contact/free_state.hpp"
 #include "contact/obstacles.hpp"
 #include "fem/partition.hpp"
@@ -58,6 +59,10 @@ class OverlapSeparation {
 
   // Steps taken while some pair was separating; pairs found at the start.
   PetscInt steps() const { return steps_; }
+  // Bytes of the free bodies' surfaces (O(scene surface) on every rank).
+  int64_t SceneBytes() const {
+    return HeldBytes(edges_) + HeldBytes(triangles_) + HeldBytes(surface_) + HeldBytes(positions_);
+  }
   size_t initial_pairs() const { return initial_pairs_; }
 
  private:
@@ -72,19 +77,22 @@ class OverlapSeparation {
   bool InsideSurface(const Point &p, size_t b) const;
   // The translation of each of the pair's bodies this step.
   std::pair<Point, Point> Translations(size_t a, size_t b) const;
-  Point At(int32_t natural) const { return Point(&positions_[3 * natural]); }
+  void NumberSurface();
+  // The surface index of a natural vertex, -1 if not on a free body's surface.
+  int32_t SurfaceIndex(int32_t natural) const;
+  Point At(int32_t surface) const { return Point(&positions_[3 * surface]); }
 
   MPI_Comm comm_ = MPI_COMM_NULL;
   const Scene *scene_ = nullptr;
   const FreeState *state_ = nullptr;
   Obstacles *obstacles_ = nullptr;
-  // Per body: its boundary edges and triangles (natural vertices).
+  // Per body: its boundary edges and triangles (surface indices).
   std::vector<std::vector<std::pair<int32_t, int32_t>>> edges_;
   std::vector<std::vector<std::array<int32_t, 3>>> triangles_;
-  std::vector<char> on_surface_;   // per natural vertex
-  std::vector<double> positions_;  // natural, 3 per vertex: the fetched surface vertices
-  std::vector<Box> box_;           // per body: its fetched surface's box
-  std::vector<Point> centroid_;    // per body: its mass centroid at the fetch
+  std::vector<int32_t> surface_;                  // surface index -> natural vertex, increasing
+  std::vector<double> positions_;                 // 3 per surface vertex: the fetched positions
+  std::vector<Box> box_;                          // per body: its fetched surface's box
+  std::vector<Point> centroid_;                   // per body: its mass centroid at the fetch
   std::vector<std::pair<size_t, size_t>> pairs_;  // separating (a < b)
   PetscInt steps_ = 0;
   size_t initial_pairs_ = 0;

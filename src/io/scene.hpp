@@ -64,6 +64,9 @@ struct Scene {
   // Whether this rank holds the bodies' meshes and the initial velocities
   // (DistributeScene); the counts are known either way.
   bool meshes_held = true;
+  // Whether the meshes were whole on every rank for contact's set-up and
+  // released after it (ReleaseMeshes).
+  bool meshes_released = false;
   // Whether every rank read its slabs of the mesh file (a deferred .h5 mesh)
   // instead of receiving them from rank 0.
   bool read_in_slabs = false;
@@ -72,6 +75,12 @@ struct Scene {
   int64_t num_tets() const;
   // Not collective. Frees the meshes and initial velocities, keeping the counts.
   void DropMeshes();
+  // Not collective. DropMeshes once contact has built its structures from the
+  // whole meshes (meshes_released).
+  void ReleaseMeshes() {
+    meshes_released = meshes_held;
+    DropMeshes();
+  }
 };
 
 // Reads and validates a scene and its meshes (OFF surfaces meshed with `meshing`);

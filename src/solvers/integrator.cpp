@@ -249,6 +249,8 @@ ImplicitEuler::~ImplicitEuler() {
   VecDestroy(&combined_velocity_);
   VecDestroy(&gravity_force_);
   VecDestroy(&x_start_);
+  VecDestroy(&motion_start_);
+  VecDestroy(&end_base_);
   VecDestroy(&v_start_);
   VecDestroy(&iterate_);
   VecDestroy(&direction_);
@@ -837,11 +839,11 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
   PetscFunctionBeginUser;
   // The obstacles move with v0 meanwhile; constrain and solve again until the
   // step takes no further vertex inside an obstacle.
-  if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
-  PetscCall(VecCopy(x, x_start_));
+  StepMotion motion;
+  PetscCall(ContactMotion(x, &motion));
   {
     StageScope stage(Stages().contact);
-    PetscCall(contact->BeginStep(x_start_, v, step_.position_step));
+    PetscCall(contact->BeginStep(motion, v));
   }
   // Corotational mode, schemes other than backward Euler: while no constraint
   // holds, the step iterates as without contact (a single linearised solve
@@ -849,39 +851,56 @@ PetscErrorCode ImplicitEuler::ContactStep(Vec x, Vec v, ContactSolver *contact) 
   bool again = true;
   if (options_.mode == MODE_COROTATIONAL && !step_.identity &&
       contact->global_constraint_count() == 0)
-    PetscCall(IterateBeforeContact(x, v, contact, &again));
+    PetscCall(IterateBeforeContact(motion, x, v, contact, &again));
   // Sticking contacts that would need more than Coulomb's friction slip (their
   // friction impulse goes into rhs_) and the step is solved again.
   for (int round = 0; again && round < kMaxContactRounds; ++round) {
     PetscCall(Solve(v, contact));
     StageScope stage(Stages().contact);
     bool added, released = false;
-    PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, &added));
+    PetscCall(contact->AddPenetrations(motion, v, &added));
     if (!added) PetscCall(contact->ReleaseSlipping(reactions_, rhs_, &released));
     again = added || released;
   }
   if (again) PetscCall(Solve(v, contact));
-  PetscCall(SolveWithGuardedVertices(x, v, contact));
+  PetscCall(SolveWithGuardedVertices(motion, x, v, contact));
   PetscCall(FinishSchemeStep(x, v));  // the response acts on the scheme's x1, v1
   bool changed;
   {
     StageScope stage(Stages().contact);
-    PetscCall(contact->EndStep(x_start_, x, v, step_.position_step, reactions_, &changed));
+    PetscCall(contact->EndStep(motion, x, v, reactions_, &changed));
   }
   contact_acted_ = changed || contact->global_constraint_count() > 0;
   elastic_state_current_ = false;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::SolveWithGuardedVertices(Vec x, Vec v, ContactSolver *contact) {
+PetscErrorCode ImplicitEuler::ContactMotion(Vec x, StepMotion *motion) {
+  PetscFunctionBeginUser;
+  if (!x_start_) PetscCall(VecDuplicate(x, &x_start_));
+  PetscCall(VecCopy(x, x_start_));
+  if (step_.identity) {
+    *motion = {x_start_, x_start_, step_.position_step, dt_, false};
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  if (!motion_start_) PetscCall(VecDuplicate(x, &motion_start_));
+  if (!end_base_) PetscCall(VecDuplicate(x, &end_base_));
+  PetscCall(VecCopy(step_x_, motion_start_));
+  PetscCall(Combine(step_.end_base, x, x, end_base_));
+  *motion = {motion_start_, end_base_, step_.end_step, dt_, true};
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SolveWithGuardedVertices(const StepMotion &motion, Vec x, Vec v,
+                                                       ContactSolver *contact) {
   PetscFunctionBeginUser;
   for (int round = 0;; ++round) {
-    PetscCall(VecWAXPY(x, step_.position_step, v, x_start_));  // x1 = x0 + dt v1
+    PetscCall(VecWAXPY(x, motion.h, v, motion.base));  // x1 = x_e + h_e u
     if (round == kMaxGuardSolves) break;
     bool held;
     {
       StageScope stage(Stages().contact);
-      PetscCall(contact->HoldGuardedVertices(x_start_, x, step_.position_step, reactions_, &held));
+      PetscCall(contact->HoldGuardedVertices(motion, x, reactions_, &held));
     }
     if (!held) break;
     PetscCall(Solve(v, contact));
@@ -889,7 +908,7 @@ PetscErrorCode ImplicitEuler::SolveWithGuardedVertices(Vec x, Vec v, ContactSolv
     bool added;
     {
       StageScope stage(Stages().contact);
-      PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, &added));
+      PetscCall(contact->AddPenetrations(motion, v, &added));
     }
     if (added) PetscCall(Solve(v, contact));
   }
@@ -907,14 +926,14 @@ PetscErrorCode ImplicitEuler::LinearisedRightHandSide(Vec x, Vec v) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ImplicitEuler::IterateBeforeContact(Vec x, Vec v, ContactSolver *contact,
-                                                   bool *constrain) {
+PetscErrorCode ImplicitEuler::IterateBeforeContact(const StepMotion &motion, Vec x, Vec v,
+                                                   ContactSolver *contact, bool *constrain) {
   PetscFunctionBeginUser;
   // The corotational iteration; it stands unless it takes a vertex into an obstacle.
   PetscCall(CorotationalStep(x, v));
   {
     StageScope stage(Stages().contact);
-    PetscCall(contact->AddPenetrations(x_start_, v, step_.position_step, constrain));
+    PetscCall(contact->AddPenetrations(motion, v, constrain));
   }
   reactions_.clear();
   if (!*constrain) PetscFunctionReturn(PETSC_SUCCESS);
@@ -930,9 +949,25 @@ PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
   if (!options_.adaptive) {
     PetscCall(TakeStep(x, v, contact));
+    if (contact_acted_) PetscCall(RestartHistoryAfterContact(x, v));
     PetscFunctionReturn(PETSC_SUCCESS);
   }
   PetscCall(AdaptiveStep(x, v, contact && contact->active() ? contact : nullptr));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::RestartHistoryAfterContact(Vec x, Vec v) {
+  PetscFunctionBeginUser;
+  // bdf2: x_{n-1} = x1 - dt v1, v_{n-1} = v1, so the next step's base point is
+  // x1 + dt/3 v1, u_b = v1 (the theta method's, without its acceleration), with
+  // the same step sizes and so the same A. alpha: a_n = 0. The equation of
+  // motion's acceleration leaves out the contact forces (a vertex resting on
+  // the ground would be given gravity's acceleration into it).
+  if (options_.scheme == SCHEME_BDF2) {
+    PetscCall(VecWAXPY(previous_x_, -dt_, v, x));
+    PetscCall(VecCopy(v, previous_v_));
+  }
+  if (options_.scheme == SCHEME_ALPHA) PetscCall(VecZeroEntries(acceleration_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -279,17 +279,28 @@ class ImplicitEuler {
   PetscErrorCode LinearStep(Vec x, Vec v);
   PetscErrorCode CorrectRigidBodyVelocities(const std::vector<Eigen::Vector3d> &target,
                                             const std::vector<Eigen::Vector3d> &solved, Vec v);
+  // Fixed steps, after a step in which the contact acted (x, v: x1, v1): a
+  // contact's velocity jump is no smooth history (bdf2 would extrapolate it
+  // into a rebound, alpha's a1 holds it), so the history restarts from a
+  // constant velocity, keeping the step sizes and A (-dt_adapt instead restarts
+  // as after PositionsChanged, its substep sizes change anyway).
+  PetscErrorCode RestartHistoryAfterContact(Vec x, Vec v);
   // Step with contact: solve, constrain, solve again (Step).
   PetscErrorCode ContactStep(Vec x, Vec v, ContactSolver *contact);
-  // x = x0 + dt v, solved again (at most kMaxGuardSolves times) while the
-  // collision guard would move vertices, with their zone velocities prescribed.
-  PetscErrorCode SolveWithGuardedVertices(Vec x, Vec v, ContactSolver *contact);
+  // The step's motion for the contact (contact.hpp's StepMotion), with x = x_b:
+  // from x_n to x1 = x_e + h_e u (time_scheme.hpp's end map).
+  PetscErrorCode ContactMotion(Vec x, StepMotion *motion);
+  // x = x1, solved again (at most kMaxGuardSolves times) while the collision
+  // guard would move vertices, with their zone velocities prescribed.
+  PetscErrorCode SolveWithGuardedVertices(const StepMotion &motion, Vec x, Vec v,
+                                          ContactSolver *contact);
   // rhs = M u_b - h_f f_el(x_b) + h_f f_ext for the state x = x_b, v = u_b.
   PetscErrorCode LinearisedRightHandSide(Vec x, Vec v);
   // Corotational mode with contact but no constraint yet, schemes other than
   // backward Euler: the corotational iteration; *constrain when it took a
   // vertex into an obstacle (x, v and rhs are then back at x_b, u_b).
-  PetscErrorCode IterateBeforeContact(Vec x, Vec v, ContactSolver *contact, bool *constrain);
+  PetscErrorCode IterateBeforeContact(const StepMotion &motion, Vec x, Vec v,
+                                      ContactSolver *contact, bool *constrain);
   // Corotational step without contact: the Newton-type iteration above, in its
   // steps: x0, v0 and the damping's start; g's scale and the start energy; the
   // direction A_k d = -g(v_k) and the slope g.d; the line search on the step
@@ -338,6 +349,8 @@ class ImplicitEuler {
   Vec elastic_force_ = nullptr, rhs_ = nullptr;
   Vec gravity_force_ = nullptr;  // M g, only when g != 0
   Vec x_start_ = nullptr;        // x0 during a step with contact
+  // Schemes other than be, with contact: x_n and the end map's base x_e.
+  Vec motion_start_ = nullptr, end_base_ = nullptr;
   // Corotational iteration: v0, the iterate v_k (and v_k before its line search),
   // the direction d, a work vector.
   Vec v_start_ = nullptr, iterate_ = nullptr, v_trial_base_ = nullptr, direction_ = nullptr,

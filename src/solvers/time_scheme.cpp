@@ -110,10 +110,18 @@ StepCoefficients GeneralizedAlpha(PetscReal dt, PetscReal rho_inf) {
   return s;
 }
 
-}  // namespace
+// x1 = end_position(x_n, ..., u, x_b + h_x u) written as x_e + h_e u.
+StepCoefficients WithEndMap(StepCoefficients s) {
+  const PetscReal through_solved = s.end_position[kXsolved];
+  s.end_step = s.end_position[kU] + through_solved * s.position_step;
+  for (int k = 0; k < kStepVectors; ++k)
+    s.end_base[k] = s.end_position[k] + through_solved * s.base_position[k];
+  s.end_base[kU] = s.end_base[kXsolved] = 0;
+  return s;
+}
 
-StepCoefficients SchemeStep(TimeScheme scheme, PetscReal dt, PetscReal previous_dt,
-                            PetscReal rho_inf, bool theta_start) {
+StepCoefficients SchemeOf(TimeScheme scheme, PetscReal dt, PetscReal previous_dt, PetscReal rho_inf,
+                          bool theta_start) {
   switch (scheme) {
     case SCHEME_BDF2:
       return Bdf2(dt, previous_dt, theta_start);
@@ -125,6 +133,13 @@ StepCoefficients SchemeStep(TimeScheme scheme, PetscReal dt, PetscReal previous_
     default:
       return BackwardEuler(dt);
   }
+}
+
+}  // namespace
+
+StepCoefficients SchemeStep(TimeScheme scheme, PetscReal dt, PetscReal previous_dt,
+                            PetscReal rho_inf, bool theta_start) {
+  return WithEndMap(SchemeOf(scheme, dt, previous_dt, rho_inf, theta_start));
 }
 
 }  // namespace softbody

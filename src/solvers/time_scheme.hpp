@@ -81,6 +81,12 @@ struct StepCoefficients {
   Combination base_position{}, base_velocity{};
   // After the solve: x1, v1 and (alpha) a1.
   Combination end_position{}, end_velocity{}, end_acceleration{};
+  // x1 as an affine function of the unknown alone, x1 = x_e + h_e u (x_e from
+  // x_n, x_{n-1}, v_n, a_n; h_e in s): the map contact constraints act on, so
+  // that they hold the step's end and not the solve's x (newmark: the
+  // midpoint). be: x_e = x_n, h_e = dt; bdf2: x_e = x_b, h_e = h_x.
+  Combination end_base{};
+  PetscReal end_step = 0;
   bool uses_previous = false;       // needs x_{n-1}, v_{n-1}
   bool uses_acceleration = false;   // needs a_n
   bool gives_acceleration = false;  // gives a1 (end_acceleration)

@@ -9,8 +9,8 @@ For backward Euler and bdf2 (second order):
     -tol 1e-4, 2 ranks: substeps were rejected, no surface crosses, no vertex
     below the ground, the total energy (kinetic, elastic, gravitational) never
     rises from one frame to the next by more than round-off (1e-10 of the
-    energy of the fall; the fixed-step bdf2 gains 26 % of it at the impact, the
-    adaptive one restarts its history after a contact's velocity jump), and
+    energy of the fall; the adaptive bdf2 restarts its history after a
+    contact's velocity jump, test_integrators_contact.py checks fixed steps), and
     the cube comes to rest on the ground;
 (c) restart bit for bit: the drop with -dt_adapt, 2 ranks, checkpoint two
     steps after the impact (resting contacts and the substep size in the

@@ -21,7 +21,9 @@ Runs softbody (2 ranks) on the project's own scenes, nothing from ../shared:
 4. The Xvfb a render starts (no $DISPLAY) takes a display number outside :0..:9, the
    ones hwloc's GL plugin opens in every mpiexec and MPI rank (a render ending while a
    simulation started once ended the simulation with "X connection to :0 broken"), and
-   the next free one when its first choice is taken.
+   the next free one when its first choice is taken; it keeps its state when its last
+   client leaves (-noreset: a render reusing a parent's display aborted about one time in
+   ten on a loaded machine when it connected during the server's reset).
 5. Bad input gives one line on stderr and a non-zero exit, no traceback: a missing
    file, an unknown option, a bad -color, a frame index out of range.
 Skips (77) when python3-vtk9 is missing, or when there is no X display and no Xvfb.
@@ -257,8 +259,44 @@ def display_of_own_xvfb():
     return run.stdout.strip() if run.returncode == 0 else "failed: " + run.stderr.strip()[-200:]
 
 
+# In a child with $DISPLAY unset: render.py's own Xvfb, one client interns an atom and
+# disconnects (the server then has no client, the moment a resetting X server resets),
+# and a client connecting half a second later looks the atom up. Prints 1 when the atom
+# survived (no reset), 0 when it was lost.
+KEEPS_STATE = """
+import ctypes, ctypes.util, os, sys, time
+sys.path.insert(0, %r)
+import render
+os.environ.pop("DISPLAY", None)
+render._DISPLAY.ensure()
+xlib = ctypes.CDLL(ctypes.util.find_library("X11") or "libX11.so.6")
+xlib.XOpenDisplay.restype = ctypes.c_void_p
+xlib.XOpenDisplay.argtypes = [ctypes.c_char_p]
+xlib.XInternAtom.restype = ctypes.c_ulong
+xlib.XInternAtom.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int]
+xlib.XCloseDisplay.argtypes = [ctypes.c_void_p]
+name = b"SOFTBODY_RESET_PROBE"
+first = xlib.XOpenDisplay(None)
+xlib.XInternAtom(first, name, 0)
+xlib.XCloseDisplay(first)
+time.sleep(0.5)
+second = None
+for _ in range(50):
+    second = xlib.XOpenDisplay(None)
+    if second:
+        break
+    time.sleep(0.1)
+print(1 if xlib.XInternAtom(second, name, 1) else 0)
+xlib.XCloseDisplay(second)
+"""
+
+
 def check_virtual_display(checks):
     import render
+    run = subprocess.run([sys.executable, "-c", KEEPS_STATE % TOOLS], capture_output=True, text=True, timeout=60)
+    checks.check(run.stdout.strip() == "1",
+                 "render.py's own Xvfb does not reset when its last client leaves (a render connecting "
+                 f"during a reset aborts in GLX) (got {run.stdout.strip() or run.stderr.strip()[-200:]})")
     first = display_of_own_xvfb()
     checks.check(first.startswith(":") and int(first[1:]) >= 10,
                  f"render.py's own Xvfb uses a display outside hwloc's :0..:9 (got {first})")

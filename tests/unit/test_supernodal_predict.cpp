@@ -88,8 +88,8 @@ TEST(SupernodalPredict, FactorEntriesEqualTheSetUp) {
               PETSC_SUCCESS);
     EXPECT_GT(stored, 3 * 12 * 12 * 12);
     EXPECT_EQ(prediction.factor_entries, stored) << precision;
-    // In double, CHOLMOD's factor alone; in single, also its copy at 4 bytes.
-    EXPECT_DOUBLE_EQ(prediction.bytes, stored * (8 + (bytes_per_entry == 4 ? 4 : 0))) << precision;
+    // CHOLMOD's factor in double and its copy for the solves at 8 or 4 bytes.
+    EXPECT_DOUBLE_EQ(prediction.bytes, stored * (8 + bytes_per_entry)) << precision;
     KSPDestroy(&ksp);
   }
   PetscOptionsClearValue(nullptr, "-pc_supernodal_precision");

@@ -91,5 +91,42 @@ TEST(TimeScheme, SecondOrderSchemesExactForUniformAcceleration) {
   }
 }
 
+// The end map x1 = x_e + h_e u (what contact constraints act on) against the
+// scheme's own x1 from the solved x = x_b + h_x u, for arbitrary states and u,
+// and its known forms: be x_e = x_n, h_e = dt; newmark x_e = x_n, h_e = dt (not
+// the solve's midpoint, h_x = dt/2).
+TEST(TimeScheme, EndMapGivesTheSchemesEndPosition) {
+  const double dt = 0.02;
+  for (TimeScheme scheme : {SCHEME_BE, SCHEME_BDF2, SCHEME_NEWMARK, SCHEME_ALPHA})
+    for (const double previous_dt : {0.0, 0.01, 0.02}) {
+      const StepCoefficients s = SchemeStep(scheme, dt, previous_dt, 0.6, true);
+      std::array<double, kStepVectors> state{};
+      state[kXn] = 0.3;
+      state[kXprev] = 0.25;
+      state[kVn] = -1.7;
+      state[kVprev] = 2.1;
+      state[kAn] = 9.81;
+      for (const double u : {-3.0, 0.0, 4.5}) {
+        double xb = 0, xe = 0;
+        for (int i = 0; i < kStepVectors; ++i) {
+          xb += s.base_position[i] * state[i];
+          xe += s.end_base[i] * state[i];
+        }
+        state[kU] = u;
+        state[kXsolved] = xb + s.position_step * u;
+        double x1 = 0;
+        for (int i = 0; i < kStepVectors; ++i) x1 += s.end_position[i] * state[i];
+        EXPECT_NEAR(xe + s.end_step * u, x1, kTight) << kTimeSchemes[scheme] << " " << previous_dt;
+      }
+    }
+  const StepCoefficients be = SchemeStep(SCHEME_BE, dt, 0, 0.9, true);
+  const StepCoefficients newmark = SchemeStep(SCHEME_NEWMARK, dt, dt, 0.9, true);
+  for (const StepCoefficients &s : {be, newmark}) {
+    EXPECT_NEAR(s.end_step, dt, kTight * dt);
+    for (int i = 0; i < kStepVectors; ++i) EXPECT_EQ(s.end_base[i], i == kXn ? 1.0 : 0.0) << i;
+  }
+  EXPECT_NEAR(newmark.position_step, dt / 2, kTight * dt);
+}
+
 }  // namespace
 }  // namespace softbody

@@ -15,6 +15,7 @@
 
 #include "common/exchange.hpp"
 #include "common/large_array.hpp"
+#include "solvers/supernodal/tiled_factor.hpp"
 
 // LAPACK / BLAS (Fortran interface): the separator's dense Schur complement.
 extern "C" {
@@ -305,7 +306,7 @@ struct Split {
   Mat *local = nullptr;                   // M_r
   cholmod_factor *factor = nullptr;       // symbolic (values dropped after the copy)
   PackedFactor<float> single;
-  PackedFactor<double> full;
+  TiledFactor full;                 // split at the interior's end
   DenseFactor<float> dense_single;  // rank 0
   DenseFactor<double> dense_full;
   std::vector<double> separator_values;  // n_S: right-hand side, then solution
@@ -320,9 +321,9 @@ struct Supernodal {
   SupernodalOrdering ordering = kOrderingBest;
   SupernodalPrecision precision = kDouble;
   SupernodalLimits limits;
-  PackedFactor<float> single;
-  cholmod_dense *solution = nullptr, *work_y = nullptr, *work_e = nullptr;  // cholmod_solve2's
-  Split split;                                                              // more than one rank
+  PackedFactor<float> single;  // one rank, single precision
+  TiledFactor full;            // one rank, double precision
+  Split split;                 // more than one rank
   double stored = 0, nonzeros = 0, flops = 0;
   // The last set-up met a matrix that is not (numerically) positive definite:
   // decided on all ranks together; the PC then reports PC_FACTOR_NUMERIC_ZEROPIVOT
@@ -336,9 +337,6 @@ PetscErrorCode ReleaseFactor(Supernodal *s) {
   if (s->started) {
     cholmod_free_factor(&s->factor, &s->common);
     cholmod_free_factor(&s->split.factor, &s->common);
-    cholmod_free_dense(&s->solution, &s->common);
-    cholmod_free_dense(&s->work_y, &s->common);
-    cholmod_free_dense(&s->work_e, &s->common);
     cholmod_finish(&s->common);
     s->started = false;
   }
@@ -554,10 +552,11 @@ PetscErrorCode SetUpOneRank(Supernodal *s, Mat A, bool new_pattern) {
   s->stored = static_cast<double>(s->factor->xsize);
   s->nonzeros = s->common.lnz;
   s->flops = s->common.fl;
-  if (s->precision == kSingle) {
+  if (s->precision == kSingle)
     s->single.From(s->factor);
-    PetscCall(DropValues(s, s->factor));
-  }
+  else
+    s->full.From(s->factor);
+  PetscCall(DropValues(s, s->factor));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -744,7 +743,7 @@ PetscErrorCode KeepLocalFactor(Supernodal *s, std::vector<double> *schur, double
     p.single.From(p.factor);
     *entries = p.single.EntriesBefore(interior);
   } else {
-    p.full.From(p.factor);
+    p.full.From(p.factor, interior);
     *entries = p.full.EntriesBefore(interior);
   }
   *flops = s->common.fl;
@@ -858,48 +857,64 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// The permuted vector of a factor's sweeps, and its permutation.
 template <typename Real>
-PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, PackedFactor<Real> &factor,
-                          const DenseFactor<Real> &dense, const PetscScalar *b, PetscScalar *x) {
+Real *SweepVector(PackedFactor<Real> &factor) {
+  return factor.y.data();
+}
+double *SweepVector(TiledFactor &factor) {
+  return factor.y();
+}
+template <typename Real>
+const int *Permutation(const PackedFactor<Real> &factor) {
+  return factor.permutation.data();
+}
+const int *Permutation(const TiledFactor &factor) {
+  return factor.permutation();
+}
+
+template <typename Factor, typename Real>
+PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, Factor &factor, const DenseFactor<Real> &dense,
+                          const PetscScalar *b, PetscScalar *x) {
   PetscFunctionBeginUser;
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
   const int interior = static_cast<int>(p.interior);
+  Real *y = SweepVector(factor);
+  const int *permutation = Permutation(factor);
   for (PetscInt l = 0; l < n; ++l) p.local_b[l] = 0.0;
   for (PetscInt l = 0; l < n; ++l)
     if (p.owned_position[l] >= 0) p.local_b[l] = b[p.owned_position[l]];
   // Forward over the interior; the separator rows collect -L_S,I L_I^-1 b_I.
   if (n > 0) {
-    for (PetscInt i = 0; i < interior; ++i)
-      factor.y[i] = static_cast<Real>(p.local_b[factor.permutation[i]]);
-    for (PetscInt i = interior; i < n; ++i) factor.y[i] = 0;
+    for (PetscInt i = 0; i < interior; ++i) y[i] = static_cast<Real>(p.local_b[permutation[i]]);
+    for (PetscInt i = interior; i < n; ++i) y[i] = 0;
     factor.Forward(interior);
   }
   for (PetscInt k = 0; k < p.separator; ++k) {
     const PetscInt l = p.separator_local[k];
-    p.separator_values[k] =
-        static_cast<double>(factor.y[interior + k]) + p.local_b[l];  // b_S where owned
+    p.separator_values[k] = static_cast<double>(y[interior + k]) + p.local_b[l];  // b_S where owned
   }
   if (p.separator > 0) {
     PetscCallMPI(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : p.separator_values.data(),
                             p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE,
                             MPI_SUM, 0, comm));
     if (rank == 0) {
-      std::vector<Real> y(p.separator_values.begin(), p.separator_values.end());
-      dense.Solve(y.data());
-      std::copy(y.begin(), y.end(), p.separator_values.begin());
+      std::vector<Real> solved(p.separator_values.begin(), p.separator_values.end());
+      dense.Solve(solved.data());
+      std::copy(solved.begin(), solved.end(), p.separator_values.begin());
     }
     PetscCallMPI(
         MPI_Bcast(p.separator_values.data(), static_cast<int>(p.separator), MPI_DOUBLE, 0, comm));
   }
   if (n > 0) {
     for (PetscInt k = 0; k < p.separator; ++k)
-      factor.y[interior + k] = static_cast<Real>(p.separator_values[k]);
+      y[interior + k] = static_cast<Real>(p.separator_values[k]);
     factor.Backward(interior);
     for (PetscInt i = 0; i < n; ++i) {
-      const PetscInt l = factor.permutation[i];
-      if (p.owned_position[l] >= 0) x[p.owned_position[l]] = factor.y[i];
+      const PetscInt l = permutation[i];
+      if (p.owned_position[l] >= 0) x[p.owned_position[l]] = y[i];
     }
   }
   for (PetscInt k = 0; k < p.separator; ++k) {  // the separator exactly as broadcast
@@ -928,25 +943,6 @@ PetscErrorCode PCSetUp_Supernodal(PC pc) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// One rank, double precision: x = A^-1 b by CHOLMOD's own solve (BLAS-2 per
-// supernode), which streams the double factor fastest.
-PetscErrorCode CholmodSolve(Supernodal *s, PetscInt n, const PetscScalar *b, PetscScalar *x) {
-  PetscFunctionBeginUser;
-  cholmod_dense dense;
-  std::memset(&dense, 0, sizeof(dense));
-  dense.nrow = dense.d = dense.nzmax = n;
-  dense.ncol = 1;
-  dense.x = const_cast<PetscScalar *>(b);
-  dense.xtype = CHOLMOD_REAL;
-  dense.dtype = CHOLMOD_DOUBLE;
-  const int ok = cholmod_solve2(CHOLMOD_A, s->factor, &dense, nullptr, &s->solution, nullptr,
-                                &s->work_y, &s->work_e, &s->common);
-  PetscCheck(ok, PETSC_COMM_SELF, PETSC_ERR_LIB, "supernodal: CHOLMOD solve failed (status %d)",
-             s->common.status);
-  std::memcpy(x, s->solution->x, sizeof(PetscScalar) * n);
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
   PetscFunctionBeginUser;
   Supernodal *s = static_cast<Supernodal *>(pc->data);
@@ -969,9 +965,7 @@ PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
   } else if (s->precision == kSingle) {
     s->single.Solve(rhs, out);
   } else {
-    PetscInt n;
-    PetscCall(VecGetLocalSize(b, &n));
-    PetscCall(CholmodSolve(s, n, rhs, out));
+    s->full.Solve(rhs, out);
   }
   PetscCall(VecRestoreArrayWrite(x, &out));
   PetscCall(VecRestoreArrayRead(b, &rhs));
@@ -1093,12 +1087,10 @@ PetscErrorCode PCSupernodalPredict(PC pc, SupernodalPrediction *prediction) {
                                        prediction->separator <= s->limits.max_separator);
   if (prediction->analysed) {
     PetscCall(MatGetNonzeroState(pc->pmat, &s->pattern_state));  // the set-up reuses the analysis
-    // The numeric factor in double and its copy in the solves' precision (one
-    // rank in double: CHOLMOD's own, no copy) beside the separator's blocks.
-    const bool copy = size > 1 || s->precision == kSingle;
-    prediction->bytes =
-        prediction->factor_entries * (kCholmodBytesPerEntry + (copy ? bytes_per_entry : 0)) +
-        prediction->separator_bytes;
+    // The numeric factor in double and its copy in the solves' precision
+    // (CHOLMOD's values are dropped after the copy) beside the separator's blocks.
+    prediction->bytes = prediction->factor_entries * (kCholmodBytesPerEntry + bytes_per_entry) +
+                        prediction->separator_bytes;
   } else {
     prediction->bytes = prediction->separator_bytes;
   }

@@ -7,8 +7,10 @@
 // streams the factor's entries twice (forward, backward) at two flops per entry:
 // it runs at the speed of memory.
 //
-// One rank: CHOLMOD's factor and solve (double precision), or a single-precision
-// copy of the factor with softbody's own sweeps (half the bytes).
+// One rank: CHOLMOD's factor copied into softbody's streaming layout with its
+// own sweeps (tiled_factor.hpp; double precision), or a single-precision packed
+// copy (half the bytes); CHOLMOD's values are dropped after the copy. The split
+// factor's pieces on several ranks are copied alike.
 // Several ranks: the factor is split at a separator (the DOFs coupled to a
 // higher rank): every rank factors the piece of A of its own interior plus the
 // separator, rank 0 the separator's dense Schur complement, and a solve sweeps
@@ -40,8 +42,9 @@ PetscErrorCode RegisterSupernodalPC();
 // default); -pc_supernodal_precision overrides it at PCSetFromOptions.
 PetscErrorCode PCSupernodalSetSinglePrecision(PC pc, bool single);
 
-// Collective. Entries of the factor L after the last set-up: stored (what a
-// solve streams, supernodal blocks with their explicit zeros) and structural
+// Collective. Entries of the factor L after the last set-up: stored (CHOLMOD's
+// supernodal blocks with their explicit zeros, a little more than the copy a
+// solve streams) and structural
 // nonzeros (lnz; on several ranks the entries the ranks' sweeps and the dense
 // separator factor stream); flops of the factorisation; bytes per entry in
 // the solves (8, or 4 in single precision). Zeros before any set-up.

@@ -1,0 +1,249 @@
+#include "solvers/supernodal/tiled_factor.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+namespace softbody {
+
+namespace {
+
+constexpr int kPanel = TiledFactor::kPanel;
+constexpr int kTile = kPanel * kPanel;  // entries of a tile
+
+// Four doubles in one vector register (GCC/Clang vector extension: AVX, or two
+// SSE registers on a plain x86-64 build); loaded and stored by memcpy, which
+// compiles to one vector move. The helpers are internal and inlined, so GCC's
+// note that such arguments change the ABI without AVX does not concern them.
+#pragma GCC diagnostic ignored "-Wpsabi"
+typedef double Vector4 __attribute__((vector_size(4 * sizeof(double))));
+
+inline Vector4 Load(const double *p) {
+  Vector4 v;
+  std::memcpy(&v, p, sizeof(v));
+  return v;
+}
+inline void Store(double *p, const Vector4 &v) {
+  std::memcpy(p, &v, sizeof(v));
+}
+inline Vector4 Broadcast(double a) {
+  return Vector4{a, a, a, a};
+}
+
+// Tiles of a panel whose diagonal is `rows_below` rows above the supernode's end.
+inline int Tiles(int rows_below) {
+  return (rows_below + kPanel - 1) / kPanel;
+}
+
+// z[0..3] are the panel's rows on its diagonal tile c (c[q * 4 + r]: row r,
+// column q); z[4..) the rows below, `tiles` - 1 more tiles. Solves the panel's
+// four values and subtracts their contributions from the rows below.
+void ForwardPanel(const double *c, int tiles, const double *inverse, double *z) {
+  for (int q = 0; q < kPanel; ++q) {
+    z[q] *= inverse[q];
+    for (int r = q + 1; r < kPanel; ++r) z[r] -= c[q * kPanel + r] * z[q];
+  }
+  const Vector4 v0 = Broadcast(z[0]), v1 = Broadcast(z[1]), v2 = Broadcast(z[2]),
+                v3 = Broadcast(z[3]);
+  for (int t = 1; t < tiles; ++t) {
+    const double *tile = c + t * kTile;
+    double *out = z + t * kPanel;
+    Store(out, Load(out) - (Load(tile) * v0 + Load(tile + 4) * v1 + Load(tile + 8) * v2 +
+                            Load(tile + 12) * v3));
+  }
+}
+
+// The same panel backward: the dot products of its columns with the solved
+// rows below (tiles bottom to top), then its four values from the triangle.
+void BackwardPanel(const double *c, int tiles, const double *inverse, double *z) {
+  Vector4 s0 = Broadcast(0.0), s1 = s0, s2 = s0, s3 = s0;
+  for (int t = tiles - 1; t >= 1; --t) {
+    const double *tile = c + t * kTile;
+    const Vector4 rows = Load(z + t * kPanel);
+    s0 += Load(tile) * rows;
+    s1 += Load(tile + 4) * rows;
+    s2 += Load(tile + 8) * rows;
+    s3 += Load(tile + 12) * rows;
+  }
+  const double sums[kPanel] = {s0[0] + s0[1] + s0[2] + s0[3], s1[0] + s1[1] + s1[2] + s1[3],
+                               s2[0] + s2[1] + s2[2] + s2[3], s3[0] + s3[1] + s3[2] + s3[3]};
+  for (int q = kPanel - 1; q >= 0; --q) {
+    double sum = sums[q];
+    for (int r = q + 1; r < kPanel; ++r) sum += c[q * kPanel + r] * z[r];
+    z[q] = (z[q] - sum) * inverse[q];
+  }
+}
+
+// sum_i a[i] b[i] over i < count, in four vector lanes and four independent sums.
+double Dot(const double *a, const double *b, int count) {
+  Vector4 s0 = Broadcast(0.0), s1 = s0;
+  int i = 0;
+  for (; i + 8 <= count; i += 8) {
+    s0 += Load(a + i) * Load(b + i);
+    s1 += Load(a + i + 4) * Load(b + i + 4);
+  }
+  if (i + 4 <= count) {
+    s0 += Load(a + i) * Load(b + i);
+    i += 4;
+  }
+  s0 += s1;
+  double sum = (s0[0] + s0[1]) + (s0[2] + s0[3]);
+  for (; i < count; ++i) sum += a[i] * b[i];
+  return sum;
+}
+
+}  // namespace
+
+size_t TiledFactor::PanelEntries(int columns, int height) {
+  size_t entries = 0;
+  for (int j = 0; j + kPanel <= columns; j += kPanel)
+    entries += static_cast<size_t>(kTile) * Tiles(height - j);
+  return entries;
+}
+
+size_t TiledFactor::SupernodeEntries(int columns, int height) {
+  size_t entries = PanelEntries(columns, height);
+  for (int j = columns / kPanel * kPanel; j < columns; ++j) entries += height - j;
+  return (entries + kPanel - 1) / kPanel * kPanel;  // the next supernode's panels stay aligned
+}
+
+void TiledFactor::From(const cholmod_factor *L, int limit) {
+  n_ = static_cast<int>(L->n);
+  const int *perm = static_cast<const int *>(L->Perm), *super = static_cast<const int *>(L->super),
+            *pi = static_cast<const int *>(L->pi), *s = static_cast<const int *>(L->s),
+            *px = static_cast<const int *>(L->px);
+  const double *x = static_cast<const double *>(L->x);
+  permutation_.assign(perm, perm + n_);
+  first_column_.assign(1, 0);
+  row_start_.assign(1, 0);
+  rows_.clear();
+  // Per stored supernode: its first value in CHOLMOD's x and CHOLMOD's height.
+  std::vector<size_t> source;
+  std::vector<int> stride;
+  for (size_t k = 0; k < L->nsuper; ++k) {
+    const int height = pi[k + 1] - pi[k];
+    const int cut = super[k] < limit && limit < super[k + 1] ? limit : super[k + 1];
+    for (int first = super[k]; first < super[k + 1];) {
+      const int last = first < cut ? cut : super[k + 1], skip = first - super[k];
+      first_column_.push_back(last);
+      rows_.insert(rows_.end(), s + pi[k] + skip, s + pi[k + 1]);
+      row_start_.push_back(static_cast<int>(rows_.size()));
+      source.push_back(px[k] + static_cast<size_t>(skip) * height + skip);
+      stride.push_back(height);
+      first = last;
+    }
+  }
+  supernodes_ = static_cast<int>(source.size());
+  value_start_.resize(supernodes_ + 1);
+  size_t entries = 0;
+  int largest = 0;
+  for (int k = 0; k < supernodes_; ++k) {
+    const int height = row_start_[k + 1] - row_start_[k];
+    value_start_[k] = entries;
+    entries += SupernodeEntries(first_column_[k + 1] - first_column_[k], height);
+    largest = std::max(largest, height);
+  }
+  value_start_[supernodes_] = entries;
+  values_.resize(entries);
+  inverse_diagonal_.resize(n_);
+  for (int k = 0; k < supernodes_; ++k) CopySupernode(x + source[k], stride[k], k);
+  y_.assign(n_, 0.0);
+  work_.assign(largest + kPanel, 0.0);
+}
+
+double TiledFactor::EntriesBefore(int limit) const {
+  double entries = 0;
+  for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k) {
+    const int columns = std::min(first_column_[k + 1], limit) - first_column_[k];
+    const int height = row_start_[k + 1] - row_start_[k];
+    for (int j = 0; j < columns; ++j) entries += height - j;
+  }
+  return entries;
+}
+
+// Stored supernode k's values from CHOLMOD's column-major block: x[j * stride +
+// i] is its entry (i, j), row i of its rows, column j of its columns.
+void TiledFactor::CopySupernode(const double *x, int stride, int k) {
+  const int columns = first_column_[k + 1] - first_column_[k],
+            height = row_start_[k + 1] - row_start_[k];
+  // The entry (i, j), zero above the diagonal and below the last row.
+  auto entry = [&](int i, int j) {
+    return i >= j && i < height ? x[static_cast<size_t>(j) * stride + i] : 0.0;
+  };
+  for (int j = 0; j < columns; ++j) inverse_diagonal_[first_column_[k] + j] = 1.0 / entry(j, j);
+  double *out = values_.data() + value_start_[k];
+  int j = 0;
+  for (; j + kPanel <= columns; j += kPanel)
+    for (int t = 0; t < Tiles(height - j); ++t)
+      for (int q = 0; q < kPanel; ++q)
+        for (int r = 0; r < kPanel; ++r) *out++ = entry(j + t * kPanel + r, j + q);
+  for (; j < columns; ++j)
+    for (int i = j; i < height; ++i) *out++ = entry(i, j);
+  std::fill(out, values_.data() + value_start_[k + 1], 0.0);
+}
+
+// y <- L_k^-1 y over supernode k's columns (y's rows of the supernode updated).
+void TiledFactor::ForwardSupernode(int k) {
+  const int first = first_column_[k], columns = first_column_[k + 1] - first,
+            height = row_start_[k + 1] - row_start_[k];
+  const int *rows = rows_.data() + row_start_[k];
+  double *z = work_.data();
+  for (int i = 0; i < height; ++i) z[i] = y_[rows[i]];
+  std::fill(z + height, z + height + kPanel, 0.0);  // the last tile's padding rows
+  const double *inverse = inverse_diagonal_.data() + first;
+  const double *c = values_.data() + value_start_[k];
+  int j = 0;
+  for (; j + kPanel <= columns; j += kPanel) {
+    ForwardPanel(c, Tiles(height - j), inverse + j, z + j);
+    c += static_cast<size_t>(kTile) * Tiles(height - j);
+  }
+  for (; j < columns; ++j) {  // plain columns: c[i - j] is row i
+    const double v = z[j] * inverse[j];
+    z[j] = v;
+    for (int i = j + 1; i < height; ++i) z[i] -= c[i - j] * v;
+    c += height - j;
+  }
+  for (int i = 0; i < height; ++i) y_[rows[i]] = z[i];
+}
+
+// y <- L_k^-T y over supernode k's columns (the rows below them solved already).
+void TiledFactor::BackwardSupernode(int k) {
+  const int first = first_column_[k], columns = first_column_[k + 1] - first,
+            height = row_start_[k + 1] - row_start_[k];
+  const int *rows = rows_.data() + row_start_[k];
+  double *z = work_.data();
+  for (int i = 0; i < height; ++i) z[i] = y_[rows[i]];
+  std::fill(z + height, z + height + kPanel, 0.0);
+  const double *inverse = inverse_diagonal_.data() + first;
+  const int panels = columns / kPanel;
+  const double *panels_end = values_.data() + value_start_[k] + PanelEntries(columns, height);
+  const double *c = panels_end;
+  for (int j = panels * kPanel; j < columns; ++j) c += height - j;
+  for (int j = columns - 1; j >= panels * kPanel; --j) {  // plain columns, last first
+    c -= height - j;
+    z[j] = (z[j] - Dot(c + 1, z + j + 1, height - j - 1)) * inverse[j];
+  }
+  c = panels_end;
+  for (int j = (panels - 1) * kPanel; j >= 0; j -= kPanel) {
+    c -= static_cast<size_t>(kTile) * Tiles(height - j);
+    BackwardPanel(c, Tiles(height - j), inverse + j, z + j);
+  }
+  for (int i = 0; i < columns; ++i) y_[first + i] = z[i];
+}
+
+void TiledFactor::Forward(int limit) {
+  for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k) ForwardSupernode(k);
+}
+
+void TiledFactor::Backward(int limit) {
+  for (int k = supernodes_ - 1; k >= 0; --k)
+    if (first_column_[k] < limit) BackwardSupernode(k);
+}
+
+void TiledFactor::Solve(const double *b, double *x) {
+  for (int i = 0; i < n_; ++i) y_[i] = b[permutation_[i]];
+  Forward(n_);
+  Backward(n_);
+  for (int i = 0; i < n_; ++i) x[permutation_[i]] = y_[i];
+}
+
+}  // namespace softbody

@@ -1,0 +1,83 @@
+// A supernodal Cholesky factor in the layout its two triangular sweeps stream,
+// and the solve x = A^-1 b with it (double precision: one rank's factor, or a
+// rank's piece of the split factor). Not collective.
+//
+// CHOLMOD's factor L of P A P^T, A = P^T L L^T P (supernode k: columns
+// [first, first + columns) of L, `height` rows each, the diagonal block on top,
+// then the rows below it listed in `rows`), is copied panel by panel: the
+// columns of a supernode in panels of kPanel = 4, each panel stored as
+// 4 x 4 tiles (rows i..i+3 of its four columns, one column after another) from
+// its diagonal tile down to the supernode's last row, the last tile padded
+// with zero rows; the supernode's last columns % 4 columns follow as plain
+// columns, each from its diagonal down. So
+// - the forward sweep reads the factor as one ascending stream: per tile, four
+//   aligned vector loads and four multiply-adds with the panel's four solved
+//   values into four rows of the supernode's gathered right-hand side;
+// - the backward sweep reads it as one descending stream (supernodes last to
+//   first, panels last to first, tiles bottom to top): per tile, four
+//   multiply-adds into the panel's four dot products.
+// A supernode's rows are gathered from the permuted vector y into a dense work
+// vector before its columns and scattered back after them, the only indirect
+// accesses; the vectors (n doubles) stay in cache while the factor streams
+// from memory. A solve allocates nothing.
+//
+// The sweeps can stop at a column `limit` (the interior of a split factor,
+// supernodal.cpp's Split): a supernode that straddles it is stored as two, its
+// columns before the limit and those after (with the rows below them).
+#pragma once
+
+#include <cholmod.h>
+
+#include <cstddef>
+#include <limits>
+#include <vector>
+
+#include "common/large_array.hpp"
+
+namespace softbody {
+
+class TiledFactor {
+ public:
+  // Columns per panel, and rows per tile: one vector of four doubles.
+  static constexpr int kPanel = 4;
+
+  // Copies CHOLMOD's factor L (supernodal, real, double; its values present),
+  // with a supernode boundary at column `limit` (none when limit >= n).
+  void From(const cholmod_factor *L, int limit = std::numeric_limits<int>::max());
+  // x = A^-1 b (b and x of size n, in A's order; they may be the same array).
+  void Solve(const double *b, double *x);
+  // On y() (the permuted vector, size n): y <- L^-1 y over the columns
+  // j < limit (their updates reach every row), and y <- L^-T y over the
+  // columns j < limit with the others' y taken as known; limit must be n or
+  // the limit given to From.
+  void Forward(int limit);
+  void Backward(int limit);
+  double *y() { return y_.data(); }
+  // L's permutation: y[i] is row permutation()[i] of A's vectors.
+  const int *permutation() const { return permutation_.data(); }
+  // Entries a pair of sweeps streams (with the tiles' zeros): the factor's bytes / 8.
+  double StoredEntries() const { return static_cast<double>(values_.size()); }
+  // CHOLMOD's entries (explicit zeros included, tiles' padding not) of the
+  // columns before `limit`, each from its diagonal down.
+  double EntriesBefore(int limit) const;
+  int size() const { return n_; }
+
+ private:
+  // Entries of the panels of a supernode (columns, height), without its plain columns.
+  static size_t PanelEntries(int columns, int height);
+  static size_t SupernodeEntries(int columns, int height);
+  void CopySupernode(const double *x, int stride, int k);
+  void ForwardSupernode(int k);
+  void BackwardSupernode(int k);
+
+  int n_ = 0, supernodes_ = 0;
+  // CHOLMOD's Perm, and its super, pi and s with straddling supernodes split at the limit.
+  std::vector<int> permutation_, first_column_, row_start_, rows_;
+  std::vector<size_t> value_start_;  // per supernode: its first value, a multiple of kPanel
+  LargeArray<double> values_;
+  std::vector<double> inverse_diagonal_;  // per column: 1 / L_jj
+  std::vector<double> y_;                 // the permuted right-hand side, then solution
+  std::vector<double> work_;              // a supernode's rows, gathered (largest height + kPanel)
+};
+
+}  // namespace softbody

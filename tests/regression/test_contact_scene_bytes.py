@@ -1,0 +1,97 @@
+"""What a rank holds of the whole scene with contact, as the run summary counts it.
+
+Two free boxes (tools/box_mesh.py, 4 x 2 x 2 cells each) stacked above the ground,
+under gravity, 2 steps, on 1 and 3 ranks. Contact between free bodies still builds
+natural-indexed arrays from the whole meshes (src/contact/free_state.hpp,
+obstacles.hpp); the meshes themselves are released once contact is set up.
+
+Expected, from the mesh file alone (V vertices and T tets per box, F boundary
+triangles per box counted here as the faces that one tet only names):
+(a) the "scene" line says the meshes were released after contact's set-up (3 ranks),
+    and the "whole scene" line counts 0 MB of meshes on every rank (1 and 3 ranks);
+(b) the obstacles' lists: per tet its 4 vertices and body (20 B) and one index
+    entry (4 B), per boundary triangle 3 vertices and body (16 B) and one index
+    entry (4 B), and two CSR starts of 8 B per scene vertex, plus one:
+    24 T + 20 F + 16 (V + 1) over the scene, within the summary's 3 digits (1 %);
+(c) the free state: 9 B per scene vertex (body 4, free flag 1, slot 4; positions,
+    velocities and masses are kept per slot, for this rank's own and received
+    vertices only), within 1 %.
+"""
+import os
+import re
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import harness  # noqa: E402
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                                "tools"))
+from softbody_tools import read_medit  # noqa: E402
+
+BOX = ((1.0, 0.5, 0.5), (4, 2, 2))
+TOLERANCE = 0.01  # relative: the summary prints 3 significant digits
+RELEASED = "meshes whole on every rank until contact's set-up, then released"
+PART = r"{} (?P<{}>[0-9.e+-]+) MB"
+
+
+def boundary_triangles(tets):
+    """The faces that one tet only names."""
+    faces = np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]],
+                                    tets[:, [0, 1, 2]]]), axis=1)
+    _, counts = np.unique(faces, axis=0, return_counts=True)
+    return int(np.count_nonzero(counts == 1))
+
+
+def line(stdout, start):
+    return next((l.strip() for l in stdout.splitlines() if l.strip().startswith(start)), "")
+
+
+def scene_bytes(text):
+    """The "whole scene" line's parts (bytes), or {} when it is missing."""
+    parts = {}
+    for label, key in (("meshes", "meshes"), ("free state", "free_state"), ("obstacles", "obstacles")):
+        match = re.search(PART.format(label, key), text)
+        if match:
+            parts[key] = float(match.group(key)) * 1e6
+    return parts
+
+
+def close(measured, expected):
+    return abs(measured - expected) <= TOLERANCE * expected
+
+
+def main():
+    args = harness.arguments()
+    checks = harness.Checks()
+    mesh = harness.box_mesh(args, "box.mesh", *BOX)
+    vertices, _, _, tets = read_medit(mesh)
+    T, F, V = 2 * len(tets), 2 * boundary_triangles(tets), 2 * len(vertices)
+    scene = os.path.join(args.work, "two-boxes.txt")
+    with open(scene, "w") as f:
+        f.write("2\n")
+        for y in (0.3, 0.85):
+            f.write(f"box.mesh 1000 1e5 0.3 0 0 {y} 0 1 0 0 0\n")
+    for ranks in (1, 3):
+        stdout = harness.run(args, ranks, ["-scene", scene, "-steps", "2", "-dt", "0.01", "-ground", "0",
+                                           "-gravity", "0,-9.81,0"]).stdout
+        whole = line(stdout, "whole scene")
+        parts = scene_bytes(whole)
+        checks.check(len(parts) == 3, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
+        if len(parts) != 3:
+            continue
+        if ranks > 1:
+            checks.check(RELEASED in line(stdout, "scene "), f"{ranks} ranks: {line(stdout, 'scene ')!r}")
+        checks.check(parts["meshes"] == 0, f"{ranks} ranks: no rank keeps the meshes ({parts['meshes']:.0f} B)")
+        expected = 24 * T + 20 * F + 16 * (V + 1)
+        checks.check(close(parts["obstacles"], expected),
+                     f"{ranks} ranks: obstacles {parts['obstacles']:.0f} B, expected 24 T + 20 F + 16 (V + 1) = "
+                     f"{expected} B (T {T}, F {F}, V {V})")
+        checks.check(close(parts["free_state"], 9 * V),
+                     f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 9 V = {9 * V} B")
+    checks.exit()
+
+
+if __name__ == "__main__":
+    main()
