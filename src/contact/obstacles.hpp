@@ -115,6 +115,7 @@ class Obstacles {
   const std::array<int32_t, 4> &free_triangle(int32_t t) const { return free_triangles_[t]; }
   size_t num_fixed_tets() const { return fixed_tets_.size(); }
   size_t num_free_tets() const { return free_tets_.size(); }
+  size_t num_free_triangles() const { return free_triangles_.size(); }
   // Bytes of the bodies' item lists and their index by vertex (O(scene) on
   // every rank; the grids, O(local + halo) for free bodies, not counted).
   int64_t SceneBytes() const;
