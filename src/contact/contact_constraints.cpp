@@ -290,6 +290,7 @@ PetscErrorCode ContactConstraints::Combine(MPI_Comm comm,
     if (i >= released_.size() || !released_[i]) solve_constraints_.push_back(normals_[i]);
   solve_constraints_.insert(solve_constraints_.end(), tangents.begin(), tangents.end());
   solve_constraints_.insert(solve_constraints_.end(), held_.begin(), held_.end());
+  for (VelocityConstraint &c : solve_constraints_) c.order_key = state_->owned_natural()[c.vertex];
   const PetscInt local = static_cast<PetscInt>(solve_constraints_.size());
   PetscCallMPI(MPIU_Allreduce(&local, &global_count_, 1, MPIU_INT, MPI_SUM, comm));
   PetscFunctionReturn(PETSC_SUCCESS);

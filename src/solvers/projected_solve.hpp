@@ -51,6 +51,10 @@ struct VelocityConstraint {
   bool two_sided = false;
   std::array<PetscInt, 3> face{{-1, -1, -1}};
   Eigen::Vector3d weights = Eigen::Vector3d::Zero();
+  // A rank-independent number of the vertex (its natural number) that orders
+  // the rows of the two-sided solve, so that they come in the same order on
+  // any rank count; -1: the vertex's PETSc number (rank-dependent).
+  PetscInt order_key = -1;
 };
 // The constraints of one vertex: an orthonormal basis of their directions and
 // the velocity component in its span that satisfies them all.

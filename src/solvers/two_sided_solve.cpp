@@ -17,14 +17,19 @@ namespace {
 constexpr double kLcpRelativeTolerance = 1e-10;
 
 // One row of J: up to four vertices (PETSc numbers, -1: none) with weights,
-// a direction, the right-hand side, and whether it is an inequality.
+// a direction, the right-hand side, and whether it is an inequality; ordered
+// by (key, sub): the vertex's order key (VelocityConstraint::order_key) and
+// the row's place among the vertex's rows; rank and position: where it was made.
 struct Row {
   PetscInt vertex[4];
   double weight[4];
   double direction[3];
   double value;
+  PetscInt key;
+  int32_t sub;
   int32_t unilateral;
-  int32_t pad;
+  int32_t rank;
+  int32_t position;
 };
 
 // This rank's rows: each constrained vertex's combined directions, then the
@@ -32,31 +37,66 @@ struct Row {
 // constraint (-1 for the others).
 std::vector<Row> LocalRows(const std::vector<ConstrainedVertex> &vertices,
                            const std::vector<VelocityConstraint> &constraints, PetscInt first,
-                           std::vector<PetscInt> *slot) {
+                           int32_t rank, std::vector<PetscInt> *slot) {
+  std::map<PetscInt, PetscInt> key;  // local vertex -> order key
+  std::map<PetscInt, int32_t> subs;  // local vertex -> rows so far
+  for (const VelocityConstraint &c : constraints)
+    key[c.vertex] = c.order_key >= 0 ? c.order_key : first + c.vertex;
   std::vector<Row> rows;
+  auto add = [&](Row row, PetscInt local) {
+    row.key = key[local];
+    row.sub = subs[local]++;
+    row.rank = rank;
+    row.position = static_cast<int32_t>(rows.size());
+    rows.push_back(row);
+  };
   for (const ConstrainedVertex &c : vertices)
     for (int j = 0; j < c.rank; ++j) {
       const Eigen::Vector3d q = c.basis.col(j);
-      rows.push_back({{first + c.vertex, -1, -1, -1},
-                      {1, 0, 0, 0},
-                      {q[0], q[1], q[2]},
-                      q.dot(c.prescribed),
-                      0,
-                      0});
+      add({{first + c.vertex, -1, -1, -1},
+           {1, 0, 0, 0},
+           {q[0], q[1], q[2]},
+           q.dot(c.prescribed),
+           -1,
+           0,
+           0,
+           0,
+           0},
+          c.vertex);
     }
   slot->assign(constraints.size(), -1);
   for (size_t i = 0; i < constraints.size(); ++i) {
     const VelocityConstraint &c = constraints[i];
     if (!c.two_sided) continue;
     (*slot)[i] = static_cast<PetscInt>(rows.size());
-    rows.push_back({{first + c.vertex, c.face[0], c.face[1], c.face[2]},
-                    {1, -c.weights[0], -c.weights[1], -c.weights[2]},
-                    {c.normal[0], c.normal[1], c.normal[2]},
-                    c.velocity,
-                    1,
-                    0});
+    add({{first + c.vertex, c.face[0], c.face[1], c.face[2]},
+         {1, -c.weights[0], -c.weights[1], -c.weights[2]},
+         {c.normal[0], c.normal[1], c.normal[2]},
+         c.velocity,
+         -1,
+         0,
+         1,
+         0,
+         0},
+        c.vertex);
   }
   return rows;
+}
+
+// Every rank's rows in (key, sub) order; *slot (LocalRows') renumbered to it.
+PetscErrorCode OrderedRows(MPI_Comm comm, const std::vector<Row> &mine, int32_t rank,
+                           std::vector<PetscInt> *slot, std::vector<Row> *rows) {
+  PetscFunctionBeginUser;
+  PetscCall(AllGatherRecords(comm, mine, rows));
+  std::sort(rows->begin(), rows->end(), [](const Row &a, const Row &b) {
+    return a.key != b.key ? a.key < b.key : a.sub < b.sub;
+  });
+  std::vector<PetscInt> row_of_position(mine.size(), -1);
+  for (size_t i = 0; i < rows->size(); ++i)
+    if ((*rows)[i].rank == rank) row_of_position[(*rows)[i].position] = static_cast<PetscInt>(i);
+  for (PetscInt &s : *slot)
+    if (s >= 0) s = row_of_position[s];
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 // y[owned] += scale J_row^T (entries of owned vertices only); begin, end: the
@@ -129,12 +169,12 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
   PetscInt begin, end;
   PetscCall(VecGetOwnershipRange(b, &begin, &end));
   begin /= 3, end /= 3;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
   std::vector<PetscInt> slot;
-  const std::vector<Row> mine = LocalRows(vertices_, constraints, begin, &slot);
+  const std::vector<Row> mine = LocalRows(vertices_, constraints, begin, rank, &slot);
   std::vector<Row> rows;
-  PetscCall(AllGatherRecords(comm, mine, &rows));
-  PetscInt local = static_cast<PetscInt>(mine.size()), offset = 0;
-  PetscCallMPI(MPI_Exscan(&local, &offset, 1, MPIU_INT, MPI_SUM, comm));
+  PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
   const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
   // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned entries.
   std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
@@ -187,7 +227,7 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
   PetscCall(SolveUnconstrained(solver, rhs_, v, iterations));
   PetscCall(Reactions(z_, v, constraints, reactions));
   for (size_t i = 0; i < constraints.size(); ++i)
-    if (slot[i] >= 0) (*reactions)[i] = lambda[offset + slot[i]];
+    if (slot[i] >= 0) (*reactions)[i] = lambda[slot[i]];
   PetscCall(
       PetscInfo(solver,
                 "two-sided contact solve: %" PetscInt_FMT
