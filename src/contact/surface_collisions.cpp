@@ -272,17 +272,20 @@ std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery 
   const std::vector<int32_t> vertices = vertices_of(moving_vertices_),
                              triangles = Usable(q, moving_triangles_, s.triangles),
                              edges = Usable(q, moving_edges_, s.edges);
+  const bool against_static = !static_.vertices.empty(), between = moving_bodies_.size() > 1;
+  const Boxes moving =
+      against_static || between ? BoxesOf(q, vertices, triangles, edges, Point::Zero()) : Boxes();
   // The moving primitives against the static ones, in the world frame.
-  const Boxes moving = BoxesOf(q, vertices, triangles, edges, Point::Zero());
-  Pairs(q, Kind::kVertexTriangle, {vertices, moving.vertices},
-        {static_.triangles, static_.triangle_boxes}, static_.triangle_grid, false, false, &out,
-        count);
-  Pairs(q, Kind::kTriangleVertex, {triangles, moving.triangles},
-        {static_.vertices, static_.vertex_boxes}, static_.vertex_grid, false, false, &out, count);
-  Pairs(q, Kind::kEdgeEdge, {edges, moving.edges}, {static_.edges, static_.edge_boxes},
-        static_.edge_grid, false, false, &out, count);
-  if (moving_bodies_.size() > 1)
-    BetweenBodies(q, vertices, triangles, edges, moving, singles, &out, count);
+  if (against_static) {
+    Pairs(q, Kind::kVertexTriangle, {vertices, moving.vertices},
+          {static_.triangles, static_.triangle_boxes}, static_.triangle_grid, false, false, &out,
+          count);
+    Pairs(q, Kind::kTriangleVertex, {triangles, moving.triangles},
+          {static_.vertices, static_.vertex_boxes}, static_.vertex_grid, false, false, &out, count);
+    Pairs(q, Kind::kEdgeEdge, {edges, moving.edges}, {static_.edges, static_.edge_boxes},
+          static_.edge_grid, false, false, &out, count);
+  }
+  if (between) BetweenBodies(q, vertices, triangles, edges, moving, singles, &out, count);
   // Each moving body against itself, in the frame of its (usable vertices') mean displacement.
   if (q.self_contact)
     for (const size_t b : moving_bodies_) {
@@ -311,30 +314,53 @@ void SurfaceCollisionFinder::SelfPass(const CollisionQuery &q, size_t b,
     BuildSelfCandidates(q, b, vertices, shift, mean);
     ++count->rebuilds;
   }
+  SelfStepBoxes(q, b, vertices, shift);
+  const ContactSurface &s = *q.surface;
+  const int32_t first_triangle = s.triangle_start[b], first_edge = s.edge_start[b];
+  for (const auto &[v, t] : self_[b].vertex_triangle) {
+    const auto &c = s.triangles[t];
+    if (vertex_box_[v].Overlaps(triangle_box_[t - first_triangle]))
+      Test(q, true, {v, c[0], c[1], c[2]}, true, out, count);
+  }
+  for (const auto &[e, f] : self_[b].edge_edge) {
+    const auto &x = s.edges[e], &y = s.edges[f];
+    if (edge_box_[e - first_edge].Overlaps(edge_box_[f - first_edge]))
+      Test(q, true, {x[0], x[1], y[0], y[1]}, false, out, count);
+  }
+}
+
+// This step's boxes of body b, grown as SweptBox's: per vertex (of
+// `vertices`), and per triangle and edge of the body (those with a vertex not
+// in `vertices` are in no candidate pair).
+void SurfaceCollisionFinder::SelfStepBoxes(const CollisionQuery &q, size_t b,
+                                           const std::vector<int32_t> &vertices,
+                                           const Point &shift) const {
+  const ContactSurface &s = *q.surface;
   for (const int32_t v : vertices) {
     vertex_box_[v] = Box();
     vertex_box_[v].Extend((*q.start)[v]);
     vertex_box_[v].Extend((*q.end)[v] - shift);
   }
   const double grow = q.tolerance.separation + q.tolerance.band;
-  auto box_of = [&](std::initializer_list<int32_t> primitive) {
-    Box box;
-    for (const int32_t v : primitive) box.Extend(vertex_box_[v]);
+  auto grown = [grow](Box box) {
     box.lower.array() -= grow;
     box.upper.array() += grow;
     return box;
   };
-  const ContactSurface &s = *q.surface;
-  for (const auto &[v, t] : self_[b].vertex_triangle) {
-    const auto &c = s.triangles[t];
-    if (box_of({v}).Overlaps(box_of({c[0], c[1], c[2]})))
-      Test(q, true, {v, c[0], c[1], c[2]}, true, out, count);
+  const int32_t first_triangle = s.triangle_start[b], first_edge = s.edge_start[b];
+  triangle_box_.resize(s.triangle_start[b + 1] - first_triangle);
+  for (size_t i = 0; i < triangle_box_.size(); ++i) {
+    Box box;
+    for (const int32_t v : s.triangles[first_triangle + i]) box.Extend(vertex_box_[v]);
+    triangle_box_[i] = grown(box);
   }
-  for (const auto &[e, f] : self_[b].edge_edge) {
-    const auto &x = s.edges[e], &y = s.edges[f];
-    if (box_of({x[0], x[1]}).Overlaps(box_of({y[0], y[1]})))
-      Test(q, true, {x[0], x[1], y[0], y[1]}, false, out, count);
+  edge_box_.resize(s.edge_start[b + 1] - first_edge);
+  for (size_t i = 0; i < edge_box_.size(); ++i) {
+    Box box;
+    for (const int32_t v : s.edges[first_edge + i]) box.Extend(vertex_box_[v]);
+    edge_box_[i] = grown(box);
   }
+  for (const int32_t v : vertices) vertex_box_[v] = grown(vertex_box_[v]);
 }
 
 // Whether body b's candidates were built from these usable vertices and none

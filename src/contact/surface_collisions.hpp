@@ -86,6 +86,8 @@ class SurfaceCollisionFinder {
   };
   void SelfPass(const CollisionQuery &query, size_t body, const std::vector<int32_t> &vertices,
                 std::vector<SurfaceCollision> *out, CollisionCount *count) const;
+  void SelfStepBoxes(const CollisionQuery &query, size_t body, const std::vector<int32_t> &vertices,
+                     const Point &shift) const;
   bool SelfCandidatesHold(const CollisionQuery &query, const SelfCandidates &c,
                           const std::vector<int32_t> &vertices, const Point &shift,
                           const Point &mean, double half_skin) const;
@@ -98,7 +100,9 @@ class SurfaceCollisionFinder {
   Binned static_;
   std::vector<double> half_skin_;             // per body (m)
   mutable std::vector<SelfCandidates> self_;  // per body
-  mutable std::vector<Box> vertex_box_;       // per surface vertex: a step's box, not grown
+  // A self-contact pass's boxes over the step: per surface vertex, and per
+  // triangle and edge of the body.
+  mutable std::vector<Box> vertex_box_, triangle_box_, edge_box_;
 };
 
 }  // namespace softbody
