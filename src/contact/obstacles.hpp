@@ -37,6 +37,16 @@ struct SurfaceHit {
   Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric coordinates of point in it
 };
 
+// A vertex against a free body meets the closest of the body's faces that
+// face it (outward normal at an obtuse angle to the vertex's own outward
+// normal) when that face lies at most this fraction of the vertex's body's mean
+// boundary edge farther than the closest face. A vertex on the edge of one of
+// two aligned stacked blocks is as close to the other block's side face as to
+// the face it rests on, and the side face's normal would push it sideways. A
+// tenth of an edge: the most a step's constraint takes a vertex out
+// (kMaxRecoveryPerStep), well above a resting step's sinking.
+constexpr double kFacingSlack = 0.1;
+
 // The obstacles constraining one vertex in a step (-1: the ground); at most
 // three (a corner).
 struct VertexObstacles {
@@ -68,10 +78,24 @@ class Obstacles {
   // The first obstacle other than `body` and those in `skip` that contains p
   // (the ground when p lies below it or within its margin), with its closest
   // surface point.
-  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
-                       SurfaceHit *hit) const;
+  // natural: the free vertex at p (-1: none); against a free body its contact
+  // point is then ContactOnBody's, and a free body whose surface lies within
+  // the ground's margin outside p counts too (its two-sided contact keeps the
+  // pair apart before the collision guard's separation would be reached).
+  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip, SurfaceHit *hit,
+                       int32_t natural = -1) const;
   // The closest point to p on the obstacle's surface (-1: the ground).
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
+  // Where free vertex `natural` at p meets the obstacle: ClosestOnBody, but on
+  // a free body the closest face facing the vertex when one lies within
+  // kFacingSlack of its body's edge of the closest (a vertex of no surface: the
+  // closest), and the normal there blended from the face vertices' normals
+  // over their faces that face the vertex (BlendFacingNormal).
+  bool ContactOnBody(const Point &p, int32_t natural, int32_t obstacle, SurfaceHit *hit) const;
+  // A free surface vertex's outward normal (unit; angle-weighted mean of its
+  // current boundary triangles' normals, Thuermer & Wuethrich 1998); zero for
+  // a vertex of no boundary triangle.
+  Point VertexNormal(int32_t natural) const;
   // Whether p lies in one of the obstacle body's tets (faces included).
   bool InsideBody(const Point &p, int32_t obstacle) const;
   // The free body's tet holding p with all barycentric coordinates above
@@ -91,6 +115,7 @@ class Obstacles {
   const std::array<int32_t, 4> &free_triangle(int32_t t) const { return free_triangles_[t]; }
   size_t num_fixed_tets() const { return fixed_tets_.size(); }
   size_t num_free_tets() const { return free_tets_.size(); }
+  size_t num_free_triangles() const { return free_triangles_.size(); }
   // Bytes of the bodies' item lists and their index by vertex (O(scene) on
   // every rank; the grids, O(local + halo) for free bodies, not counted).
   int64_t SceneBytes() const;
@@ -131,6 +156,12 @@ class Obstacles {
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
                          const VertexObstacles &skip) const;
+  // FindPenetration's last resort for free vertex `natural` at p.
+  bool NearFreeBody(const Point &p, int32_t natural, const VertexObstacles &skip,
+                    SurfaceHit *hit) const;
+  template <class Keep>
+  Point AngleWeightedNormal(int32_t natural, Keep keep) const;
+  void BlendFacingNormal(const Point &own, SurfaceHit *hit) const;
   // Whether free bodies a and b are a separating pair.
   bool Separating(int32_t a, int32_t b) const;
   Point WorldPoint(int32_t n) const { return state_->position(n); }
