@@ -259,6 +259,9 @@ ImplicitEuler::~ImplicitEuler() {
   VecDestroy(&damping_force_);
   KSPDestroy(&ksp_);
   KSPDestroy(&fallback_ksp_);
+  KSPDestroy(&filter_ksp_);
+  MatDestroy(&filter_matrix_);
+  VecDestroy(&filter_work_);
   MatDestroy(&A_);
   MatDestroy(&K_);
   MatDestroy(&A_linear_);
@@ -440,6 +443,33 @@ PetscErrorCode ImplicitEuler::SetTimeStep(PetscReal dt) {
   if (options_.adaptive && (target_step_ <= 0 || target_step_ > dt)) target_step_ = dt;
   dt_ = options_.adaptive ? target_step_ : dt;
   PetscCall(PrepareStep());
+  if (options_.adaptive) PetscCall(SetDampingFilter());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SetDampingFilter() {
+  PetscFunctionBeginUser;
+  const PetscReal a = options_.alpha, b = options_.beta, horizon = RunLength();
+  if (options_.mode != MODE_LINEAR || b <= 0 || horizon == filter_horizon_)
+    PetscFunctionReturn(PETSC_SUCCESS);
+  filter_horizon_ = horizon;
+  if (!filter_matrix_) {
+    PetscCall(assembler_.CreateMatrix(&filter_matrix_));
+    PetscCall(VecDuplicate(rest_, &filter_work_));
+  }
+  {
+    StageScope stage(Stages().assembly);
+    PetscCall(assembler_.Fill(
+        filter_matrix_,
+        RowAssembler::FillTerms().Stiffness(b * horizon).Mass(mass_, 1.0 + a * horizon)));
+  }
+  StageScope stage(Stages().factorisation);
+  if (!filter_ksp_) {
+    SolverChoice choice;
+    PetscCall(CreateSolver(filter_matrix_, rest_, &filter_ksp_, &choice));
+  }
+  PetscCall(KSPSetOperators(filter_ksp_, filter_matrix_, filter_matrix_));
+  PetscCall(KSPSetUp(filter_ksp_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -1014,6 +1044,13 @@ PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool 
     PetscCall(VecWAXPY(combined_position_, -1.0, saved_previous_v_, saved_v_));
     PetscCall(VecAXPY(combined_velocity_, -h / saved_previous_dt_, combined_position_));
   }
+  PetscReal raw = 0;
+  PetscCall(VecNorm(combined_velocity_, NORM_2, &raw));
+  if (filter_ksp_) {
+    StageScope stage(Stages().step);
+    PetscCall(VecPointwiseMult(filter_work_, mass_, combined_velocity_));
+    PetscCall(KSPSolve(filter_ksp_, filter_work_, combined_velocity_));
+  }
   // The scale: the displacement plus the distance the faster of the substep's
   // start and end velocities covers in a step of the time loop (not of the
   // substep: a body starting from rest, an impact or a strike changes v by as
@@ -1028,7 +1065,22 @@ PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool 
   *estimated = scale > 0;
   *error = (second ? kSecondOrderErrorConstant : kFirstOrderErrorConstant) * h * difference /
            (scale > 0 ? scale : 1);
+  PetscCall(PetscInfo(nullptr, "-dt_adapt: substep %.6g s estimate %.4g (unfiltered %.4g) %s\n",
+                      (double)h, (double)*error,
+                      (double)(*error * raw / (difference > 0 ? difference : 1)),
+                      second ? "second" : "first"));
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void ImplicitEuler::ScaleToRun(PetscReal *error, PetscReal *exponent) const {
+  const bool history = options_.scheme != SCHEME_BE && saved_previous_dt_ > 0;
+  const bool accumulates = options_.scheme == SCHEME_BE || history;
+  if (options_.mode == MODE_LINEAR) {
+    if (accumulates) *error *= RunLength() / dt_;
+    *exponent = options_.scheme == SCHEME_BE ? 1.0 : 0.5;
+  } else {
+    *exponent = history ? 1.0 / 3 : 0.5;
+  }
 }
 
 int ImplicitEuler::LadderLevel(uint64_t elapsed) const {
@@ -1052,9 +1104,10 @@ PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v, ContactSolver *contact)
     PetscReal error;
     bool estimated;
     PetscCall(SubstepError(x, v, &error, &estimated));
-    const PetscReal order = options_.scheme != SCHEME_BE && saved_previous_dt_ > 0 ? 2 : 1;
+    PetscReal exponent;
+    ScaleToRun(&error, &exponent);
     const PetscReal factor = estimated && error > 0
-                                 ? kSafety * std::pow(options_.tolerance / error, 1 / (order + 1))
+                                 ? kSafety * std::pow(options_.tolerance / error, exponent)
                                  : kMaxGrowth;
     if (estimated && error > options_.tolerance) {
       PetscCall(RestoreSubstepState(x, v, contact));

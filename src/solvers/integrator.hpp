@@ -263,6 +263,9 @@ class ImplicitEuler {
   PetscErrorCode SaveSubstepState(Vec x, Vec v, const ContactSolver *contact);
   PetscErrorCode RestoreSubstepState(Vec x, Vec v, ContactSolver *contact);
   PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);
+  PetscErrorCode SetDampingFilter();
+  void ScaleToRun(PetscReal *error, PetscReal *exponent) const;
+  PetscReal RunLength() const { return PetscMax(interval_, options_.steps * options_.dt); }
   PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
   PetscErrorCode BeginSchemeStep(Vec x, Vec v);
   PetscErrorCode FinishSchemeStep(Vec x, Vec v);
@@ -346,6 +349,10 @@ class ImplicitEuler {
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
   KSP fallback_ksp_ = nullptr;  // created at the first breakdown
+  Mat filter_matrix_ = nullptr;
+  KSP filter_ksp_ = nullptr;
+  Vec filter_work_ = nullptr;
+  PetscReal filter_horizon_ = 0;
   Vec elastic_force_ = nullptr, rhs_ = nullptr;
   Vec gravity_force_ = nullptr;  // M g, only when g != 0
   Vec x_start_ = nullptr;        // x0 during a step with contact
