@@ -87,7 +87,8 @@ struct IntegratorOptions {
   PetscReal rho_inf = 0.9;
   // -dt_adapt: each step of -dt (the interval between steps the time loop sees,
   // frames and -dt_schedule) is taken in substeps whose size follows a local
-  // error estimate: relative error per substep at most -tol (see Step).
+  // error estimate; -tol is about the relative error of x - X at the run's end
+  // in linear mode, the relative error per substep in corotational mode (see Step).
   PetscBool adaptive = PETSC_FALSE;
   PetscReal tolerance = 1e-4;
   PetscReal dt = 0.02;  // s
@@ -170,7 +171,9 @@ class ImplicitEuler {
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step; with
   // -dt_adapt, by substeps of the step: each is repeated with a smaller size
-  // while its local error estimate exceeds -tol (relative to |x - X| + Dt |v|, Dt
+  // while its local error estimate exceeds -tol (linear mode: filtered by the
+  // damping over the run and, with history, taken per unit time times the
+  // run's length: SetDampingFilter, ScaleToRun; relative to |x - X| + Dt |v|, Dt
   // the step and |v| the larger of the substep's start and end speeds:
   // backward Euler h |v1 - v0| / 2, the second-order schemes
   // h |v1 - v0 - (h / h_prev)(v0 - v_prev)| / 6, the velocity's second difference),
@@ -263,8 +266,13 @@ class ImplicitEuler {
   PetscErrorCode SaveSubstepState(Vec x, Vec v, const ContactSolver *contact);
   PetscErrorCode RestoreSubstepState(Vec x, Vec v, ContactSolver *contact);
   PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);
+  // Linear mode with stiffness damping: factorises the damping filter B of the
+  // estimate (integrator.cpp) for the run's length (once).
   PetscErrorCode SetDampingFilter();
+  // The estimate against -tol (scaled per unit time to the run's length, or
+  // not) and the exponent of tol / error in the next target size.
   void ScaleToRun(PetscReal *error, PetscReal *exponent) const;
+  // The run's length -steps x -dt (s), at least the step of the time loop.
   PetscReal RunLength() const { return PetscMax(interval_, options_.steps * options_.dt); }
   PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
   PetscErrorCode BeginSchemeStep(Vec x, Vec v);
@@ -349,6 +357,8 @@ class ImplicitEuler {
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
   KSP fallback_ksp_ = nullptr;  // created at the first breakdown
+  // -dt_adapt's damping filter B, its solver, a work vector and the length (s)
+  // B was filled for (0: none).
   Mat filter_matrix_ = nullptr;
   KSP filter_ksp_ = nullptr;
   Vec filter_work_ = nullptr;
