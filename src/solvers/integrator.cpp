@@ -112,6 +112,8 @@ PetscErrorCode CheckIntegratorOptions(MPI_Comm comm, const IntegratorOptions &o)
              "option -newton_rtol: must be > 0 (got %g)", (double)o.newton_rtol);
   PetscCheck(o.newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
              "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o.newton_max_it);
+  PetscCheck(o.horizon >= 0, comm, PETSC_ERR_USER_INPUT,
+             "option -dt_adapt_horizon: must be >= 0 (got %g)", (double)o.horizon);
   PetscCheck(o.tolerance > 0 && o.tolerance < 1, comm, PETSC_ERR_USER_INPUT,
              "option -tol: must be in (0, 1) (got %g)", (double)o.tolerance);
   PetscCheck(o.rho_inf >= 0 && o.rho_inf <= 1, comm, PETSC_ERR_USER_INPUT,
@@ -192,12 +194,20 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                              "Take each time step in substeps sized by a local error estimate "
                              "(-tol); frames stay at the steps' times (docs/integrators.md)",
                              nullptr, o->adaptive, &o->adaptive, nullptr));
-  PetscCall(PetscOptionsReal("-tol",
-                             "-dt_adapt: about the relative error of x - X at the run's end "
-                             "(linear mode: each substep's estimate, filtered by the damping, per "
-                             "unit time times the run's length -steps x -dt; corotational: per "
-                             "substep, over |x - X| + dt max(|v0|, |v1|)) (docs/integrators.md)",
-                             nullptr, o->tolerance, &o->tolerance, nullptr));
+  PetscCall(
+      PetscOptionsReal("-tol",
+                       "-dt_adapt: about the relative error of x - X at the run's end "
+                       "(linear mode, bdf2, newmark, alpha: each substep's estimate, filtered "
+                       "by the damping, per unit time times the run's length -steps x -dt); "
+                       "be and corotational mode: the relative error per substep, over "
+                       "|x - X| + dt max(|v0|, |v1|) (docs/integrators.md)",
+                       nullptr, o->tolerance, &o->tolerance, nullptr));
+  PetscCall(PetscOptionsReal("-dt_adapt_horizon",
+                             "-dt_adapt, linear mode: the time (s) at whose end -tol bounds the "
+                             "error; the damping filter of the estimate looks as far (0: the run's "
+                             "length -steps x -dt; give it to continue a run with more -steps bit "
+                             "for bit)",
+                             nullptr, o->horizon, &o->horizon, nullptr));
   PetscCall(
       PetscOptionsString("-dt_schedule",
                          "Change the time step during the run: t1:dt1,t2:dt2 (s) means dt1 from "
@@ -1080,20 +1090,23 @@ PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool 
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Linear mode: an estimate of a substep with history (and every backward
-// Euler estimate) is a local error that accumulates over the run, so it is
-// compared with -tol per unit time, scaled to the run's length (error x T / h:
-// the sum of such errors over the run is then about -tol); the estimate of a
-// start without history is a one-off error and is compared with -tol as it is.
-// Exponents: estimate ~ h^(p+1), so error x T / h ~ h^p. Corotational mode keeps
+// Linear mode: the estimate of a second-order scheme's substep with history is
+// a local error that accumulates over the run, so it is compared with -tol per
+// unit time, scaled to the run's length (error x T / h: the sum of such errors
+// over the run is then about -tol). The estimate of a start without history,
+// or of a substep in which the contact acted (a velocity jump, however small
+// the substep), is a one-off error and is compared with -tol as it is.
+// Backward Euler keeps the per-substep tolerance: its first-difference
+// estimate relative to |x - X| + Dt |v| is, per unit time, h-independent for a
+// body starting from rest (v1 - v0 = g h, |v| = g h), so no substep met it.
+// Exponents: estimate ~ h^(p+1), per unit time ~ h^p. Corotational mode keeps
 // the per-substep tolerance (no filter there: the strike's stiff content would
 // ask for tiny substeps per unit time).
 void ImplicitEuler::ScaleToRun(PetscReal *error, PetscReal *exponent) const {
   const bool history = options_.scheme != SCHEME_BE && saved_previous_dt_ > 0;
-  const bool accumulates = options_.scheme == SCHEME_BE || history;
-  if (options_.mode == MODE_LINEAR) {
-    if (accumulates) *error *= RunLength() / dt_;
-    *exponent = options_.scheme == SCHEME_BE ? 1.0 : 0.5;
+  if (options_.mode == MODE_LINEAR && history && !contact_acted_) {
+    *error *= RunLength() / dt_;
+    *exponent = 0.5;
   } else {
     *exponent = history ? 1.0 / 3 : 0.5;
   }

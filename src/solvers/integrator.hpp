@@ -91,6 +91,9 @@ struct IntegratorOptions {
   // in linear mode, the relative error per substep in corotational mode (see Step).
   PetscBool adaptive = PETSC_FALSE;
   PetscReal tolerance = 1e-4;
+  // -dt_adapt_horizon (s): the time over which -tol bounds the error (linear
+  // mode); 0: the run's length, -steps x -dt.
+  PetscReal horizon = 0;
   PetscReal dt = 0.02;  // s
   // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
@@ -272,8 +275,12 @@ class ImplicitEuler {
   // The estimate against -tol (scaled per unit time to the run's length, or
   // not) and the exponent of tol / error in the next target size.
   void ScaleToRun(PetscReal *error, PetscReal *exponent) const;
-  // The run's length -steps x -dt (s), at least the step of the time loop.
-  PetscReal RunLength() const { return PetscMax(interval_, options_.steps * options_.dt); }
+  // -dt_adapt_horizon, by default the run's length -steps x -dt (s); at least
+  // the step of the time loop.
+  PetscReal RunLength() const {
+    return PetscMax(interval_,
+                    options_.horizon > 0 ? options_.horizon : options_.steps * options_.dt);
+  }
   PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
   PetscErrorCode BeginSchemeStep(Vec x, Vec v);
   PetscErrorCode FinishSchemeStep(Vec x, Vec v);
