@@ -663,6 +663,7 @@ PetscErrorCode ImplicitEuler::GetHistory(SchemeHistory *history) {
 PetscErrorCode ImplicitEuler::SetHistory(const std::vector<double> &scalars, bool found) {
   PetscFunctionBeginUser;
   const bool usable = found && scalars.size() >= 2;
+  first_substep_ = false;  // a checkpoint follows at least one step
   previous_dt_ = usable ? scalars[0] : 0;
   acceleration_valid_ = usable && scalars[1] != 0;
   if (options_.adaptive && usable && scalars.size() >= 3 && scalars[2] > 0) {
@@ -1154,7 +1155,9 @@ PetscErrorCode ImplicitEuler::AdaptiveStep(Vec x, Vec v, ContactSolver *contact)
     // A contact's velocity jump is no smooth history: the scheme restarts after
     // it (a multistep scheme would extrapolate the jump into a rebound) and the
     // next estimate is the first difference.
-    if (contact && contact_acted_) PositionsChanged();
+    if ((contact && contact_acted_) || (first_substep_ && options_.scheme != SCHEME_BE))
+      PositionsChanged();
+    first_substep_ = false;
     ++stats_.accepted_steps;
     PetscCall(PetscInfo(nullptr, "-dt_adapt: substep of %.17g s accepted\n", (double)dt_));
     stats_.min_step = PetscMin(stats_.min_step, dt_);

@@ -345,6 +345,8 @@ class ImplicitEuler {
   PetscReal target_step_ = 0, saved_previous_dt_ = 0;
   bool saved_acceleration_valid_ = false;
   RestingContacts saved_contact_;
+  // -dt_adapt: no substep accepted yet in this run (the history restarts after it).
+  bool first_substep_ = true;
   // The last step's contact constrained a vertex or changed x or v after the solve.
   bool contact_acted_ = false;
   Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
