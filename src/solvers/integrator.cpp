@@ -55,6 +55,9 @@ constexpr PetscReal kMaxGrowth = 2.0;
 // 1/12, BDF2's 2/9).
 constexpr PetscReal kFirstOrderErrorConstant = 0.5;
 constexpr PetscReal kSecondOrderErrorConstant = 1.0 / 6.0;
+// bdf2's start in linear mode, the theta method with theta = 2/3: its local
+// position error (theta - 1/2) h^2 x'' is h |v1 - v0| / 6.
+constexpr PetscReal kThetaStartErrorConstant = 1.0 / 6.0;
 // A substep rejected this often in a row stops the run (the error estimate
 // does not fall with the size: not a smooth motion).
 constexpr int kMaxRejections = 30;
@@ -112,6 +115,8 @@ PetscErrorCode CheckIntegratorOptions(MPI_Comm comm, const IntegratorOptions &o)
              "option -newton_rtol: must be > 0 (got %g)", (double)o.newton_rtol);
   PetscCheck(o.newton_max_it >= 1, comm, PETSC_ERR_USER_INPUT,
              "option -newton_max_it: must be >= 1 (got %" PetscInt_FMT ")", o.newton_max_it);
+  PetscCheck(o.factor_cache >= 1, comm, PETSC_ERR_USER_INPUT,
+             "option -dt_adapt_factors: must be >= 1 (got %" PetscInt_FMT ")", o.factor_cache);
   PetscCheck(o.horizon >= 0, comm, PETSC_ERR_USER_INPUT,
              "option -dt_adapt_horizon: must be >= 0 (got %g)", (double)o.horizon);
   PetscCheck(o.tolerance > 0 && o.tolerance < 1, comm, PETSC_ERR_USER_INPUT,
@@ -202,6 +207,12 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                        "be and corotational mode: the relative error per substep, over "
                        "|x - X| + dt max(|v0|, |v1|) (docs/integrators.md)",
                        nullptr, o->tolerance, &o->tolerance, nullptr));
+  PetscCall(
+      PetscOptionsInt("-dt_adapt_factors",
+                      "-dt_adapt, linear mode: factorisations of A kept for the substep "
+                      "sizes used last, so that a size used again costs no refactorisation "
+                      "(each holds a factor of A: mind the memory on big meshes; 1: none kept)",
+                      nullptr, o->factor_cache, &o->factor_cache, nullptr));
   PetscCall(PetscOptionsReal("-dt_adapt_horizon",
                              "-dt_adapt, linear mode: the time (s) at whose end -tol bounds the "
                              "error; the damping filter of the estimate looks as far (0: the run's "
@@ -269,6 +280,11 @@ ImplicitEuler::~ImplicitEuler() {
   VecDestroy(&work_);
   VecDestroy(&v_trial_base_);
   VecDestroy(&damping_force_);
+  if (!systems_.empty()) A_ = nullptr, ksp_ = nullptr;  // owned by the cache's entries
+  for (CachedSystem &entry : systems_) {
+    KSPDestroy(&entry.solver);
+    MatDestroy(&entry.matrix);
+  }
   KSPDestroy(&ksp_);
   KSPDestroy(&fallback_ksp_);
   KSPDestroy(&filter_ksp_);
@@ -345,6 +361,7 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
   gamg_ = gamg;
   PetscBool warp;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCWarp, &warp));
+  warp_ = warp;
   if (warp && options_.mode == MODE_COROTATIONAL) {
     // The warp preconditioner: A0 = the linear system, factorised per time step size.
     PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &A_linear_));
@@ -518,6 +535,9 @@ PetscErrorCode ImplicitEuler::FillSystem(PetscReal hf, PetscReal hx) {
     }
     PetscFunctionReturn(PETSC_SUCCESS);
   }
+  bool cached = false;
+  PetscCall(SelectCachedSystem(hf, hx, &cached));
+  if (cached) PetscFunctionReturn(PETSC_SUCCESS);
   PetscLogDouble start, end;
   {
     StageScope stage(Stages().assembly);
@@ -534,6 +554,41 @@ PetscErrorCode ImplicitEuler::FillSystem(PetscReal hf, PetscReal hx) {
   PetscCall(KSPSetUp(ksp_));
   PetscCall(PetscTime(&end));
   stats_.factor_seconds = end - start;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ImplicitEuler::SelectCachedSystem(PetscReal hf, PetscReal hx, bool *cached) {
+  PetscFunctionBeginUser;
+  *cached = false;
+  if (!options_.adaptive || options_.factor_cache <= 0 || options_.mode != MODE_LINEAR || warp_)
+    PetscFunctionReturn(PETSC_SUCCESS);
+  ++cache_clock_;
+  if (systems_.empty()) {  // the set-up's A and solver become the first entry (owned by it)
+    systems_.push_back({hf, hx, A_, ksp_, cache_clock_});
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  CachedSystem *chosen = nullptr;
+  for (CachedSystem &entry : systems_)
+    if (entry.force_step == hf && entry.position_step == hx) chosen = &entry;
+  if (chosen) {
+    *cached = true;
+  } else if (static_cast<PetscInt>(systems_.size()) < options_.factor_cache) {
+    CachedSystem entry{hf, hx, nullptr, nullptr, 0};
+    PetscCall(MatDuplicate(A_, MAT_DO_NOT_COPY_VALUES, &entry.matrix));
+    SolverChoice choice;
+    PetscCall(CreateSolver(entry.matrix, rest_, &entry.solver, &choice));
+    systems_.push_back(entry);
+    chosen = &systems_.back();
+  } else {  // the least recently used entry is refilled
+    chosen = &systems_.front();
+    for (CachedSystem &entry : systems_)
+      if (entry.last_use < chosen->last_use) chosen = &entry;
+    chosen->force_step = hf;
+    chosen->position_step = hx;
+  }
+  chosen->last_use = cache_clock_;
+  A_ = chosen->matrix;
+  ksp_ = chosen->solver;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -1082,8 +1137,12 @@ PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool 
   PetscCall(VecNorm(saved_v_, NORM_2, &start_speed));
   const PetscReal scale = displacement + interval_ * PetscMax(speed, start_speed);
   *estimated = scale > 0;
-  *error = (second ? kSecondOrderErrorConstant : kFirstOrderErrorConstant) * h * difference /
-           (scale > 0 ? scale : 1);
+  const bool theta_start =
+      !second && options_.scheme == SCHEME_BDF2 && options_.mode == MODE_LINEAR;
+  const PetscReal constant = second        ? kSecondOrderErrorConstant
+                             : theta_start ? kThetaStartErrorConstant
+                                           : kFirstOrderErrorConstant;
+  *error = constant * h * difference / (scale > 0 ? scale : 1);
   PetscCall(PetscInfo(nullptr, "-dt_adapt: substep %.6g s estimate %.4g (unfiltered %.4g) %s\n",
                       (double)h, (double)*error,
                       (double)(*error * raw / (difference > 0 ? difference : 1)),

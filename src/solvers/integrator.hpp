@@ -94,6 +94,11 @@ struct IntegratorOptions {
   // -dt_adapt_horizon (s): the time over which -tol bounds the error (linear
   // mode); 0: the run's length, -steps x -dt.
   PetscReal horizon = 0;
+  // -dt_adapt_factors: linear mode keeps the systems (A and its factor) of this
+  // many substep sizes, the least recently used replaced first. 4: bdf2 moving
+  // between two sizes uses four systems (each size's own and the two of the
+  // step after a change); each holds a factor (20 MB at the default scene).
+  PetscInt factor_cache = 4;
   PetscReal dt = 0.02;  // s
   // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
@@ -272,6 +277,10 @@ class ImplicitEuler {
   // Linear mode with stiffness damping: factorises the damping filter B of the
   // estimate (integrator.cpp) for the run's length (once).
   PetscErrorCode SetDampingFilter();
+  // -dt_adapt, linear mode: makes A_ and ksp_ the cached system of the step sizes
+  // (h_f, h_x); *cached when it holds them already factorised (else the caller
+  // fills and factorises it: a new entry, or the least recently used one).
+  PetscErrorCode SelectCachedSystem(PetscReal hf, PetscReal hx, bool *cached);
   // The estimate against -tol (scaled per unit time to the run's length, or
   // not) and the exponent of tol / error in the next target size.
   void ScaleToRun(PetscReal *error, PetscReal *exponent) const;
@@ -368,6 +377,15 @@ class ImplicitEuler {
   KSP fallback_ksp_ = nullptr;  // created at the first breakdown
   // -dt_adapt's damping filter B, its solver, a work vector and the length (s)
   // B was filled for (0: none).
+  struct CachedSystem {
+    PetscReal force_step, position_step;  // h_f, h_x (s) of its values
+    Mat matrix;
+    KSP solver;
+    uint64_t last_use;
+  };
+  std::vector<CachedSystem> systems_;  // -dt_adapt_factors; empty: A_, ksp_ own themselves
+  uint64_t cache_clock_ = 0;
+  bool warp_ = false;  // the warp preconditioner holds A_: no cache
   Mat filter_matrix_ = nullptr;
   KSP filter_ksp_ = nullptr;
   Vec filter_work_ = nullptr;
