@@ -42,7 +42,8 @@ compared with independent references:
     ranks before set-up with one line naming the option (-dt_adapt with
     contact: test_adaptive_contact.py).
 (g) -dt_adapt on the bar's mode (no damping), steps of T/2 (frames at
-    t = k T/2), 4 steps: for -tol 1e-2 .. 1e-6 the error at 2T against the exact
+    t = k T/2), 4 steps: for -tol 1e-2 .. 1e-5 (1e-6 takes 14 000 substeps
+    since -tol is per unit time: left out for the suite's time) the error at 2T against the exact
     solution falls monotonically with -tol, every run rejects at least one
     substep (the first substeps of size T/2 miss any of these tolerances: the
     rejected path), the frames lie at k T/2 to 1e-12, the result file has
@@ -259,7 +260,7 @@ def adaptive(bar, checks):
     q_exact, p_exact = exact(w, 0.0, 2 * T, p0)
     for scheme in ("bdf2", "newmark"):
         errors, rows = [], []
-        for tol in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6):
+        for tol in (1e-2, 1e-3, 1e-4, 1e-5):
             name = f"adapt_{scheme}_{tol:g}"
             out = harness.fresh_result(bar.args.work, name)
             r = harness.run(bar.args, RANKS, ["-scene", bar.scene, "-output", out, "-integrator", scheme,
@@ -275,7 +276,7 @@ def adaptive(bar, checks):
             summary_ok = "-dt_adapt" in r.stdout and "rejected" in r.stdout
             rows.append((tol, attributes, times_ok and summary_ok))
         falling = all(b < a for a, b in zip(errors, errors[1:]))
-        checks.check(falling, f"(g) {scheme} -dt_adapt: error at 2T for -tol 1e-2 .. 1e-6: "
+        checks.check(falling, f"(g) {scheme} -dt_adapt: error at 2T for -tol 1e-2 .. 1e-5: "
                               + ", ".join(f"{e:.2e}" for e in errors) + " (falls monotonically)")
         checks.check(all(row[1]["rejected_steps"] >= 1 and row[2] for row in rows),
                      f"(g) {scheme} -dt_adapt: accepted / rejected substeps per -tol: "
