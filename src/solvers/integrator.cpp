@@ -55,9 +55,6 @@ constexpr PetscReal kMaxGrowth = 2.0;
 // 1/12, BDF2's 2/9).
 constexpr PetscReal kFirstOrderErrorConstant = 0.5;
 constexpr PetscReal kSecondOrderErrorConstant = 1.0 / 6.0;
-// bdf2's start in linear mode, the theta method with theta = 2/3: its local
-// position error (theta - 1/2) h^2 x'' is h |v1 - v0| / 6.
-constexpr PetscReal kThetaStartErrorConstant = 1.0 / 6.0;
 // A substep rejected this often in a row stops the run (the error estimate
 // does not fall with the size: not a smooth motion).
 constexpr int kMaxRejections = 30;
@@ -1137,11 +1134,11 @@ PetscErrorCode ImplicitEuler::SubstepError(Vec x, Vec v, PetscReal *error, bool 
   PetscCall(VecNorm(saved_v_, NORM_2, &start_speed));
   const PetscReal scale = displacement + interval_ * PetscMax(speed, start_speed);
   *estimated = scale > 0;
-  const bool theta_start =
-      !second && options_.scheme == SCHEME_BDF2 && options_.mode == MODE_LINEAR;
-  const PetscReal constant = second        ? kSecondOrderErrorConstant
-                             : theta_start ? kThetaStartErrorConstant
-                                           : kFirstOrderErrorConstant;
+  // bdf2's theta start keeps backward Euler's constant: with its own
+  // (theta - 1/2 = 1/6) the bar of test_integrators.py (g) ends 2 to 4 times
+  // further from the exact solution at -tol 1e-3 .. 1e-5 (its velocity error,
+  // of the same order, is not in the estimate).
+  const PetscReal constant = second ? kSecondOrderErrorConstant : kFirstOrderErrorConstant;
   *error = constant * h * difference / (scale > 0 ? scale : 1);
   PetscCall(PetscInfo(nullptr, "-dt_adapt: substep %.6g s estimate %.4g (unfiltered %.4g) %s\n",
                       (double)h, (double)*error,
