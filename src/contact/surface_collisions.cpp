@@ -1,6 +1,7 @@
 #include "contact/surface_collisions.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 namespace softbody {
 
@@ -12,6 +13,10 @@ namespace {
 // (docs/contact.md): larger skins list more pairs, smaller ones rebuild more;
 // a quarter and a whole edge were slower.
 constexpr double kSkinOfEdge = 0.5;
+// A cached pair skips CCD when its distance bound exceeds this many times
+// separation + band (CCD reports only pairs that come within that; the factor
+// keeps the bound clear of the round-off of either computation).
+constexpr double kApartMargin = 2.0;
 
 // A primitive's box over the step (start and end of its vertices, the end
 // shifted by `shift`), grown by the distance CCD reports within. In the pass
@@ -317,16 +322,46 @@ void SurfaceCollisionFinder::SelfPass(const CollisionQuery &q, size_t b,
   SelfStepBoxes(q, b, vertices, shift);
   const ContactSurface &s = *q.surface;
   const int32_t first_triangle = s.triangle_start[b], first_edge = s.edge_start[b];
-  for (const auto &[v, t] : self_[b].vertex_triangle) {
-    const auto &c = s.triangles[t];
-    if (vertex_box_[v].Overlaps(triangle_box_[t - first_triangle]))
-      Test(q, true, {v, c[0], c[1], c[2]}, true, out, count);
+  const SelfCandidates &c = self_[b];
+  const int32_t first_vertex = s.vertex_start[b];
+  for (size_t k = 0; k < c.vertex_triangle.size(); ++k) {
+    const auto &[v, t] = c.vertex_triangle[k];
+    const auto &w = s.triangles[t];
+    const std::array<int32_t, 4> pair = {v, w[0], w[1], w[2]};
+    if (vertex_box_[v].Overlaps(triangle_box_[t - first_triangle]) &&
+        !StaysApart(q, c, first_vertex, pair, 1, c.vertex_triangle_distance[k]))
+      Test(q, true, pair, true, out, count);
   }
-  for (const auto &[e, f] : self_[b].edge_edge) {
+  for (size_t k = 0; k < c.edge_edge.size(); ++k) {
+    const auto &[e, f] = c.edge_edge[k];
     const auto &x = s.edges[e], &y = s.edges[f];
-    if (edge_box_[e - first_edge].Overlaps(edge_box_[f - first_edge]))
-      Test(q, true, {x[0], x[1], y[0], y[1]}, false, out, count);
+    const std::array<int32_t, 4> pair = {x[0], x[1], y[0], y[1]};
+    if (edge_box_[e - first_edge].Overlaps(edge_box_[f - first_edge]) &&
+        !StaysApart(q, c, first_vertex, pair, 2, c.edge_edge_distance[k]))
+      Test(q, true, pair, false, out, count);
   }
+}
+
+// Whether the pair (vertices v[0 .. on_a) against v[on_a .. 4)) stays farther
+// than kApartMargin (separation + band) apart over the step, so that CCD
+// would find it apart. For points a = sum alpha_i x_i and b = sum beta_j x_j
+// of the two primitives, a - b = sum alpha_i beta_j (x_i - x_j): the
+// distance is at least its value at the build less the largest change of an
+// x_i - x_j since then, and that change is affine in the step's time, so its
+// largest norm is at the start or the end.
+bool SurfaceCollisionFinder::StaysApart(const CollisionQuery &q, const SelfCandidates &c,
+                                        int32_t first_vertex, const std::array<int32_t, 4> &v,
+                                        int on_a, double distance) const {
+  const double keep = kApartMargin * (q.tolerance.separation + q.tolerance.band);
+  if (distance <= keep) return false;
+  double change = 0;
+  for (int i = 0; i < on_a; ++i)
+    for (int j = on_a; j < 4; ++j) {
+      const Point built = c.built[v[i] - first_vertex] - c.built[v[j] - first_vertex];
+      for (const auto *x : {q.start, q.end})
+        change = std::max(change, ((*x)[v[i]] - (*x)[v[j]] - built).squaredNorm());
+    }
+  return distance - std::sqrt(change) > keep;
 }
 
 // This step's boxes of body b, grown as SweptBox's: per vertex (of
@@ -415,6 +450,28 @@ void SurfaceCollisionFinder::BuildSelfCandidates(const CollisionQuery &q, size_t
     if (!Shares({s.edges[e][0], s.edges[e][1], s.edges[f][0], s.edges[f][1]}))
       c.edge_edge.push_back({e, f});
   });
+  MeasureSelfCandidates(q, b);
+}
+
+// The distances of body b's candidate pairs at the build's start positions.
+void SurfaceCollisionFinder::MeasureSelfCandidates(const CollisionQuery &q, size_t b) const {
+  const ContactSurface &s = *q.surface;
+  SelfCandidates &c = self_[b];
+  const std::vector<Point> &x = *q.start;
+  c.built.assign(x.begin() + s.vertex_start[b], x.begin() + s.vertex_start[b + 1]);
+  c.vertex_triangle_distance.resize(c.vertex_triangle.size());
+  for (size_t k = 0; k < c.vertex_triangle.size(); ++k) {
+    const auto &[v, t] = c.vertex_triangle[k];
+    const auto &w = s.triangles[t];
+    c.vertex_triangle_distance[k] =
+        std::sqrt(PointTriangleDistanceSquared(x[v], x[w[0]], x[w[1]], x[w[2]]));
+  }
+  c.edge_edge_distance.resize(c.edge_edge.size());
+  for (size_t k = 0; k < c.edge_edge.size(); ++k) {
+    const auto &e = s.edges[c.edge_edge[k][0]], &f = s.edges[c.edge_edge[k][1]];
+    c.edge_edge_distance[k] =
+        std::sqrt(EdgeEdgeDistanceSquared(x[e[0]], x[e[1]], x[f[0]], x[f[1]]));
+  }
 }
 
 }  // namespace softbody

@@ -83,9 +83,18 @@ class SurfaceCollisionFinder {
     // (less the shift) at the build, relative to the mean start position.
     std::vector<Box> vertex_boxes;
     std::vector<std::array<int32_t, 2>> vertex_triangle, edge_edge;
+    // Per pair: its distance at the build (start positions), and per surface
+    // vertex of the body those positions: a pair whose vertices have moved
+    // relative to each other by less than that distance less the separation
+    // stays apart (SurfaceCollisionFinder::StaysApart).
+    std::vector<double> vertex_triangle_distance, edge_edge_distance;
+    std::vector<Point> built;
   };
   void SelfPass(const CollisionQuery &query, size_t body, const std::vector<int32_t> &vertices,
                 std::vector<SurfaceCollision> *out, CollisionCount *count) const;
+  bool StaysApart(const CollisionQuery &query, const SelfCandidates &c, int32_t first_vertex,
+                  const std::array<int32_t, 4> &v, int on_a, double distance) const;
+  void MeasureSelfCandidates(const CollisionQuery &query, size_t body) const;
   void SelfStepBoxes(const CollisionQuery &query, size_t body, const std::vector<int32_t> &vertices,
                      const Point &shift) const;
   bool SelfCandidatesHold(const CollisionQuery &query, const SelfCandidates &c,

@@ -5,7 +5,8 @@
 // reports when every vertex-triangle and edge-edge pair is tested, and count
 // the same pairs close at the start. The steps alternate between small
 // motions (the self-contact candidates are reused) and large ones (they are
-// rebuilt), and the test checks that both happen.
+// rebuilt), and the test checks that both happen. Cached pairs skip CCD when a
+// distance bound keeps them apart: a wrong bound misses pairs here.
 #include <gtest/gtest.h>
 
 #include <algorithm>
