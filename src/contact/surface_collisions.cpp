@@ -204,12 +204,20 @@ Side Near(const ContactSurface &s, const std::vector<Box> &body_boxes,
 // near another body are binned.
 void BetweenBodies(const CollisionQuery &q, const std::vector<int32_t> &vertices,
                    const std::vector<int32_t> &triangles, const std::vector<int32_t> &edges,
-                   const Boxes &moving, const std::vector<std::array<int32_t, 1>> &singles,
+                   Boxes *boxes, const std::vector<std::array<int32_t, 1>> &singles,
                    std::vector<SurfaceCollision> *out, CollisionCount *count) {
   const ContactSurface &s = *q.surface;
   std::vector<Box> body_boxes(s.num_bodies());
   for (size_t i = 0; i < vertices.size(); ++i)
-    body_boxes[s.body[vertices[i]]].Extend(moving.vertices[i]);
+    body_boxes[s.body[vertices[i]]].Extend(boxes->vertices[i]);
+  bool meet = false;
+  for (size_t a = 0; a < body_boxes.size() && !meet; ++a)
+    for (size_t b = a + 1; b < body_boxes.size() && !meet; ++b)
+      meet = body_boxes[a].Overlaps(body_boxes[b]);
+  if (!meet) return;
+  if (boxes->triangles.size() != triangles.size() || boxes->edges.size() != edges.size())
+    *boxes = BoxesOf(q, vertices, triangles, edges, Point::Zero());
+  const Boxes &moving = *boxes;
   std::vector<int32_t> v_ids, t_ids, e_ids;
   Boxes near;
   const Side v = Near(s, body_boxes, vertices, moving.vertices, singles, &v_ids, &near.vertices);
@@ -278,8 +286,12 @@ std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery 
                              triangles = Usable(q, moving_triangles_, s.triangles),
                              edges = Usable(q, moving_edges_, s.edges);
   const bool against_static = !static_.vertices.empty(), between = moving_bodies_.size() > 1;
-  const Boxes moving =
-      against_static || between ? BoxesOf(q, vertices, triangles, edges, Point::Zero()) : Boxes();
+  // The moving primitives' boxes; between bodies alone, only the vertices'
+  // first (BetweenBodies adds the others when two bodies' boxes meet).
+  const std::vector<int32_t> none;
+  Boxes moving = against_static ? BoxesOf(q, vertices, triangles, edges, Point::Zero())
+                 : between      ? BoxesOf(q, vertices, none, none, Point::Zero())
+                                : Boxes();
   // The moving primitives against the static ones, in the world frame.
   if (against_static) {
     Pairs(q, Kind::kVertexTriangle, {vertices, moving.vertices},
@@ -290,7 +302,7 @@ std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery 
     Pairs(q, Kind::kEdgeEdge, {edges, moving.edges}, {static_.edges, static_.edge_boxes},
           static_.edge_grid, false, false, &out, count);
   }
-  if (between) BetweenBodies(q, vertices, triangles, edges, moving, singles, &out, count);
+  if (between) BetweenBodies(q, vertices, triangles, edges, &moving, singles, &out, count);
   // Each moving body against itself, in the frame of its (usable vertices') mean displacement.
   if (q.self_contact)
     for (const size_t b : moving_bodies_) {
