@@ -136,6 +136,16 @@ PetscErrorCode FreeState::SetupFixedSet(Vec lumped_mass, const std::vector<int32
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+void FreeState::AttachItems(FreeItems *items) {
+  std::vector<int32_t> kept(owned_natural_);
+  kept.insert(kept.end(), fixed_set_.begin(), fixed_set_.end());
+  std::sort(kept.begin(), kept.end());
+  items->Setup(
+      *scene_, [&](int32_t n) { return is_free(n); },
+      [&](int32_t n) { return std::binary_search(kept.begin(), kept.end(), n); });
+  items_ = items;
+}
+
 PetscErrorCode FreeState::Exchange(Vec x, Vec v, PetscReal dt, const StateNeeds &needs) {
   PetscFunctionBeginUser;
   ++stamp_now_;
@@ -211,6 +221,7 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
   PetscInt64 bytes;
   PetscCall(neighbours_.Exchange(plan.ranks, plan.counts, records, &received, &bytes));
   bytes_sent_ += bytes;
+  if (items_) PetscCall(ExchangeItems(plan, records, received));
   for (const HaloVertex &h : received) {
     const int32_t n = h.natural, s = Slot(n);
     std::copy(h.x, h.x + 3, &x_[3 * s]);
@@ -218,6 +229,20 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
     inverse_mass_[s] = h.inverse_mass;
     MarkCurrent(n);
   }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The items of the halo's vertices (AttachItems), along the same ranks.
+PetscErrorCode FreeState::ExchangeItems(const HaloPlan &plan, const std::vector<HaloVertex> &sent,
+                                        const std::vector<HaloVertex> &received) {
+  PetscFunctionBeginUser;
+  std::vector<int32_t> sent_naturals, received_naturals;
+  for (const HaloVertex &h : sent) sent_naturals.push_back(h.natural);
+  for (const HaloVertex &h : received) received_naturals.push_back(h.natural);
+  PetscInt64 bytes;
+  PetscCall(items_->Exchange(neighbours_, plan.ranks, plan.counts, sent_naturals, received_naturals,
+                             &bytes));
+  bytes_sent_ += bytes;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

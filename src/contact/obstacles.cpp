@@ -28,8 +28,8 @@ constexpr double kTieOfEdge = 1e-9;
 
 }  // namespace
 
-void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool ground,
-                            double ground_y, double ground_margin) {
+void Obstacles::SetupGround(const Scene &scene, FreeState &state, bool ground, double ground_y,
+                            double ground_margin) {
   scene_ = &scene;
   state_ = &state;
   ground_ = ground;
@@ -38,84 +38,42 @@ void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool gro
 }
 
 int64_t Obstacles::SceneBytes() const {
-  return HeldBytes(fixed_tets_) + HeldBytes(free_tets_) + HeldBytes(fixed_triangles_) +
-         HeldBytes(free_triangles_) + HeldBytes(tets_start_) + HeldBytes(triangles_start_) +
-         HeldBytes(tets_of_vertex_) + HeldBytes(triangles_of_vertex_) + HeldBytes(static_tets_) +
-         HeldBytes(static_triangles_);
+  return HeldBytes(fixed_tets_bin_.ids) + HeldBytes(fixed_tets_bin_.items) +
+         HeldBytes(fixed_triangles_bin_.ids) + HeldBytes(fixed_triangles_bin_.items) +
+         free_items_.HeldBytes();
 }
 
 void Obstacles::SetupBodies(bool track_free) {
-  // Exact sizes: the lists hold every tet of the scene's obstacle bodies.
-  size_t fixed_tets = 0, free_tets = 0;
-  for (const Body &body : scene_->bodies)
-    (body.fixed ? fixed_tets : free_tets) += body.fixed || track_free ? body.num_tets() : 0;
-  fixed_tets_.reserve(fixed_tets);
-  free_tets_.reserve(free_tets);
+  // Exact sizes: the fixed lists hold every tet of the scene's fixed bodies.
+  size_t fixed_tets = 0;
+  for (const Body &body : scene_->bodies) fixed_tets += body.fixed ? body.num_tets() : 0;
+  std::vector<FreeTet> tets;
+  std::vector<FreeTriangle> triangles;
+  tets.reserve(fixed_tets);
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
-    if (scene_->bodies[b].fixed || track_free) AddBody(b);
-  fixed_triangles_.shrink_to_fit();
-  free_triangles_.shrink_to_fit();
+    if (scene_->bodies[b].fixed) AddFixedBody(b, &tets, &triangles);
+  triangles.shrink_to_fit();
   BuildFixedBodyBoxes();
-  std::vector<int32_t> tets(fixed_tets_.size()), triangles(fixed_triangles_.size());
-  std::iota(tets.begin(), tets.end(), 0);
-  std::iota(triangles.begin(), triangles.end(), 0);
-  BinItems(fixed_tets_, tets, &fixed_tets_bin_);
-  BinItems(fixed_triangles_, triangles, &fixed_triangles_bin_);
-  if (track_free) IndexFreeItems();
+  std::vector<int32_t> tet_ids(tets.size()), triangle_ids(triangles.size());
+  std::iota(tet_ids.begin(), tet_ids.end(), 0);
+  std::iota(triangle_ids.begin(), triangle_ids.end(), 0);
+  BinItems(std::move(tet_ids), std::move(tets), &fixed_tets_bin_);
+  BinItems(std::move(triangle_ids), std::move(triangles), &fixed_triangles_bin_);
+  if (track_free) state_->AttachItems(&free_items_);
 }
 
-namespace {
-
-// CSR of the items (first N entries: natural vertices) by vertex, over V
-// vertices: each item once, under its first corner that `counts` accepts (an
-// item whose corners are all current has that corner current, so visiting the
-// current vertices' lists finds it; one entry per item instead of one per
-// corner). Items with no such corner are left out.
-template <size_t N, class Counts>
-void IndexByVertex(const std::vector<std::array<int32_t, N>> &items, size_t corners, int32_t V,
-                   Counts counts, std::vector<int64_t> *start, std::vector<int32_t> *of_vertex) {
-  auto key = [&](const std::array<int32_t, N> &item) {
-    const auto corner = std::find_if(item.begin(), item.begin() + corners, counts);
-    return corner == item.begin() + corners ? -1 : *corner;
-  };
-  start->assign(static_cast<size_t>(V) + 1, 0);
-  for (const auto &item : items)
-    if (const int32_t n = key(item); n >= 0) ++(*start)[n + 1];
-  for (int32_t n = 0; n < V; ++n) (*start)[n + 1] += (*start)[n];
-  of_vertex->resize((*start)[V]);
-  std::vector<int64_t> next(start->begin(), start->end() - 1);
-  for (size_t t = 0; t < items.size(); ++t)
-    if (const int32_t n = key(items[t]); n >= 0) (*of_vertex)[next[n]++] = static_cast<int32_t>(t);
-}
-
-}  // namespace
-
-void Obstacles::IndexFreeItems() {
-  const int32_t V = scene_->num_vertices();
-  auto is_free = [&](int32_t n) { return state_->is_free(n); };
-  IndexByVertex(free_tets_, 4, V, is_free, &tets_start_, &tets_of_vertex_);
-  IndexByVertex(free_triangles_, 3, V, is_free, &triangles_start_, &triangles_of_vertex_);
-  for (size_t t = 0; t < free_tets_.size(); ++t)
-    if (std::none_of(free_tets_[t].begin(), free_tets_[t].begin() + 4, is_free))
-      static_tets_.push_back(static_cast<int32_t>(t));
-  for (size_t t = 0; t < free_triangles_.size(); ++t)
-    if (std::none_of(free_triangles_[t].begin(), free_triangles_[t].begin() + 3, is_free))
-      static_triangles_.push_back(static_cast<int32_t>(t));
-}
-
-void Obstacles::AddBody(size_t b) {
+void Obstacles::AddFixedBody(size_t b, std::vector<FreeTet> *tets,
+                             std::vector<FreeTriangle> *triangles) const {
   const Body &body = scene_->bodies[b];
   const auto boundary = BoundaryTriangles(body.mesh);
-  auto &tets = body.fixed ? fixed_tets_ : free_tets_;
-  auto &triangles = body.fixed ? fixed_triangles_ : free_triangles_;
   for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-    tets.push_back({body.first_vertex + body.mesh.tets(t, 0),
-                    body.first_vertex + body.mesh.tets(t, 1),
-                    body.first_vertex + body.mesh.tets(t, 2),
-                    body.first_vertex + body.mesh.tets(t, 3), static_cast<int32_t>(b)});
+    tets->push_back({body.first_vertex + body.mesh.tets(t, 0),
+                     body.first_vertex + body.mesh.tets(t, 1),
+                     body.first_vertex + body.mesh.tets(t, 2),
+                     body.first_vertex + body.mesh.tets(t, 3), static_cast<int32_t>(b)});
   for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-    triangles.push_back({body.first_vertex + boundary(f, 0), body.first_vertex + boundary(f, 1),
-                         body.first_vertex + boundary(f, 2), static_cast<int32_t>(b)});
+    triangles->push_back({body.first_vertex + boundary(f, 0), body.first_vertex + boundary(f, 1),
+                          body.first_vertex + boundary(f, 2), static_cast<int32_t>(b)});
 }
 
 void Obstacles::MoveFreeBodies() {
@@ -136,42 +94,54 @@ void Obstacles::BuildFixedBodyBoxes() {
 }
 
 template <size_t N>
-void Obstacles::BinItems(const std::vector<std::array<int32_t, N>> &items,
-                         const std::vector<int32_t> &which, Binned *bin) const {
-  bin->ids = which;
-  bin->boxes.assign(which.size(), Box());
-  for (size_t slot = 0; slot < which.size(); ++slot)
-    for (size_t a = 0; a + 1 < N; ++a) bin->boxes[slot].Extend(WorldPoint(items[which[slot]][a]));
+void Obstacles::BinItems(std::vector<int32_t> ids, std::vector<std::array<int32_t, N>> items,
+                         Binned<N> *bin) const {
+  bin->ids = std::move(ids);
+  bin->items = std::move(items);
+  bin->boxes.assign(bin->ids.size(), Box());
+  for (size_t slot = 0; slot < bin->ids.size(); ++slot)
+    for (size_t a = 0; a + 1 < N; ++a) bin->boxes[slot].Extend(WorldPoint(bin->items[slot][a]));
   bin->grid.Build(bin->boxes);
 }
 
-template <size_t N>
-std::vector<int32_t> Obstacles::CurrentItems(const std::vector<std::array<int32_t, N>> &items,
-                                             const std::vector<int64_t> &start,
-                                             const std::vector<int32_t> &of_vertex,
-                                             const std::vector<int32_t> &static_items) const {
-  std::vector<int32_t> current = static_items;
+template <size_t N, class ForEachOf>
+void Obstacles::BinCurrent(
+    const std::vector<std::pair<int32_t, std::array<int32_t, N>>> &static_items,
+    ForEachOf for_each_of, Binned<N> *bin) const {
+  std::vector<std::pair<int32_t, std::array<int32_t, N>>> current = static_items;
   for (const int32_t n : state_->current_free())
-    for (int64_t k = start[n]; k < start[n + 1]; ++k) {
-      const auto &item = items[of_vertex[k]];
+    for_each_of(n, [&](int32_t id, const std::array<int32_t, N> &item) {
       if (std::all_of(item.begin(), item.begin() + (N - 1),
                       [&](int32_t m) { return state_->current(m); }))
-        current.push_back(of_vertex[k]);
-    }
-  std::sort(current.begin(), current.end());
-  current.erase(std::unique(current.begin(), current.end()), current.end());
-  return current;
+        current.push_back({id, item});
+    });
+  std::sort(current.begin(), current.end(),
+            [](const auto &a, const auto &b) { return a.first < b.first; });
+  current.erase(std::unique(current.begin(), current.end(),
+                            [](const auto &a, const auto &b) { return a.first == b.first; }),
+                current.end());
+  std::vector<int32_t> ids(current.size());
+  std::vector<std::array<int32_t, N>> items(current.size());
+  for (size_t k = 0; k < current.size(); ++k) std::tie(ids[k], items[k]) = current[k];
+  BinItems(std::move(ids), std::move(items), bin);
 }
 
 void Obstacles::EnsureFreeGrids() const {
   if (free_grids_current_) return;
-  BinItems(free_tets_, CurrentItems(free_tets_, tets_start_, tets_of_vertex_, static_tets_),
-           &free_tets_bin_);
-  BinItems(free_triangles_,
-           CurrentItems(free_triangles_, triangles_start_, triangles_of_vertex_, static_triangles_),
-           &free_triangles_bin_);
+  BinCurrent(
+      free_items_.static_tets(), [&](int32_t n, auto visit) { free_items_.ForEachTetOf(n, visit); },
+      &free_tets_bin_);
+  BinCurrent(
+      free_items_.static_triangles(),
+      [&](int32_t n, auto visit) { free_items_.ForEachTriangleOf(n, visit); },
+      &free_triangles_bin_);
   free_grids_current_ = true;
   ++free_grid_builds_;
+}
+
+FreeTriangle Obstacles::free_triangle(int32_t t) const {
+  const auto &ids = free_triangles_bin_.ids;
+  return free_triangles_bin_.items[std::lower_bound(ids.begin(), ids.end(), t) - ids.begin()];
 }
 
 // ClosestOnBody and EntryOnBody fill the hit inside their grid visits, not in
@@ -185,8 +155,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
-  const Binned &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
+  const Binned<4> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const UniformGrid &grid = bin.grid;
   if (grid.empty()) return false;
   const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
@@ -198,8 +167,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   // searched: every triangle nearer than it meets that neighbourhood.
   for (double radius = grid.cell_size(), searched = 0; best > searched && searched < 2 * limit;
        searched = radius, radius *= 2)
-    bin.ForEachNear(p, radius, [&](int32_t t, const Box &) {
-      const auto &tri = triangles[t];
+    bin.ForEachNear(p, radius, [&](int32_t t, const FreeTriangle &tri, const Box &) {
       if (tri[3] != obstacle) return;
       const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
       Eigen::Vector3d w;
@@ -226,11 +194,9 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
 bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
   bool inside = false;
   (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
-      .ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
-        const auto &tet = tets[t];
+      .ForEachNear(p, 0.0, [&](int32_t, const FreeTet &tet, const Box &box) {
         if (inside || tet[4] != obstacle || !box.Contains(p, kBoxMargin)) return;
         inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
                              WorldPoint(tet[3]))
@@ -243,8 +209,7 @@ bool Obstacles::LocateInFreeBody(const Point &p, int32_t body, double margin,
                                  Point *velocity) const {
   EnsureFreeGrids();
   bool found = false;
-  free_tets_bin_.ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
-    const auto &tet = free_tets_[t];
+  free_tets_bin_.ForEachNear(p, 0.0, [&](int32_t, const FreeTet &tet, const Box &box) {
     if (found || tet[4] != body || !box.Contains(p, kBoxMargin)) return;
     const Eigen::Vector4d w = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]),
                                           WorldPoint(tet[2]), WorldPoint(tet[3]));
@@ -260,14 +225,13 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
                             SurfaceHit *hit) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
-  const Binned &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
+  const Binned<4> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const Point direction = end - start;
   double first = kNoCrossing;
   int32_t chosen = -1;
   bin.ForEachNear(
-      0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(), [&](int32_t t, const Box &) {
-        const auto &tri = triangles[t];
+      0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(),
+      [&](int32_t t, const FreeTriangle &tri, const Box &) {
         if (tri[3] != obstacle) return;
         const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
         const Point normal = (b - a).cross(c - a);
@@ -314,20 +278,20 @@ bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstac
 
 int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
                                   const VertexObstacles &skip) const {
-  const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
-  int32_t first = -1;  // the lowest tet holding p
+  int32_t first = -1, first_body = -1;  // the lowest tet holding p, its body
   (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
-      .ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
-        const auto &tet = tets[t];
+      .ForEachNear(p, 0.0, [&](int32_t t, const FreeTet &tet, const Box &box) {
         if ((first >= 0 && t >= first) || tet[4] == body || skip.Has(tet[4]) ||
             !box.Contains(p, kBoxMargin) || (!fixed_part && Separating(body, tet[4])))
           return;
         if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
                         WorldPoint(tet[3]))
-                .minCoeff() >= -kInsideTolerance)
+                .minCoeff() >= -kInsideTolerance) {
           first = t;
+          first_body = tet[4];
+        }
       });
-  return first >= 0 ? tets[first][4] : -1;
+  return first_body;
 }
 
 bool Obstacles::Separating(int32_t a, int32_t b) const {

@@ -7,11 +7,14 @@
 // once; the free bodies' boxes follow them (MoveFreeBodies) and their grids
 // are rebuilt lazily, when a query first needs them, so that a step whose
 // bodies' boxes stay apart builds none. Positions and velocities are read
-// from FreeState (world coordinates); the free grids hold only the tets and
-// triangles whose vertices are all current there (this rank's and its halo's),
-// found from the current vertices, so a rebuild costs O(local + halo). Queries
-// break ties of distance by the lower triangle or tet index, so that answers
-// do not depend on which items a rank's grid holds. Not collective.
+// from FreeState (world coordinates). The fixed bodies' tets and triangles are
+// held whole on every rank; of the free bodies' a rank holds only those listed
+// under its own, its halo's and the fixed set's vertices (free_items.hpp: they
+// travel with the halo), and the free grids bin those whose vertices are all
+// current, so both the lists and a rebuild are O(local + halo). Queries break
+// ties of distance by the lower triangle or tet index (the item's index in the
+// scene's list), so that answers do not depend on which items a rank's grid
+// holds. Not collective.
 #pragma once
 
 #include <algorithm>
@@ -20,6 +23,7 @@
 #include <utility>
 #include <vector>
 
+#include "contact/free_items.hpp"
 #include "contact/free_state.hpp"
 #include "contact/geometry.hpp"
 #include "io/scene.hpp"
@@ -51,11 +55,14 @@ class Obstacles {
  public:
   // First: the scene, the state the queries read, and the ground (an obstacle
   // when `ground`, at height ground_y in m; a point less than ground_margin of
-  // its body's mean boundary edge above it counts as inside).
-  void SetupGround(const Scene &scene, const FreeState &state, bool ground, double ground_y,
+  // its body's mean boundary edge above it counts as inside). The state's
+  // halo exchanges bring the free items (SetupBodies).
+  void SetupGround(const Scene &scene, FreeState &state, bool ground, double ground_y,
                    double ground_margin);
-  // The bodies: fixed ones always, free ones when `track_free` (they are
-  // obstacles to each other or meet sharp edges); builds the fixed grids.
+  // While the scene's meshes are held. The bodies: fixed ones always, free
+  // ones when `track_free` (they are obstacles to each other or meet sharp
+  // edges; their items then travel with the state's halo); builds the fixed
+  // grids.
   void SetupBodies(bool track_free);
 
   // The free bodies moved (FreeState holds their new positions and boxes):
@@ -87,46 +94,52 @@ class Obstacles {
   bool ground() const { return ground_; }
   double ground_y() const { return ground_y_; }
   const Box &body_box(size_t body) const { return body_box_[body]; }
-  // A free body's boundary triangle: natural vertices and body.
-  const std::array<int32_t, 4> &free_triangle(int32_t t) const { return free_triangles_[t]; }
-  size_t num_fixed_tets() const { return fixed_tets_.size(); }
-  size_t num_free_tets() const { return free_tets_.size(); }
-  // Bytes of the bodies' item lists and their index by vertex (O(scene) on
-  // every rank; the grids, O(local + halo) for free bodies, not counted).
+  // A free body's boundary triangle: natural vertices and body. t: a
+  // SurfaceHit's triangle on a free body, from a query since the free bodies
+  // last moved (the free grids hold it).
+  FreeTriangle free_triangle(int32_t t) const;
+  size_t num_fixed_tets() const { return fixed_tets_bin_.ids.size(); }
+  size_t num_free_tets() const { return static_cast<size_t>(free_items_.num_tets()); }
+  // Bytes of the bodies' item lists: the fixed bodies' (O(scene) on every
+  // rank) and the free items this rank holds (O(local + halo)); the grids and
+  // their items' boxes are not counted.
   int64_t SceneBytes() const;
   // How often this rank built the free bodies' grids.
   PetscInt free_grid_builds() const { return free_grid_builds_; }
 
  private:
-  // A body's tets and boundary triangles, as natural vertices + body.
-  void AddBody(size_t b);
+  // A fixed body's tets and boundary triangles, as natural vertices + body.
+  void AddFixedBody(size_t b, std::vector<FreeTet> *tets,
+                    std::vector<FreeTriangle> *triangles) const;
   void BuildFixedBodyBoxes();
-  // Each free vertex's tets and triangles (CSR), and those with no free vertex.
-  void IndexFreeItems();
-  // The free items (tets: 4 vertices, triangles: 3) whose vertices are all current.
-  template <size_t N>
-  std::vector<int32_t> CurrentItems(const std::vector<std::array<int32_t, N>> &items,
-                                    const std::vector<int64_t> &start,
-                                    const std::vector<int32_t> &of_vertex,
-                                    const std::vector<int32_t> &static_items) const;
   void EnsureFreeGrids() const;
-  // Items (tets or triangles) binned in a uniform grid over their boxes: the
-  // grid holds slots, ids[slot] the item and boxes[slot] its box. Only the
-  // binned items' boxes are kept, so a free grid costs O(local + halo).
+  // Items (tets or triangles: N - 1 vertices and the body) binned in a uniform
+  // grid over their boxes: the grid holds slots, ids[slot] the item's index,
+  // items[slot] the item and boxes[slot] its box. Free grids hold only the
+  // current items, O(local + halo).
+  template <size_t N>
   struct Binned {
-    std::vector<int32_t> ids;
+    std::vector<int32_t> ids;  // increasing
+    std::vector<std::array<int32_t, N>> items;
     std::vector<Box> boxes;
     UniformGrid grid;
-    // visit(item, box) for the items whose cells meet the box around p of half-width radius.
+    // visit(id, item, box) for the items whose cells meet the box around p of half-width radius.
     template <typename Visit>
     void ForEachNear(const Point &p, double radius, Visit visit) const {
-      grid.ForEachNear(p, radius, [&](int32_t slot) { visit(ids[slot], boxes[slot]); });
+      grid.ForEachNear(p, radius,
+                       [&](int32_t slot) { visit(ids[slot], items[slot], boxes[slot]); });
     }
   };
-  // The listed items (`which`, increasing) binned at the world positions.
+  // The items (id increasing) binned at the world positions.
   template <size_t N>
-  void BinItems(const std::vector<std::array<int32_t, N>> &items, const std::vector<int32_t> &which,
-                Binned *bin) const;
+  void BinItems(std::vector<int32_t> ids, std::vector<std::array<int32_t, N>> items,
+                Binned<N> *bin) const;
+  // The free items whose vertices are all current, binned: those under the
+  // current free vertices (ForEachOf: free_items_'s ForEachTetOf or
+  // ForEachTriangleOf) and the static ones.
+  template <size_t N, class ForEachOf>
+  void BinCurrent(const std::vector<std::pair<int32_t, std::array<int32_t, N>>> &static_items,
+                  ForEachOf for_each_of, Binned<N> *bin) const;
   // The first body other than `body` and those in `skip` in whose tets of the
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
@@ -136,22 +149,19 @@ class Obstacles {
   Point WorldPoint(int32_t n) const { return state_->position(n); }
 
   const Scene *scene_ = nullptr;
-  const FreeState *state_ = nullptr;
+  FreeState *state_ = nullptr;  // read by the queries; its halo brings free_items_
   bool ground_ = false;
   double ground_y_ = 0;
   double ground_margin_ = 0;  // in mean boundary edges of the point's body
-  std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
-  std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
-  Binned fixed_tets_bin_, fixed_triangles_bin_;
-  mutable Binned free_tets_bin_, free_triangles_bin_;
+  Binned<5> fixed_tets_bin_;
+  Binned<4> fixed_triangles_bin_;
+  FreeItems free_items_;
+  mutable Binned<5> free_tets_bin_;
+  mutable Binned<4> free_triangles_bin_;
   mutable bool free_grids_current_ = false;
   mutable PetscInt free_grid_builds_ = 0;
   std::vector<std::pair<size_t, size_t>> separating_;  // (a < b), SetSeparating
   std::vector<Box> body_box_;  // broad phase: each obstacle body's bounding box
-  // Free items by vertex (CSR over natural vertices) and those without a free vertex.
-  std::vector<int64_t> tets_start_, triangles_start_;
-  std::vector<int32_t> tets_of_vertex_, triangles_of_vertex_;
-  std::vector<int32_t> static_tets_, static_triangles_;
 };
 
 }  // namespace softbody

@@ -1,0 +1,140 @@
+#include "contact/free_items.hpp"
+
+#include "common/held_bytes.hpp"
+#include "fem/mesh.hpp"
+
+namespace softbody {
+
+namespace {
+
+// The fourth corner of a triangle's record: none.
+constexpr int32_t kNoCorner = -1;
+
+// An item's key: its first corner with unknowns (-1: none, a static item).
+template <class Item>
+int32_t KeyOf(const Item &item, const std::function<bool(int32_t)> &is_free) {
+  const auto corner = std::find_if(item.begin(), item.end() - 1, is_free);
+  return corner == item.end() - 1 ? -1 : *corner;
+}
+
+// Exact capacity: the lists' bytes are what the run summary counts.
+template <class T>
+void Fit(std::vector<T> *v) {
+  v->shrink_to_fit();
+}
+
+}  // namespace
+
+// A tet or triangle (corner[3] = kNoCorner) travelling with its key vertex.
+struct FreeItems::Record {
+  int32_t key, id, corner[4], body;
+};
+
+void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is_free,
+                      const std::function<bool(int32_t)> &kept) {
+  int32_t tet_id = 0, triangle_id = 0;
+  auto add = [&](const auto &item, int32_t id, auto *own, auto *stat) {
+    const int32_t key = KeyOf(item, is_free);
+    if (key < 0)
+      stat->push_back({id, item});
+    else if (kept(key))
+      own->push_back({key, id, item});
+  };
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const Body &body = scene.bodies[b];
+    if (body.fixed) continue;
+    const int32_t first = body.first_vertex, body_id = static_cast<int32_t>(b);
+    for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
+      add(FreeTet{first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
+                  first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id},
+          tet_id++, &own_tets_, &static_tets_);
+    const auto boundary = BoundaryTriangles(body.mesh);
+    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
+      add(FreeTriangle{first + boundary(f, 0), first + boundary(f, 1), first + boundary(f, 2),
+                       body_id},
+          triangle_id++, &own_triangles_, &static_triangles_);
+  }
+  num_tets_ = tet_id;
+  std::sort(own_tets_.begin(), own_tets_.end());
+  std::sort(own_triangles_.begin(), own_triangles_.end());
+  Fit(&own_tets_);
+  Fit(&own_triangles_);
+  Fit(&static_tets_);
+  Fit(&static_triangles_);
+}
+
+int64_t FreeItems::HeldBytes() const {
+  using softbody::HeldBytes;
+  return HeldBytes(own_tets_) + HeldBytes(halo_tets_) + HeldBytes(own_triangles_) +
+         HeldBytes(halo_triangles_) + HeldBytes(static_tets_) + HeldBytes(static_triangles_) +
+         HeldBytes(sent_) + HeldBytes(received_);
+}
+
+void FreeItems::Pack(const std::vector<PetscMPIInt> &to_ranks,
+                     const std::vector<PetscMPIInt> &to_counts, const std::vector<int32_t> &sent,
+                     std::vector<Record> *records, std::vector<PetscMPIInt> *counts) {
+  std::vector<std::pair<PetscMPIInt, int32_t>> now;
+  now.reserve(sent.size());
+  for (size_t i = 0, k = 0; i < to_ranks.size(); ++i) {
+    const size_t before = records->size();
+    for (PetscMPIInt c = 0; c < to_counts[i]; ++c, ++k) {
+      const std::pair<PetscMPIInt, int32_t> pair(to_ranks[i], sent[k]);
+      now.push_back(pair);
+      if (std::binary_search(sent_.begin(), sent_.end(), pair)) continue;
+      ForEachOf(own_tets_, sent[k], [&](int32_t id, const FreeTet &t) {
+        records->push_back({sent[k], id, {t[0], t[1], t[2], t[3]}, t[4]});
+      });
+      ForEachOf(own_triangles_, sent[k], [&](int32_t id, const FreeTriangle &t) {
+        records->push_back({sent[k], id, {t[0], t[1], t[2], kNoCorner}, t[3]});
+      });
+    }
+    counts->push_back(static_cast<PetscMPIInt>(records->size() - before));
+  }
+  std::sort(now.begin(), now.end());
+  sent_ = std::move(now);
+}
+
+void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<Record> &records) {
+  std::vector<int32_t> now(received);
+  std::sort(now.begin(), now.end());
+  List<FreeTet> tets;
+  List<FreeTriangle> triangles;
+  for (const int32_t n : now) {
+    if (!std::binary_search(received_.begin(), received_.end(), n)) continue;
+    ForEachOf(halo_tets_, n, [&](int32_t id, const FreeTet &t) { tets.push_back({n, id, t}); });
+    ForEachOf(halo_triangles_, n, [&](int32_t id, const FreeTriangle &t) {
+      triangles.push_back({n, id, t});
+    });
+  }
+  for (const Record &r : records)
+    if (r.corner[3] == kNoCorner)
+      triangles.push_back({r.key, r.id, {r.corner[0], r.corner[1], r.corner[2], r.body}});
+    else
+      tets.push_back({r.key, r.id, {r.corner[0], r.corner[1], r.corner[2], r.corner[3], r.body}});
+  std::sort(tets.begin(), tets.end());
+  std::sort(triangles.begin(), triangles.end());
+  halo_tets_ = std::move(tets);
+  halo_triangles_ = std::move(triangles);
+  received_ = std::move(now);
+  Fit(&halo_tets_);
+  Fit(&halo_triangles_);
+}
+
+PetscErrorCode FreeItems::Exchange(const NeighbourExchange &neighbours,
+                                   const std::vector<PetscMPIInt> &to_ranks,
+                                   const std::vector<PetscMPIInt> &to_counts,
+                                   const std::vector<int32_t> &sent,
+                                   const std::vector<int32_t> &received, PetscInt64 *bytes_sent) {
+  PetscFunctionBeginUser;
+  std::vector<Record> records, arrived;
+  std::vector<PetscMPIInt> ranks, counts;
+  Pack(to_ranks, to_counts, sent, &records, &counts);
+  for (size_t i = 0; i < to_ranks.size(); ++i)
+    if (counts[i] > 0) ranks.push_back(to_ranks[i]);
+  counts.erase(std::remove(counts.begin(), counts.end(), 0), counts.end());
+  PetscCall(neighbours.Exchange(ranks, counts, records, &arrived, bytes_sent));
+  Unpack(received, arrived);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody

@@ -1,0 +1,119 @@
+// The free bodies' tets and boundary triangles that one rank holds for the
+// obstacles' free grids (obstacles.hpp): O(local + halo) items, not the scene's.
+//
+// An item is listed under its key, its first corner with unknowns; an item
+// without one is static and kept on every rank. A rank keeps for good the items
+// listed under its own vertices and under the fixed set's (free_state.hpp), and
+// the items listed under its halo's vertices while they stay in its halo: the
+// halo exchange calls Exchange, in which the owner of a vertex sends the items
+// listed under it to a rank whose halo the vertex enters (it was not sent there
+// at the previous halo exchange), and a rank keeps a received vertex's items
+// until a halo exchange no longer brings the vertex. The free grids bin the
+// items whose corners are all current, found under the current vertices: an
+// item whose corners are all current has its key current, so every rank finds
+// the same items as if it held the whole scene's.
+//
+// Items are named by their index in the scene's list (bodies in order, each
+// body's tets or boundary triangles in mesh order), the same on every rank, so
+// queries can break ties by it.
+#pragma once
+
+#include <petscsys.h>
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <utility>
+#include <vector>
+
+#include "common/neighbour_exchange.hpp"
+#include "io/scene.hpp"
+
+namespace softbody {
+
+// A free body's tet: 4 natural vertices, its body.
+using FreeTet = std::array<int32_t, 5>;
+// A free body's boundary triangle (outward by the right-hand rule): 3 natural
+// vertices, its body.
+using FreeTriangle = std::array<int32_t, 4>;
+
+class FreeItems {
+ public:
+  // Not collective. From the scene's whole meshes (set-up only): the free
+  // bodies' items listed under the vertices for which kept(natural) holds (this
+  // rank's own and the fixed set), and the static ones; is_free(natural): the
+  // vertex has unknowns.
+  void Setup(const Scene &scene, const std::function<bool(int32_t)> &is_free,
+             const std::function<bool(int32_t)> &kept);
+
+  // Collective (the free state's halo exchange). to_ranks / to_counts /
+  // sent: the natural vertices this rank sent in the halo, grouped by rank as
+  // NeighbourExchange takes them; received: the vertices it received. Sends
+  // the items of the vertices new to a rank's halo, keeps those of the
+  // received vertices. *bytes_sent: the payload sent.
+  PetscErrorCode Exchange(const NeighbourExchange &neighbours,
+                          const std::vector<PetscMPIInt> &to_ranks,
+                          const std::vector<PetscMPIInt> &to_counts,
+                          const std::vector<int32_t> &sent, const std::vector<int32_t> &received,
+                          PetscInt64 *bytes_sent);
+
+  // Not collective. visit(id, item) for the items listed under vertex n that
+  // this rank holds (each once), and for_static the same for the static items.
+  template <class Visit>
+  void ForEachTetOf(int32_t n, Visit visit) const {
+    ForEachOf(own_tets_, n, visit);
+    ForEachOf(halo_tets_, n, visit);
+  }
+  template <class Visit>
+  void ForEachTriangleOf(int32_t n, Visit visit) const {
+    ForEachOf(own_triangles_, n, visit);
+    ForEachOf(halo_triangles_, n, visit);
+  }
+  const std::vector<std::pair<int32_t, FreeTet>> &static_tets() const { return static_tets_; }
+  const std::vector<std::pair<int32_t, FreeTriangle>> &static_triangles() const {
+    return static_triangles_;
+  }
+
+  // The scene's free tets (all ranks).
+  int64_t num_tets() const { return num_tets_; }
+  // Bytes of the lists this rank holds.
+  int64_t HeldBytes() const;
+
+ private:
+  // An item under its key vertex, with its index in the scene's list.
+  template <class Item>
+  struct Keyed {
+    int32_t key, id;
+    Item item;
+    bool operator<(const Keyed &o) const { return key < o.key || (key == o.key && id < o.id); }
+  };
+  template <class Item>
+  using List = std::vector<Keyed<Item>>;  // sorted by (key, id)
+
+  template <class Item, class Visit>
+  static void ForEachOf(const List<Item> &list, int32_t n, Visit visit) {
+    auto at = std::lower_bound(list.begin(), list.end(), n,
+                               [](const Keyed<Item> &k, int32_t key) { return k.key < key; });
+    for (; at != list.end() && at->key == n; ++at) visit(at->id, at->item);
+  }
+  // The records for the vertices of `sent` new to their rank's halo; fills
+  // *counts per rank of to_ranks.
+  struct Record;
+  void Pack(const std::vector<PetscMPIInt> &to_ranks, const std::vector<PetscMPIInt> &to_counts,
+            const std::vector<int32_t> &sent, std::vector<Record> *records,
+            std::vector<PetscMPIInt> *counts);
+  // The halo lists: the received vertices' items, kept ones and new ones.
+  void Unpack(const std::vector<int32_t> &received, const std::vector<Record> &records);
+
+  int64_t num_tets_ = 0;
+  List<FreeTet> own_tets_, halo_tets_;
+  List<FreeTriangle> own_triangles_, halo_triangles_;
+  std::vector<std::pair<int32_t, FreeTet>> static_tets_;            // (id, tet), id increasing
+  std::vector<std::pair<int32_t, FreeTriangle>> static_triangles_;  // (id, triangle)
+  // The previous halo exchange: (rank, vertex) sent, and the vertices received; sorted.
+  std::vector<std::pair<PetscMPIInt, int32_t>> sent_;
+  std::vector<int32_t> received_;
+};
+
+}  // namespace softbody
