@@ -36,7 +36,7 @@ void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is
   auto add = [&](const auto &item, int32_t id, auto *own, auto *stat) {
     const int32_t key = KeyOf(item, is_free);
     if (key < 0)
-      stat->push_back({id, item});
+      stat->push_back({key, id, item});
     else if (kept(key))
       own->push_back({key, id, item});
   };
@@ -81,11 +81,13 @@ void FreeItems::Pack(const std::vector<PetscMPIInt> &to_ranks,
       const std::pair<PetscMPIInt, int32_t> pair(to_ranks[i], sent[k]);
       now.push_back(pair);
       if (std::binary_search(sent_.begin(), sent_.end(), pair)) continue;
-      ForEachOf(own_tets_, sent[k], [&](int32_t id, const FreeTet &t) {
-        records->push_back({sent[k], id, {t[0], t[1], t[2], t[3]}, t[4]});
+      ForEachOf(own_tets_, sent[k], [&](const IndexedItem<FreeTet> &i) {
+        const FreeTet &t = i.item;
+        records->push_back({sent[k], i.id, {t[0], t[1], t[2], t[3]}, t[4]});
       });
-      ForEachOf(own_triangles_, sent[k], [&](int32_t id, const FreeTriangle &t) {
-        records->push_back({sent[k], id, {t[0], t[1], t[2], kNoCorner}, t[3]});
+      ForEachOf(own_triangles_, sent[k], [&](const IndexedItem<FreeTriangle> &i) {
+        const FreeTriangle &t = i.item;
+        records->push_back({sent[k], i.id, {t[0], t[1], t[2], kNoCorner}, t[3]});
       });
     }
     counts->push_back(static_cast<PetscMPIInt>(records->size() - before));
@@ -101,10 +103,9 @@ void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<R
   List<FreeTriangle> triangles;
   for (const int32_t n : now) {
     if (!std::binary_search(received_.begin(), received_.end(), n)) continue;
-    ForEachOf(halo_tets_, n, [&](int32_t id, const FreeTet &t) { tets.push_back({n, id, t}); });
-    ForEachOf(halo_triangles_, n, [&](int32_t id, const FreeTriangle &t) {
-      triangles.push_back({n, id, t});
-    });
+    ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &i) { tets.push_back(i); });
+    ForEachOf(halo_triangles_, n,
+              [&](const IndexedItem<FreeTriangle> &i) { triangles.push_back(i); });
   }
   for (const Record &r : records)
     if (r.corner[3] == kNoCorner)
@@ -118,6 +119,7 @@ void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<R
   received_ = std::move(now);
   Fit(&halo_tets_);
   Fit(&halo_triangles_);
+  ++generation_;
 }
 
 PetscErrorCode FreeItems::Exchange(const NeighbourExchange &neighbours,

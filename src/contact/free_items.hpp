@@ -38,6 +38,15 @@ using FreeTet = std::array<int32_t, 5>;
 // vertices, its body.
 using FreeTriangle = std::array<int32_t, 4>;
 
+// A tet or triangle with its key vertex (-1: none, static) and its index in
+// the scene's list.
+template <class Item>
+struct IndexedItem {
+  int32_t key, id;
+  Item item;
+  bool operator<(const IndexedItem &o) const { return key < o.key || (key == o.key && id < o.id); }
+};
+
 class FreeItems {
  public:
   // Not collective. From the scene's whole meshes (set-up only): the free
@@ -58,8 +67,9 @@ class FreeItems {
                           const std::vector<int32_t> &sent, const std::vector<int32_t> &received,
                           PetscInt64 *bytes_sent);
 
-  // Not collective. visit(id, item) for the items listed under vertex n that
-  // this rank holds (each once), and for_static the same for the static items.
+  // Not collective. visit(indexed item) for the items listed under vertex n
+  // that this rank holds (each once); the static items. The references stay
+  // valid until the next Exchange (generation() tells).
   template <class Visit>
   void ForEachTetOf(int32_t n, Visit visit) const {
     ForEachOf(own_tets_, n, visit);
@@ -70,10 +80,12 @@ class FreeItems {
     ForEachOf(own_triangles_, n, visit);
     ForEachOf(halo_triangles_, n, visit);
   }
-  const std::vector<std::pair<int32_t, FreeTet>> &static_tets() const { return static_tets_; }
-  const std::vector<std::pair<int32_t, FreeTriangle>> &static_triangles() const {
+  const std::vector<IndexedItem<FreeTet>> &static_tets() const { return static_tets_; }
+  const std::vector<IndexedItem<FreeTriangle>> &static_triangles() const {
     return static_triangles_;
   }
+  // How many Exchanges changed the lists.
+  uint64_t generation() const { return generation_; }
 
   // The scene's free tets (all ranks).
   int64_t num_tets() const { return num_tets_; }
@@ -81,21 +93,14 @@ class FreeItems {
   int64_t HeldBytes() const;
 
  private:
-  // An item under its key vertex, with its index in the scene's list.
   template <class Item>
-  struct Keyed {
-    int32_t key, id;
-    Item item;
-    bool operator<(const Keyed &o) const { return key < o.key || (key == o.key && id < o.id); }
-  };
-  template <class Item>
-  using List = std::vector<Keyed<Item>>;  // sorted by (key, id)
+  using List = std::vector<IndexedItem<Item>>;  // sorted by (key, id)
 
   template <class Item, class Visit>
   static void ForEachOf(const List<Item> &list, int32_t n, Visit visit) {
     auto at = std::lower_bound(list.begin(), list.end(), n,
-                               [](const Keyed<Item> &k, int32_t key) { return k.key < key; });
-    for (; at != list.end() && at->key == n; ++at) visit(at->id, at->item);
+                               [](const IndexedItem<Item> &k, int32_t key) { return k.key < key; });
+    for (; at != list.end() && at->key == n; ++at) visit(*at);
   }
   // The records for the vertices of `sent` new to their rank's halo; fills
   // *counts per rank of to_ranks.
@@ -109,8 +114,9 @@ class FreeItems {
   int64_t num_tets_ = 0;
   List<FreeTet> own_tets_, halo_tets_;
   List<FreeTriangle> own_triangles_, halo_triangles_;
-  std::vector<std::pair<int32_t, FreeTet>> static_tets_;            // (id, tet), id increasing
-  std::vector<std::pair<int32_t, FreeTriangle>> static_triangles_;  // (id, triangle)
+  List<FreeTet> static_tets_;  // key -1, id increasing
+  List<FreeTriangle> static_triangles_;
+  uint64_t generation_ = 0;
   // The previous halo exchange: (rank, vertex) sent, and the vertices received; sorted.
   std::vector<std::pair<PetscMPIInt, int32_t>> sent_;
   std::vector<int32_t> received_;

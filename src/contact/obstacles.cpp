@@ -38,42 +38,39 @@ void Obstacles::SetupGround(const Scene &scene, FreeState &state, bool ground, d
 }
 
 int64_t Obstacles::SceneBytes() const {
-  return HeldBytes(fixed_tets_bin_.ids) + HeldBytes(fixed_tets_bin_.items) +
-         HeldBytes(fixed_triangles_bin_.ids) + HeldBytes(fixed_triangles_bin_.items) +
-         free_items_.HeldBytes();
+  return HeldBytes(fixed_tets_) + HeldBytes(fixed_triangles_) + free_items_.HeldBytes();
 }
 
 void Obstacles::SetupBodies(bool track_free) {
   // Exact sizes: the fixed lists hold every tet of the scene's fixed bodies.
   size_t fixed_tets = 0;
   for (const Body &body : scene_->bodies) fixed_tets += body.fixed ? body.num_tets() : 0;
-  std::vector<FreeTet> tets;
-  std::vector<FreeTriangle> triangles;
-  tets.reserve(fixed_tets);
+  fixed_tets_.reserve(fixed_tets);
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
-    if (scene_->bodies[b].fixed) AddFixedBody(b, &tets, &triangles);
-  triangles.shrink_to_fit();
+    if (scene_->bodies[b].fixed) AddFixedBody(b);
+  fixed_triangles_.shrink_to_fit();
   BuildFixedBodyBoxes();
-  std::vector<int32_t> tet_ids(tets.size()), triangle_ids(triangles.size());
-  std::iota(tet_ids.begin(), tet_ids.end(), 0);
-  std::iota(triangle_ids.begin(), triangle_ids.end(), 0);
-  BinItems(std::move(tet_ids), std::move(tets), &fixed_tets_bin_);
-  BinItems(std::move(triangle_ids), std::move(triangles), &fixed_triangles_bin_);
+  fixed_tets_bin_.base = fixed_tets_.data();
+  fixed_triangles_bin_.base = fixed_triangles_.data();
+  BinItems(fixed_tets_.size(), &fixed_tets_bin_);
+  BinItems(fixed_triangles_.size(), &fixed_triangles_bin_);
   if (track_free) state_->AttachItems(&free_items_);
 }
 
-void Obstacles::AddFixedBody(size_t b, std::vector<FreeTet> *tets,
-                             std::vector<FreeTriangle> *triangles) const {
+void Obstacles::AddFixedBody(size_t b) {
   const Body &body = scene_->bodies[b];
   const auto boundary = BoundaryTriangles(body.mesh);
+  const int32_t first = body.first_vertex, body_id = static_cast<int32_t>(b);
   for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-    tets->push_back({body.first_vertex + body.mesh.tets(t, 0),
-                     body.first_vertex + body.mesh.tets(t, 1),
-                     body.first_vertex + body.mesh.tets(t, 2),
-                     body.first_vertex + body.mesh.tets(t, 3), static_cast<int32_t>(b)});
+    fixed_tets_.push_back({-1,
+                           static_cast<int32_t>(fixed_tets_.size()),
+                           {first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
+                            first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id}});
   for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-    triangles->push_back({body.first_vertex + boundary(f, 0), body.first_vertex + boundary(f, 1),
-                          body.first_vertex + boundary(f, 2), static_cast<int32_t>(b)});
+    fixed_triangles_.push_back(
+        {-1,
+         static_cast<int32_t>(fixed_triangles_.size()),
+         {first + boundary(f, 0), first + boundary(f, 1), first + boundary(f, 2), body_id}});
 }
 
 void Obstacles::MoveFreeBodies() {
@@ -93,41 +90,45 @@ void Obstacles::BuildFixedBodyBoxes() {
   }
 }
 
-template <size_t N>
-void Obstacles::BinItems(std::vector<int32_t> ids, std::vector<std::array<int32_t, N>> items,
-                         Binned<N> *bin) const {
-  bin->ids = std::move(ids);
-  bin->items = std::move(items);
-  bin->boxes.assign(bin->ids.size(), Box());
-  for (size_t slot = 0; slot < bin->ids.size(); ++slot)
-    for (size_t a = 0; a + 1 < N; ++a) bin->boxes[slot].Extend(WorldPoint(bin->items[slot][a]));
+template <class Item>
+void Obstacles::BinItems(size_t count, Binned<Item> *bin) const {
+  bin->boxes.assign(count, Box());
+  for (size_t slot = 0; slot < count; ++slot) {
+    const Item &item = bin->at(slot).item;
+    for (size_t a = 0; a + 1 < item.size(); ++a) bin->boxes[slot].Extend(WorldPoint(item[a]));
+  }
   bin->grid.Build(bin->boxes);
 }
 
-template <size_t N, class ForEachOf>
-void Obstacles::BinCurrent(
-    const std::vector<std::pair<int32_t, std::array<int32_t, N>>> &static_items,
-    ForEachOf for_each_of, Binned<N> *bin) const {
-  std::vector<std::pair<int32_t, std::array<int32_t, N>>> current = static_items;
+template <class Item, class ForEachOf>
+void Obstacles::BinCurrent(const std::vector<IndexedItem<Item>> &static_items,
+                           ForEachOf for_each_of, Binned<Item> *bin) const {
+  auto all_current = [&](const IndexedItem<Item> &i) {
+    return std::all_of(i.item.begin(), i.item.end() - 1,
+                       [&](int32_t m) { return state_->current(m); });
+  };
+  // Counted first, so that the list is allocated once at its size.
+  size_t count = static_items.size();
   for (const int32_t n : state_->current_free())
-    for_each_of(n, [&](int32_t id, const std::array<int32_t, N> &item) {
-      if (std::all_of(item.begin(), item.begin() + (N - 1),
-                      [&](int32_t m) { return state_->current(m); }))
-        current.push_back({id, item});
+    for_each_of(n, [&](const IndexedItem<Item> &i) { count += all_current(i); });
+  auto &items = bin->items;
+  items.clear();
+  items.shrink_to_fit();
+  items.reserve(count);
+  for (const IndexedItem<Item> &i : static_items) items.push_back(&i);
+  for (const int32_t n : state_->current_free())
+    for_each_of(n, [&](const IndexedItem<Item> &i) {
+      if (all_current(i)) items.push_back(&i);
     });
-  std::sort(current.begin(), current.end(),
-            [](const auto &a, const auto &b) { return a.first < b.first; });
-  current.erase(std::unique(current.begin(), current.end(),
-                            [](const auto &a, const auto &b) { return a.first == b.first; }),
-                current.end());
-  std::vector<int32_t> ids(current.size());
-  std::vector<std::array<int32_t, N>> items(current.size());
-  for (size_t k = 0; k < current.size(); ++k) std::tie(ids[k], items[k]) = current[k];
-  BinItems(std::move(ids), std::move(items), bin);
+  std::sort(items.begin(), items.end(), [](auto a, auto b) { return a->id < b->id; });
+  items.erase(
+      std::unique(items.begin(), items.end(), [](auto a, auto b) { return a->id == b->id; }),
+      items.end());
+  BinItems(items.size(), bin);
 }
 
 void Obstacles::EnsureFreeGrids() const {
-  if (free_grids_current_) return;
+  if (free_grids_current_ && binned_generation_ == free_items_.generation()) return;
   BinCurrent(
       free_items_.static_tets(), [&](int32_t n, auto visit) { free_items_.ForEachTetOf(n, visit); },
       &free_tets_bin_);
@@ -136,12 +137,16 @@ void Obstacles::EnsureFreeGrids() const {
       [&](int32_t n, auto visit) { free_items_.ForEachTriangleOf(n, visit); },
       &free_triangles_bin_);
   free_grids_current_ = true;
+  binned_generation_ = free_items_.generation();
   ++free_grid_builds_;
 }
 
 FreeTriangle Obstacles::free_triangle(int32_t t) const {
-  const auto &ids = free_triangles_bin_.ids;
-  return free_triangles_bin_.items[std::lower_bound(ids.begin(), ids.end(), t) - ids.begin()];
+  const auto &items = free_triangles_bin_.items;
+  const auto at =
+      std::lower_bound(items.begin(), items.end(), t,
+                       [](const IndexedItem<FreeTriangle> *i, int32_t id) { return i->id < id; });
+  return (*at)->item;
 }
 
 // ClosestOnBody and EntryOnBody fill the hit inside their grid visits, not in
@@ -155,7 +160,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const Binned<4> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
+  const Binned<FreeTriangle> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const UniformGrid &grid = bin.grid;
   if (grid.empty()) return false;
   const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
@@ -225,7 +230,7 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
                             SurfaceHit *hit) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const Binned<4> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
+  const Binned<FreeTriangle> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const Point direction = end - start;
   double first = kNoCrossing;
   int32_t chosen = -1;

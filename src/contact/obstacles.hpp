@@ -98,7 +98,7 @@ class Obstacles {
   // SurfaceHit's triangle on a free body, from a query since the free bodies
   // last moved (the free grids hold it).
   FreeTriangle free_triangle(int32_t t) const;
-  size_t num_fixed_tets() const { return fixed_tets_bin_.ids.size(); }
+  size_t num_fixed_tets() const { return fixed_tets_.size(); }
   size_t num_free_tets() const { return static_cast<size_t>(free_items_.num_tets()); }
   // Bytes of the bodies' item lists: the fixed bodies' (O(scene) on every
   // rank) and the free items this rank holds (O(local + halo)); the grids and
@@ -108,38 +108,40 @@ class Obstacles {
   PetscInt free_grid_builds() const { return free_grid_builds_; }
 
  private:
-  // A fixed body's tets and boundary triangles, as natural vertices + body.
-  void AddFixedBody(size_t b, std::vector<FreeTet> *tets,
-                    std::vector<FreeTriangle> *triangles) const;
+  // A fixed body's tets and boundary triangles, as natural vertices + body,
+  // indexed in the scene's list of fixed items.
+  void AddFixedBody(size_t b);
   void BuildFixedBodyBoxes();
   void EnsureFreeGrids() const;
-  // Items (tets or triangles: N - 1 vertices and the body) binned in a uniform
-  // grid over their boxes: the grid holds slots, ids[slot] the item's index,
-  // items[slot] the item and boxes[slot] its box. Free grids hold only the
-  // current items, O(local + halo).
-  template <size_t N>
+  // Items (tets or triangles: vertices and the body) binned in a uniform grid
+  // over their boxes: the grid holds slots, at(slot) the item (from `base`,
+  // slot = index, or `items`: free grids hold only the current items, O(local +
+  // halo), pointers into FreeItems' lists) and boxes[slot] its box.
+  template <class Item>
   struct Binned {
-    std::vector<int32_t> ids;  // increasing
-    std::vector<std::array<int32_t, N>> items;
+    const IndexedItem<Item> *base = nullptr;
+    std::vector<const IndexedItem<Item> *> items;  // id increasing
     std::vector<Box> boxes;
     UniformGrid grid;
+    const IndexedItem<Item> &at(size_t slot) const { return base ? base[slot] : *items[slot]; }
     // visit(id, item, box) for the items whose cells meet the box around p of half-width radius.
     template <typename Visit>
     void ForEachNear(const Point &p, double radius, Visit visit) const {
-      grid.ForEachNear(p, radius,
-                       [&](int32_t slot) { visit(ids[slot], items[slot], boxes[slot]); });
+      grid.ForEachNear(p, radius, [&](int32_t slot) {
+        const IndexedItem<Item> &i = at(slot);
+        visit(i.id, i.item, boxes[slot]);
+      });
     }
   };
-  // The items (id increasing) binned at the world positions.
-  template <size_t N>
-  void BinItems(std::vector<int32_t> ids, std::vector<std::array<int32_t, N>> items,
-                Binned<N> *bin) const;
+  // The bin's boxes at the world positions and its grid, for its `count` items.
+  template <class Item>
+  void BinItems(size_t count, Binned<Item> *bin) const;
   // The free items whose vertices are all current, binned: those under the
-  // current free vertices (ForEachOf: free_items_'s ForEachTetOf or
+  // current free vertices (for_each_of: free_items_'s ForEachTetOf or
   // ForEachTriangleOf) and the static ones.
-  template <size_t N, class ForEachOf>
-  void BinCurrent(const std::vector<std::pair<int32_t, std::array<int32_t, N>>> &static_items,
-                  ForEachOf for_each_of, Binned<N> *bin) const;
+  template <class Item, class ForEachOf>
+  void BinCurrent(const std::vector<IndexedItem<Item>> &static_items, ForEachOf for_each_of,
+                  Binned<Item> *bin) const;
   // The first body other than `body` and those in `skip` in whose tets of the
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
@@ -152,13 +154,16 @@ class Obstacles {
   FreeState *state_ = nullptr;  // read by the queries; its halo brings free_items_
   bool ground_ = false;
   double ground_y_ = 0;
-  double ground_margin_ = 0;  // in mean boundary edges of the point's body
-  Binned<5> fixed_tets_bin_;
-  Binned<4> fixed_triangles_bin_;
+  double ground_margin_ = 0;                      // in mean boundary edges of the point's body
+  std::vector<IndexedItem<FreeTet>> fixed_tets_;  // the fixed bodies' (key -1)
+  std::vector<IndexedItem<FreeTriangle>> fixed_triangles_;
+  Binned<FreeTet> fixed_tets_bin_;
+  Binned<FreeTriangle> fixed_triangles_bin_;
   FreeItems free_items_;
-  mutable Binned<5> free_tets_bin_;
-  mutable Binned<4> free_triangles_bin_;
+  mutable Binned<FreeTet> free_tets_bin_;
+  mutable Binned<FreeTriangle> free_triangles_bin_;
   mutable bool free_grids_current_ = false;
+  mutable uint64_t binned_generation_ = 0;  // free_items_'s, when the free grids were built
   mutable PetscInt free_grid_builds_ = 0;
   std::vector<std::pair<size_t, size_t>> separating_;  // (a < b), SetSeparating
   std::vector<Box> body_box_;  // broad phase: each obstacle body's bounding box
