@@ -40,14 +40,27 @@ void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is
     else if (kept(key))
       own->push_back({key, id, item});
   };
+  auto tet = [&](const Body &body, int32_t t, int32_t body_id) {
+    const int32_t first = body.first_vertex;
+    return FreeTet{first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
+                   first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id};
+  };
+  // The tets counted first, so that their lists are allocated once at their size.
+  size_t own = 0, stat = 0;
+  for (size_t b = 0; b < scene.bodies.size(); ++b)
+    for (int32_t t = 0; !scene.bodies[b].fixed && t < scene.bodies[b].mesh.num_tets(); ++t) {
+      const int32_t key = KeyOf(tet(scene.bodies[b], t, 0), is_free);
+      own += key >= 0 && kept(key);
+      stat += key < 0;
+    }
+  own_tets_.reserve(own);
+  static_tets_.reserve(stat);
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
     if (body.fixed) continue;
     const int32_t first = body.first_vertex, body_id = static_cast<int32_t>(b);
     for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-      add(FreeTet{first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
-                  first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id},
-          tet_id++, &own_tets_, &static_tets_);
+      add(tet(body, t, body_id), tet_id++, &own_tets_, &static_tets_);
     const auto boundary = BoundaryTriangles(body.mesh);
     for (Eigen::Index f = 0; f < boundary.rows(); ++f)
       add(FreeTriangle{first + boundary(f, 0), first + boundary(f, 1), first + boundary(f, 2),
@@ -57,9 +70,7 @@ void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is
   num_tets_ = tet_id;
   std::sort(own_tets_.begin(), own_tets_.end());
   std::sort(own_triangles_.begin(), own_triangles_.end());
-  Fit(&own_tets_);
   Fit(&own_triangles_);
-  Fit(&static_tets_);
   Fit(&static_triangles_);
 }
 
@@ -99,8 +110,18 @@ void FreeItems::Pack(const std::vector<PetscMPIInt> &to_ranks,
 void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<Record> &records) {
   std::vector<int32_t> now(received);
   std::sort(now.begin(), now.end());
+  // Counted first, so that the lists are allocated once at their size.
+  size_t num_tets = 0, num_triangles = 0;
+  for (const int32_t n : now)
+    if (std::binary_search(received_.begin(), received_.end(), n)) {
+      ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &) { ++num_tets; });
+      ForEachOf(halo_triangles_, n, [&](const IndexedItem<FreeTriangle> &) { ++num_triangles; });
+    }
+  for (const Record &r : records) ++(r.corner[3] == kNoCorner ? num_triangles : num_tets);
   List<FreeTet> tets;
   List<FreeTriangle> triangles;
+  tets.reserve(num_tets);
+  triangles.reserve(num_triangles);
   for (const int32_t n : now) {
     if (!std::binary_search(received_.begin(), received_.end(), n)) continue;
     ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &i) { tets.push_back(i); });
@@ -117,8 +138,6 @@ void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<R
   halo_tets_ = std::move(tets);
   halo_triangles_ = std::move(triangles);
   received_ = std::move(now);
-  Fit(&halo_tets_);
-  Fit(&halo_triangles_);
   ++generation_;
 }
 
