@@ -118,17 +118,18 @@ PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g, PetscInt64 by
   PetscFunctionBeginUser;
   if (!g) PetscFunctionReturn(PETSC_SUCCESS);
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &bytes, 1, MPIU_INT64, MPI_MAX, comm));
-  PetscCall(PetscPrintf(comm,
-                        "  guard        %" PetscInt_FMT
-                        " passes with colliding surface pairs (%" PetscInt_FMT
-                        " pairs, %" PetscInt_FMT " rounds, at most %" PetscInt_FMT
-                        " in a step); zones moved %" PetscInt_FMT " vertices (%" PetscInt_FMT
-                        " frozen); %" PetscInt_FMT " pairs tested; %" PetscInt_FMT
-                        " pairs closer than the separation at a step's start (%" PetscInt_FMT
-                        " at the scene's start), not guarded; %.3f s",
-                        g->passes_guarded, g->collisions, g->rounds, g->max_rounds,
-                        g->zone_vertices, g->frozen_vertices, g->candidates, g->close_pairs,
-                        g->initial_close_pairs, (double)g->seconds));
+  PetscCall(PetscPrintf(
+      comm,
+      "  guard        %" PetscInt_FMT " passes with colliding surface pairs (%" PetscInt_FMT
+      " pairs, %" PetscInt_FMT " rounds, at most %" PetscInt_FMT
+      " in a step); zones moved %" PetscInt_FMT " vertices (%" PetscInt_FMT
+      " frozen); %" PetscInt_FMT " pairs tested (self-contact candidates listed %" PetscInt_FMT
+      " times, all ranks); %" PetscInt_FMT
+      " pairs closer than the separation at a step's start (%" PetscInt_FMT
+      " at the scene's start), not guarded; %.3f s",
+      g->passes_guarded, g->collisions, g->rounds, g->max_rounds, g->zone_vertices,
+      g->frozen_vertices, g->candidates, g->rebuilds, g->close_pairs, g->initial_close_pairs,
+      (double)g->seconds));
   if (bytes > 0)
     PetscCall(PetscPrintf(comm, "; halo and pairs: %.3g kB sent by the busiest rank in all",
                           bytes / 1e3));

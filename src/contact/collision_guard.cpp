@@ -234,12 +234,14 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
   query_.changed = nullptr;
   query_.usable = parallel_ ? &usable_ : nullptr;
   query_.owned = parallel_ ? &owned_mask_ : nullptr;
-  PetscInt rounds = 0, counts[2] = {0, 0};  // pairs tested, pairs close at the start
+  // Pairs tested, pairs close at the start, self-contact candidate lists built.
+  PetscInt rounds = 0, counts[3] = {0, 0, 0};
   for (;; ++rounds) {
     CollisionCount count;
     std::vector<SurfaceCollision> collisions = finder_.Find(query_, &count);
     counts[0] += count.candidates;
     if (rounds == 0) counts[1] += count.close;
+    counts[2] += count.rebuilds;
     PetscCall(ShareCollisions(&collisions));
     if (collisions.empty()) break;
     stats_.collisions += static_cast<PetscInt>(collisions.size());
@@ -253,9 +255,10 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
     query_.changed = &changed;
   }
   query_.changed = nullptr;
-  if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM, comm_));
+  if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 3, MPIU_INT, MPI_SUM, comm_));
   stats_.candidates += counts[0];
   stats_.close_pairs += counts[1];
+  stats_.rebuilds += counts[2];
   if (rounds > 0) ++stats_.passes_guarded;
   stats_.rounds += rounds;
   stats_.max_rounds = std::max(stats_.max_rounds, rounds);

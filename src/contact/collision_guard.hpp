@@ -55,6 +55,7 @@ struct GuardStatistics {
   PetscInt initial_close_pairs =
       0;                    // of them, at the scene's start (placed touching or overlapping)
   PetscInt candidates = 0;  // pairs tested by CCD
+  PetscInt rebuilds = 0;    // self-contact candidate lists built, summed over ranks
   PetscLogDouble seconds = 0;
 };
 

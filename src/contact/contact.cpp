@@ -66,6 +66,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   obstacles_.SetupGround(scene, state_, ground_, options.ground_y,
                          kGroundMarginOfGap * options.gap);
   if (body_obstacles_) SetupBodyObstacles(candidates);
+  if (free_obstacles_) PetscCall(state_.SetupRingSet(lumped_mass, RingNeighbours()));
   CollectCheckedVertices();
   constraints_.Setup(scene, layout, state_, obstacles_, features_, options.gap);
   friction_.Setup(options.friction, [this](int32_t n) { return 1 / state_.inverse_mass(n); });
@@ -73,6 +74,19 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   if (guard_on_) PetscCall(SetupGuard(lumped_mass));
   if (free_obstacles_) separation_.Setup(comm, scene, state_, &obstacles_);
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+std::vector<int32_t> ContactSolver::RingNeighbours() const {
+  std::vector<int32_t> owned = state_.owned_natural(), ring;
+  std::sort(owned.begin(), owned.end());
+  auto own = [&](int32_t n) { return std::binary_search(owned.begin(), owned.end(), n); };
+  for (size_t t = 0; t < obstacles_.num_free_triangles(); ++t) {
+    const auto &triangle = obstacles_.free_triangle(static_cast<int32_t>(t));
+    if (std::none_of(triangle.begin(), triangle.begin() + 3, own)) continue;
+    for (int k = 0; k < 3; ++k)
+      if (!own(triangle[k])) ring.push_back(triangle[k]);
+  }
+  return ring;
 }
 
 PetscErrorCode ContactSolver::SetupGuard(Vec lumped_mass) {
@@ -152,7 +166,7 @@ PetscErrorCode ContactSolver::Refresh(Vec x, Vec v, PetscReal dt, bool features)
   PetscFunctionBeginUser;
   features_near_ = false;
   if (features && !features_.empty()) PetscCall(FeaturesNear(x, v, dt, &features_near_));
-  const StateNeeds needs{free_obstacles_ || features_near_, !distance_.empty()};
+  const StateNeeds needs{free_obstacles_ || features_near_, !distance_.empty(), free_obstacles_};
   if (exchange_always_ || features_near_) PetscCall(ExchangeFreeState(x, v, dt, needs));
   if (needs.halo) obstacles_.MoveFreeBodies();
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -280,7 +294,8 @@ void ContactSolver::ReaimFeatureContact(int32_t feature, int32_t natural, PetscI
 void ContactSolver::ReaimVertexContact(PetscInt local, const Contact &contact,
                                        const Point &position, const Point &velocity, PetscReal dt) {
   SurfaceHit hit;
-  if (!obstacles_.ClosestOnBody(position + dt * velocity, contact.body, &hit)) return;
+  if (!obstacles_.ContactOnBody(position + dt * velocity, contact.natural, contact.body, &hit))
+    return;
   constraints_.Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt,
                          hit, false);
   if (options_.friction > 0)

@@ -224,6 +224,9 @@ class ContactSolver {
   // With mean_velocity_differs: the vertices held in this step end with the
   // mean velocity (x1 - x_n) / dt (the guard writes it for those it moves).
   PetscErrorCode EndHeldWithMeanVelocity(const StepMotion &motion, Vec x, Vec v);
+  // Not collective. The other ranks' corners (natural) of the free boundary
+  // triangles at this rank's own vertices (FreeState::SetupRingSet).
+  std::vector<int32_t> RingNeighbours() const;
 
   // Times a public method: the "Contact" event of -log_view and stats_.seconds.
   class Timing {

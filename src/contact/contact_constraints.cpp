@@ -64,7 +64,8 @@ bool ContactConstraints::AddVertexPenetration(PetscInt local, int32_t natural, c
   if (held.full()) return false;
   const Point predicted = x0 + dt * velocity;
   SurfaceHit hit;
-  if (!obstacles_->FindPenetration(predicted, state_->body_of(natural), held, &hit)) return false;
+  if (!obstacles_->FindPenetration(predicted, state_->body_of(natural), held, &hit, natural))
+    return false;
   PreferEntry(x0, predicted, &hit);
   Constrain(local, natural, x0, predicted, velocity, dt, hit, true);
   return true;
@@ -99,10 +100,33 @@ void ContactConstraints::Constrain(PetscInt local, int32_t natural, const Point 
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
   const double normal_velocity = RecoveryVelocity(natural, x0, target, dt, hit);
   normals_.push_back({local, n, normal_velocity, w_obstacle == 0});
+  if (hit.body >= 0 && !scene_->bodies[hit.body].fixed && hit.triangle >= 0)
+    MakeTwoSided(natural, x0, dt, hit, &normals_.back());
   contacts_.push_back(
       {natural, hit.body, common, fresh && approach < -bounce_speed_, -1, hit.velocity});
   VertexObstacles &obstacles = constrained_[local];
   obstacles.obstacle[obstacles.count++] = hit.body;
+}
+
+// The relative normal velocity that takes the vertex from its start height
+// above the face (the face point at the step's start: the predicted one less
+// dt times its velocity) to the gap, never higher than it started; from
+// inside, at most kMaxRecoveryPerStep edges per step, and deeper than that
+// only stopping the sinking (RecoveryVelocity's rules, relative to the face).
+void ContactConstraints::MakeTwoSided(int32_t natural, const Point &x0, PetscReal dt,
+                                      const SurfaceHit &hit, VelocityConstraint *constraint) const {
+  const Point &n = hit.normal;
+  const double edge = state_->edge(state_->body_of(natural)), gap = gap_ * edge;
+  const double height = n.dot(x0 - (hit.point - dt * hit.velocity));
+  double velocity = ((height >= 0 ? std::min(gap, height) : gap) - height) / dt;
+  if (height < 0)
+    velocity = std::min(
+        velocity, -height > kMaxRecoveryPerStep * edge ? 0.0 : kMaxRecoveryPerStep * edge / dt);
+  const auto &triangle = obstacles_->free_triangle(hit.triangle);
+  constraint->velocity = velocity;
+  constraint->two_sided = true;
+  constraint->weights = hit.weights;
+  for (int k = 0; k < 3; ++k) constraint->face[k] = layout_->PetscVertexOfNatural(triangle[k]);
 }
 
 // A vertex already inside at the start of the step (a body placed in the
@@ -266,6 +290,7 @@ PetscErrorCode ContactConstraints::Combine(MPI_Comm comm,
     if (i >= released_.size() || !released_[i]) solve_constraints_.push_back(normals_[i]);
   solve_constraints_.insert(solve_constraints_.end(), tangents.begin(), tangents.end());
   solve_constraints_.insert(solve_constraints_.end(), held_.begin(), held_.end());
+  for (VelocityConstraint &c : solve_constraints_) c.order_key = state_->owned_natural()[c.vertex];
   const PetscInt local = static_cast<PetscInt>(solve_constraints_.size());
   PetscCallMPI(MPIU_Allreduce(&local, &global_count_, 1, MPIU_INT, MPI_SUM, comm));
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -6,12 +6,18 @@
 //   n . v = n . (s - x0) / dt,
 // s its closest surface point (against a fixed body, where its path enters it)
 // and n that surface's outward normal, so that it ends the step on the
-// surface; against a free body s is the plane where the two sides meet, the
-// overlap split by inverse mass. A vertex already inside at the start of the
-// step leaves at most kMaxRecoveryPerStep edge lengths per step faster than
-// the obstacle; more than that deep inside another free body, it only stops
-// sinking. The contact leaves with the two sides' momentum-weighted normal
-// velocity (Contact::normal_velocity).
+// surface. Against a free body the constraint is two-sided
+// (projected_solve.hpp): n . (v - sum_k w_k v_k) >= c on the relative normal
+// velocity of the vertex and the face point (w its barycentric weights), which
+// takes the vertex from its start height above the face to the gap; the two
+// bodies get equal and opposite impulses; the face is the closest one facing
+// the vertex (Obstacles::ContactOnBody), and a vertex within the ground's
+// margin outside another free body is constrained too. A vertex already inside
+// at the start of the step leaves at most kMaxRecoveryPerStep edge lengths per
+// step faster than the obstacle; more than that deep inside another free body,
+// it only stops sinking. A one-sided contact leaves with the two sides'
+// momentum-weighted normal velocity (Contact::normal_velocity); a two-sided one
+// with the solve's.
 //
 // Feature contact: a fixed body's sharp-edge point p (SharpFeatures) that the
 // solve would take into a free body's surface triangle (closest point q,
@@ -121,6 +127,10 @@ class ContactConstraints {
   // The normal velocity that takes x0 to target, limited for a vertex already inside.
   double RecoveryVelocity(int32_t natural, const Point &x0, const Point &target, PetscReal dt,
                           const SurfaceHit &hit) const;
+  // Against a free body: *constraint becomes two-sided (projected_solve.hpp),
+  // on the relative normal velocity of the vertex and the hit's face point.
+  void MakeTwoSided(int32_t natural, const Point &x0, PetscReal dt, const SurfaceHit &hit,
+                    VelocityConstraint *constraint) const;
   // Which vertices of the triangle a feature contact moves.
   std::array<bool, 3> MovingVertices(const std::array<int32_t, 4> &triangle, const SurfaceHit &hit,
                                      const Point &m) const;

@@ -7,9 +7,6 @@ namespace softbody {
 
 namespace {
 
-// The fourth corner of a triangle's record: none.
-constexpr int32_t kNoCorner = -1;
-
 // An item's key: its first corner with unknowns (-1: none, a static item).
 template <class Item>
 int32_t KeyOf(const Item &item, const std::function<bool(int32_t)> &is_free) {
@@ -25,19 +22,22 @@ void Fit(std::vector<T> *v) {
 
 }  // namespace
 
-// A tet or triangle (corner[3] = kNoCorner) travelling with its key vertex.
+// A tet travelling with its key vertex.
 struct FreeItems::Record {
   int32_t key, id, corner[4], body;
 };
 
 void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is_free,
                       const std::function<bool(int32_t)> &kept) {
+  const uint64_t generation = generation_ + 1;  // grids of the lists before are stale
+  *this = FreeItems();
+  generation_ = generation;
   int32_t tet_id = 0, triangle_id = 0;
-  auto add = [&](const auto &item, int32_t id, auto *own, auto *stat) {
+  auto add = [&](const auto &item, int32_t id, auto *own, auto *stat, bool all = false) {
     const int32_t key = KeyOf(item, is_free);
     if (key < 0)
       stat->push_back({key, id, item});
-    else if (kept(key))
+    else if (all || kept(key))
       own->push_back({key, id, item});
   };
   auto tet = [&](const Body &body, int32_t t, int32_t body_id) {
@@ -65,19 +65,24 @@ void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is
     for (Eigen::Index f = 0; f < boundary.rows(); ++f)
       add(FreeTriangle{first + boundary(f, 0), first + boundary(f, 1), first + boundary(f, 2),
                        body_id},
-          triangle_id++, &own_triangles_, &static_triangles_);
+          triangle_id++, &triangles_, &static_triangles_, true);
   }
   num_tets_ = tet_id;
   std::sort(own_tets_.begin(), own_tets_.end());
-  std::sort(own_triangles_.begin(), own_triangles_.end());
-  Fit(&own_triangles_);
+  std::sort(triangles_.begin(), triangles_.end());
+  Fit(&triangles_);
   Fit(&static_triangles_);
+  triangle_at_.assign(triangle_id, 0);
+  for (size_t k = 0; k < triangles_.size(); ++k)
+    triangle_at_[triangles_[k].id] = static_cast<int32_t>(k);
+  for (size_t k = 0; k < static_triangles_.size(); ++k)
+    triangle_at_[static_triangles_[k].id] = -static_cast<int32_t>(k) - 1;
 }
 
 int64_t FreeItems::HeldBytes() const {
   using softbody::HeldBytes;
-  return HeldBytes(own_tets_) + HeldBytes(halo_tets_) + HeldBytes(own_triangles_) +
-         HeldBytes(halo_triangles_) + HeldBytes(static_tets_) + HeldBytes(static_triangles_) +
+  return HeldBytes(own_tets_) + HeldBytes(halo_tets_) + HeldBytes(triangles_) +
+         HeldBytes(triangle_at_) + HeldBytes(static_tets_) + HeldBytes(static_triangles_) +
          HeldBytes(sent_) + HeldBytes(received_);
 }
 
@@ -96,10 +101,6 @@ void FreeItems::Pack(const std::vector<PetscMPIInt> &to_ranks,
         const FreeTet &t = i.item;
         records->push_back({sent[k], i.id, {t[0], t[1], t[2], t[3]}, t[4]});
       });
-      ForEachOf(own_triangles_, sent[k], [&](const IndexedItem<FreeTriangle> &i) {
-        const FreeTriangle &t = i.item;
-        records->push_back({sent[k], i.id, {t[0], t[1], t[2], kNoCorner}, t[3]});
-      });
     }
     counts->push_back(static_cast<PetscMPIInt>(records->size() - before));
   }
@@ -111,32 +112,21 @@ void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<R
   std::vector<int32_t> now(received);
   std::sort(now.begin(), now.end());
   // Counted first, so that the lists are allocated once at their size.
-  size_t num_tets = 0, num_triangles = 0;
+  size_t num_tets = records.size();
   for (const int32_t n : now)
     if (std::binary_search(received_.begin(), received_.end(), n)) {
       ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &) { ++num_tets; });
-      ForEachOf(halo_triangles_, n, [&](const IndexedItem<FreeTriangle> &) { ++num_triangles; });
     }
-  for (const Record &r : records) ++(r.corner[3] == kNoCorner ? num_triangles : num_tets);
   List<FreeTet> tets;
-  List<FreeTriangle> triangles;
   tets.reserve(num_tets);
-  triangles.reserve(num_triangles);
   for (const int32_t n : now) {
     if (!std::binary_search(received_.begin(), received_.end(), n)) continue;
     ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &i) { tets.push_back(i); });
-    ForEachOf(halo_triangles_, n,
-              [&](const IndexedItem<FreeTriangle> &i) { triangles.push_back(i); });
   }
   for (const Record &r : records)
-    if (r.corner[3] == kNoCorner)
-      triangles.push_back({r.key, r.id, {r.corner[0], r.corner[1], r.corner[2], r.body}});
-    else
-      tets.push_back({r.key, r.id, {r.corner[0], r.corner[1], r.corner[2], r.corner[3], r.body}});
+    tets.push_back({r.key, r.id, {r.corner[0], r.corner[1], r.corner[2], r.corner[3], r.body}});
   std::sort(tets.begin(), tets.end());
-  std::sort(triangles.begin(), triangles.end());
   halo_tets_ = std::move(tets);
-  halo_triangles_ = std::move(triangles);
   received_ = std::move(now);
   ++generation_;
 }

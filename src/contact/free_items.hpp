@@ -1,17 +1,19 @@
 // The free bodies' tets and boundary triangles that one rank holds for the
-// obstacles' free grids (obstacles.hpp): O(local + halo) items, not the scene's.
+// obstacles' free grids (obstacles.hpp): O(local + halo) tets, not the scene's.
 //
 // An item is listed under its key, its first corner with unknowns; an item
-// without one is static and kept on every rank. A rank keeps for good the items
-// listed under its own vertices and under the fixed set's (free_state.hpp), and
-// the items listed under its halo's vertices while they stay in its halo: the
-// halo exchange calls Exchange, in which the owner of a vertex sends the items
-// listed under it to a rank whose halo the vertex enters (it was not sent there
-// at the previous halo exchange), and a rank keeps a received vertex's items
-// until a halo exchange no longer brings the vertex. The free grids bin the
-// items whose corners are all current, found under the current vertices: an
-// item whose corners are all current has its key current, so every rank finds
-// the same items as if it held the whole scene's.
+// without one is static and kept on every rank. A rank keeps for good the tets
+// listed under its own vertices and under the fixed and ring sets'
+// (free_state.hpp), and the tets listed under its halo's vertices while they
+// stay in its halo: the halo exchange calls Exchange, in which the owner of a
+// vertex sends the tets listed under it to a rank whose halo the vertex enters
+// (it was not sent there at the previous halo exchange), and a rank keeps a
+// received vertex's tets until a halo exchange no longer brings the vertex.
+// The boundary triangles (O(surface)) are kept whole on every rank: the ring
+// set is found from them at set-up. The free grids bin the items whose corners
+// are all current, found under the current vertices: an item whose corners are
+// all current has its key current, so every rank finds the same items as if it
+// held the whole scene's.
 //
 // Items are named by their index in the scene's list (bodies in order, each
 // body's tets or boundary triangles in mesh order), the same on every rank, so
@@ -49,10 +51,10 @@ struct IndexedItem {
 
 class FreeItems {
  public:
-  // Not collective. From the scene's whole meshes (set-up only): the free
-  // bodies' items listed under the vertices for which kept(natural) holds (this
-  // rank's own and the fixed set), and the static ones; is_free(natural): the
-  // vertex has unknowns.
+  // Not collective. From the scene's whole meshes (set-up only; again replaces
+  // all): the free bodies' tets listed under the vertices for which
+  // kept(natural) holds (this rank's own, the fixed and ring sets'), the static
+  // ones, and every boundary triangle; is_free(natural): the vertex has unknowns.
   void Setup(const Scene &scene, const std::function<bool(int32_t)> &is_free,
              const std::function<bool(int32_t)> &kept);
 
@@ -77,8 +79,13 @@ class FreeItems {
   }
   template <class Visit>
   void ForEachTriangleOf(int32_t n, Visit visit) const {
-    ForEachOf(own_triangles_, n, visit);
-    ForEachOf(halo_triangles_, n, visit);
+    ForEachOf(triangles_, n, visit);
+  }
+  // The scene's free boundary triangles (every rank holds them) and one by index.
+  int64_t num_triangles() const { return static_cast<int64_t>(triangle_at_.size()); }
+  const FreeTriangle &triangle(int32_t id) const {
+    const int32_t at = triangle_at_[id];
+    return at >= 0 ? triangles_[at].item : static_triangles_[-at - 1].item;
   }
   const std::vector<IndexedItem<FreeTet>> &static_tets() const { return static_tets_; }
   const std::vector<IndexedItem<FreeTriangle>> &static_triangles() const {
@@ -113,8 +120,9 @@ class FreeItems {
 
   int64_t num_tets_ = 0;
   List<FreeTet> own_tets_, halo_tets_;
-  List<FreeTriangle> own_triangles_, halo_triangles_;
-  List<FreeTet> static_tets_;  // key -1, id increasing
+  List<FreeTriangle> triangles_;      // every keyed one
+  std::vector<int32_t> triangle_at_;  // id -> index in triangles_, or -1 - index in static
+  List<FreeTet> static_tets_;         // key -1, id increasing
   List<FreeTriangle> static_triangles_;
   uint64_t generation_ = 0;
   // The previous halo exchange: (rank, vertex) sent, and the vertices received; sorted.

@@ -8,9 +8,11 @@
 namespace softbody {
 
 FreeState::~FreeState() {
-  VecScatterDestroy(&fixed_scatter_);
-  VecDestroy(&fixed_x_);
-  VecDestroy(&fixed_v_);
+  for (ScatteredSet *set : {&fixed_set_, &ring_set_}) {
+    VecScatterDestroy(&set->scatter);
+    VecDestroy(&set->x);
+    VecDestroy(&set->v);
+  }
 }
 
 int64_t FreeState::SceneBytes() const {
@@ -110,40 +112,59 @@ PetscErrorCode FreeState::SumBodyMasses(MPI_Comm comm) {
 
 PetscErrorCode FreeState::SetupFixedSet(Vec lumped_mass, const std::vector<int32_t> &naturals) {
   PetscFunctionBeginUser;
+  PetscCall(SetupScatteredSet(lumped_mass, naturals, &fixed_set_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode FreeState::SetupRingSet(Vec lumped_mass, const std::vector<int32_t> &naturals) {
+  PetscFunctionBeginUser;
+  PetscCall(SetupScatteredSet(lumped_mass, naturals, &ring_set_));
+  if (items_) SetupItems();
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode FreeState::SetupScatteredSet(Vec lumped_mass, const std::vector<int32_t> &naturals,
+                                            ScatteredSet *set) {
+  PetscFunctionBeginUser;
   for (const int32_t n : naturals)
-    if (free_[n]) fixed_set_.push_back(n);
-  std::sort(fixed_set_.begin(), fixed_set_.end());
-  fixed_set_.erase(std::unique(fixed_set_.begin(), fixed_set_.end()), fixed_set_.end());
+    if (free_[n]) set->naturals.push_back(n);
+  std::sort(set->naturals.begin(), set->naturals.end());
+  set->naturals.erase(std::unique(set->naturals.begin(), set->naturals.end()), set->naturals.end());
   std::vector<PetscInt> dofs;
-  for (const int32_t n : fixed_set_)
+  for (const int32_t n : set->naturals)
     for (int c = 0; c < 3; ++c) dofs.push_back(3 * layout_->PetscVertexOfNatural(n) + c);
   IS from;
   PetscCall(ISCreateGeneral(PETSC_COMM_SELF, static_cast<PetscInt>(dofs.size()), dofs.data(),
                             PETSC_COPY_VALUES, &from));
-  PetscCall(VecCreateSeq(PETSC_COMM_SELF, static_cast<PetscInt>(dofs.size()), &fixed_x_));
-  PetscCall(VecDuplicate(fixed_x_, &fixed_v_));
-  PetscCall(VecScatterCreate(lumped_mass, from, fixed_x_, nullptr, &fixed_scatter_));
+  PetscCall(VecCreateSeq(PETSC_COMM_SELF, static_cast<PetscInt>(dofs.size()), &set->x));
+  PetscCall(VecDuplicate(set->x, &set->v));
+  PetscCall(VecScatterCreate(lumped_mass, from, set->x, nullptr, &set->scatter));
   PetscCall(ISDestroy(&from));
-  PetscCall(VecScatterBegin(fixed_scatter_, lumped_mass, fixed_x_, INSERT_VALUES, SCATTER_FORWARD));
-  PetscCall(VecScatterEnd(fixed_scatter_, lumped_mass, fixed_x_, INSERT_VALUES, SCATTER_FORWARD));
+  PetscCall(VecScatterBegin(set->scatter, lumped_mass, set->x, INSERT_VALUES, SCATTER_FORWARD));
+  PetscCall(VecScatterEnd(set->scatter, lumped_mass, set->x, INSERT_VALUES, SCATTER_FORWARD));
   const PetscScalar *mass;
-  PetscCall(VecGetArrayRead(fixed_x_, &mass));
-  for (size_t k = 0; k < fixed_set_.size(); ++k) {
-    position_ref(fixed_set_[k]) = RestPosition(fixed_set_[k]);
-    inverse_mass_[Slot(fixed_set_[k])] = 1.0 / mass[3 * k];
+  PetscCall(VecGetArrayRead(set->x, &mass));
+  for (size_t k = 0; k < set->naturals.size(); ++k) {
+    position_ref(set->naturals[k]) = RestPosition(set->naturals[k]);
+    inverse_mass_[Slot(set->naturals[k])] = 1.0 / mass[3 * k];
   }
-  PetscCall(VecRestoreArrayRead(fixed_x_, &mass));
+  PetscCall(VecRestoreArrayRead(set->x, &mass));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 void FreeState::AttachItems(FreeItems *items) {
+  items_ = items;
+  SetupItems();
+}
+
+void FreeState::SetupItems() {
   std::vector<int32_t> kept(owned_natural_);
-  kept.insert(kept.end(), fixed_set_.begin(), fixed_set_.end());
+  for (const ScatteredSet *set : {&fixed_set_, &ring_set_})
+    kept.insert(kept.end(), set->naturals.begin(), set->naturals.end());
   std::sort(kept.begin(), kept.end());
-  items->Setup(
+  items_->Setup(
       *scene_, [&](int32_t n) { return is_free(n); },
       [&](int32_t n) { return std::binary_search(kept.begin(), kept.end(), n); });
-  items_ = items;
 }
 
 PetscErrorCode FreeState::Exchange(Vec x, Vec v, PetscReal dt, const StateNeeds &needs) {
@@ -154,7 +175,8 @@ PetscErrorCode FreeState::Exchange(Vec x, Vec v, PetscReal dt, const StateNeeds 
   PetscCall(WriteOwnedState(x, v, dt, &owned_boxes));
   PetscCall(ReduceBodyBoxes(owned_boxes));
   if (needs.halo) PetscCall(ExchangeHalo(owned_boxes));
-  if (needs.fixed_set) PetscCall(FetchFixedSet(x, v, dt));
+  if (needs.fixed_set) PetscCall(FetchScatteredSet(x, v, dt, fixed_set_));
+  if (needs.rings) PetscCall(FetchScatteredSet(x, v, dt, ring_set_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -246,25 +268,26 @@ PetscErrorCode FreeState::ExchangeItems(const HaloPlan &plan, const std::vector<
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode FreeState::FetchFixedSet(Vec x, Vec v, PetscReal dt) {
+PetscErrorCode FreeState::FetchScatteredSet(Vec x, Vec v, PetscReal dt, const ScatteredSet &set) {
   PetscFunctionBeginUser;
-  for (auto [from, to] : {std::pair<Vec, Vec>(x, fixed_x_), std::pair<Vec, Vec>(v, fixed_v_)}) {
-    PetscCall(VecScatterBegin(fixed_scatter_, from, to, INSERT_VALUES, SCATTER_FORWARD));
-    PetscCall(VecScatterEnd(fixed_scatter_, from, to, INSERT_VALUES, SCATTER_FORWARD));
+  if (!set.scatter) PetscFunctionReturn(PETSC_SUCCESS);
+  for (auto [from, to] : {std::pair<Vec, Vec>(x, set.x), std::pair<Vec, Vec>(v, set.v)}) {
+    PetscCall(VecScatterBegin(set.scatter, from, to, INSERT_VALUES, SCATTER_FORWARD));
+    PetscCall(VecScatterEnd(set.scatter, from, to, INSERT_VALUES, SCATTER_FORWARD));
   }
   const PetscScalar *ax, *av;
-  PetscCall(VecGetArrayRead(fixed_x_, &ax));
-  PetscCall(VecGetArrayRead(fixed_v_, &av));
-  for (size_t k = 0; k < fixed_set_.size(); ++k) {
-    const int32_t n = fixed_set_[k], s = Slot(n);
+  PetscCall(VecGetArrayRead(set.x, &ax));
+  PetscCall(VecGetArrayRead(set.v, &av));
+  for (size_t k = 0; k < set.naturals.size(); ++k) {
+    const int32_t n = set.naturals[k], s = Slot(n);
     for (int c = 0; c < 3; ++c) {
       x_[3 * s + c] = ax[3 * k + c] + dt * av[3 * k + c];
       v_[3 * s + c] = av[3 * k + c];
     }
     MarkCurrent(n);
   }
-  PetscCall(VecRestoreArrayRead(fixed_x_, &ax));
-  PetscCall(VecRestoreArrayRead(fixed_v_, &av));
+  PetscCall(VecRestoreArrayRead(set.x, &ax));
+  PetscCall(VecRestoreArrayRead(set.v, &av));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -14,7 +14,10 @@
 //   the vertex's body's reach, point to point (neighbour_exchange.hpp), so the
 //   messages follow the contact zone, not the mesh;
 // - the fixed set (SetupFixedSet): vertices every rank reads whenever asked,
-//   e.g. the distance constraints' (a scatter of just them).
+//   e.g. the distance constraints' (a scatter of just them);
+// - the ring set (SetupRingSet): per rank, the other ranks' vertices of the
+//   boundary triangles at its own surface vertices (a scatter of just them;
+//   O(the rank's part's boundary)).
 // The reach of a body is -contact_halo_reach (contact_options.hpp) times its
 // longest rest tet edge: every tet and boundary triangle of another body that
 // meets this rank's box, and is stretched less than that, comes whole.
@@ -48,6 +51,7 @@ struct HaloPlan;
 struct StateNeeds {
   bool halo = false;       // other ranks' vertices near this rank's
   bool fixed_set = false;  // the vertices of SetupFixedSet
+  bool rings = false;      // the vertices of SetupRingSet
 };
 
 class FreeState {
@@ -68,10 +72,16 @@ class FreeState {
   // Collective. The vertices (natural) that every Exchange with needs.fixed_set
   // brings to every rank; their inverse masses fetched now.
   PetscErrorCode SetupFixedSet(Vec lumped_mass, const std::vector<int32_t> &naturals);
+  // Collective. The vertices (natural) that every Exchange with needs.rings
+  // brings to this rank (each rank its own list): the other corners of the
+  // boundary triangles at its own surface vertices, so that a vertex's normal
+  // reads its whole ring on any rank count; their inverse masses fetched now.
+  PetscErrorCode SetupRingSet(Vec lumped_mass, const std::vector<int32_t> &naturals);
   // Not collective, after SetupMasses and SetupFixedSet, while the scene's
   // meshes are held. Sets up *items (free_items.hpp: the items listed under
-  // this rank's own and the fixed set's vertices) and has every halo exchange
-  // bring the items of the vertices it brings.
+  // this rank's own, the fixed set's and the ring set's vertices; SetupRingSet
+  // after it sets them up again) and has every halo exchange bring the items
+  // of the vertices it brings.
   void AttachItems(FreeItems *items);
   // Collective. This rank's vertices at x + dt v (dt = 0: at x) and velocities
   // v, the free bodies' boxes there, and what `needs` asks for.
@@ -136,9 +146,10 @@ class FreeState {
   // Collective. body_box_: every rank's boxes joined, and the non-free vertices'.
   PetscErrorCode ReduceBodyBoxes(const std::vector<Box> &owned_boxes);
   PetscErrorCode ExchangeHalo(const std::vector<Box> &owned_boxes);
+  // items_->Setup for this rank's own, fixed-set and ring-set vertices.
+  void SetupItems();
   PetscErrorCode ExchangeItems(const HaloPlan &plan, const std::vector<HaloVertex> &sent,
                                const std::vector<HaloVertex> &received);
-  PetscErrorCode FetchFixedSet(Vec x, Vec v, PetscReal dt);
   // The vertex's slot in the per-slot arrays, given on first use (position
   // NaN, velocity and inverse mass 0 until written).
   int32_t Slot(int32_t natural);
@@ -175,10 +186,18 @@ class FreeState {
   NeighbourExchange neighbours_;
   FreeItems *items_ = nullptr;  // AttachItems
   PetscInt64 bytes_sent_ = 0;
-  // The fixed set: its free vertices (natural) and their DOFs gathered.
-  std::vector<int32_t> fixed_set_;
-  VecScatter fixed_scatter_ = nullptr;
-  Vec fixed_x_ = nullptr, fixed_v_ = nullptr;
+  // Vertices fetched by a scatter of just them: their free vertices (natural)
+  // and their DOFs gathered.
+  struct ScatteredSet {
+    std::vector<int32_t> naturals;
+    VecScatter scatter = nullptr;
+    Vec x = nullptr, v = nullptr;
+  };
+  PetscErrorCode SetupScatteredSet(Vec lumped_mass, const std::vector<int32_t> &naturals,
+                                   ScatteredSet *set);
+  PetscErrorCode FetchScatteredSet(Vec x, Vec v, PetscReal dt, const ScatteredSet &set);
+  ScatteredSet fixed_set_;  // SetupFixedSet's, the same on every rank
+  ScatteredSet ring_set_;   // SetupRingSet's, this rank's own
 };
 
 }  // namespace softbody

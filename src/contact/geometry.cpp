@@ -138,13 +138,4 @@ void UniformGrid::Build(const std::vector<Box> &boxes) {
   }
 }
 
-Eigen::Array3i UniformGrid::CellOf(const Eigen::Array3d &p) const {
-  const Eigen::Array3d relative = (p - bounds_.lower.array()) / h_;
-  return relative.floor().max(-1.0).min(cells_.cast<double>()).cast<int>().max(0).min(cells_ - 1);
-}
-
-int64_t UniformGrid::Index(int i, int j, int k) const {
-  return i + static_cast<int64_t>(cells_[0]) * (j + static_cast<int64_t>(cells_[1]) * k);
-}
-
 }  // namespace softbody

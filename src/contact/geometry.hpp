@@ -96,8 +96,15 @@ class UniformGrid {
   const Box &bounds() const { return bounds_; }
 
  private:
-  Eigen::Array3i CellOf(const Eigen::Array3d &p) const;
-  int64_t Index(int i, int j, int k) const;
+  // Inline: the grids' inner loops call them for every box (a call each cost
+  // 13 % of a guard-bound run).
+  Eigen::Array3i CellOf(const Eigen::Array3d &p) const {
+    const Eigen::Array3d relative = (p - bounds_.lower.array()) / h_;
+    return relative.floor().max(-1.0).min(cells_.cast<double>()).cast<int>().max(0).min(cells_ - 1);
+  }
+  int64_t Index(int i, int j, int k) const {
+    return i + static_cast<int64_t>(cells_[0]) * (j + static_cast<int64_t>(cells_[1]) * k);
+  }
 
   Box bounds_;
   double h_ = 1;

@@ -1,6 +1,8 @@
 #include "contact/obstacles.hpp"
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 #include <numeric>
 
 #include "common/held_bytes.hpp"
@@ -25,6 +27,11 @@ constexpr double kNoCrossing = 2;
 // closer must not decide its normal. 1e-9: far above round-off in positions of
 // order 1-100 m, far below any geometric difference that matters.
 constexpr double kTieOfEdge = 1e-9;
+// ContactOnBody blends the normal only for a point at most this many of its
+// body's mean boundary edges from the face (a resting contact): the blend
+// reads the triangles around the face's vertices, which a deep point's halo
+// (-contact_halo_reach) need not hold on every rank count.
+constexpr double kBlendReach = 0.1;
 
 }  // namespace
 
@@ -141,14 +148,6 @@ void Obstacles::EnsureFreeGrids() const {
   ++free_grid_builds_;
 }
 
-FreeTriangle Obstacles::free_triangle(int32_t t) const {
-  const auto &items = free_triangles_bin_.items;
-  const auto at =
-      std::lower_bound(items.begin(), items.end(), t,
-                       [](const IndexedItem<FreeTriangle> *i, int32_t id) { return i->id < id; });
-  return (*at)->item;
-}
-
 // ClosestOnBody and EntryOnBody fill the hit inside their grid visits, not in
 // a shared helper: the compiler's fused multiply-adds follow the code's shape,
 // and a helper changed the last bits of the normals.
@@ -263,7 +262,7 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
 }
 
 bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
-                                SurfaceHit *hit) const {
+                                SurfaceHit *hit, int32_t natural) const {
   if (ground_ && p[1] < ground_y_ + ground_margin_ * state_->edge(body) && !skip.Has(-1))
     return ClosestOnBody(p, -1, hit);
   // Broad phase: only bodies whose box holds p.
@@ -271,14 +270,129 @@ bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstac
   for (size_t b = 0; b < body_box_.size(); ++b)
     if (static_cast<int32_t>(b) != body && body_box_[b].Contains(p))
       (scene_->bodies[b].fixed ? near_fixed : near_free) = true;
-  if (!near_fixed && !near_free) return false;
+  if (!near_fixed && !near_free) return natural >= 0 && NearFreeBody(p, natural, skip, hit);
   if (near_free) EnsureFreeGrids();
   for (const bool fixed_part : {true, false}) {
     if (!(fixed_part ? near_fixed : near_free)) continue;
     const int32_t inside = BodyContaining(p, fixed_part, body, skip);
-    if (inside >= 0) return ClosestOnBody(p, inside, hit);
+    if (inside >= 0)
+      return fixed_part || natural < 0 ? ClosestOnBody(p, inside, hit)
+                                       : ContactOnBody(p, natural, inside, hit);
+  }
+  return natural >= 0 && NearFreeBody(p, natural, skip, hit);
+}
+
+// The lowest free body other than the vertex's whose surface lies within the
+// margin outside p (the ground's margin, in the vertex's body's edges), facing it.
+bool Obstacles::NearFreeBody(const Point &p, int32_t natural, const VertexObstacles &skip,
+                             SurfaceHit *hit) const {
+  const int32_t body = state_->body_of(natural);
+  const double margin = ground_margin_ * state_->edge(body);
+  for (size_t b = 0; b < body_box_.size(); ++b) {
+    const int32_t other = static_cast<int32_t>(b);
+    if (other == body || scene_->bodies[b].fixed || skip.Has(other) || Separating(body, other) ||
+        !body_box_[b].Contains(p, margin))
+      continue;
+    SurfaceHit near;
+    if (ContactOnBody(p, natural, other, &near) && (near.point - p).norm() < margin &&
+        near.normal.dot(p - near.point) >= 0) {
+      *hit = near;
+      return true;
+    }
   }
   return false;
+}
+
+// sum_t angle_t n_t over the current free triangles t at `natural` whose
+// normal n_t satisfies keep(n_t), in increasing triangle order. The ring comes
+// from the triangle grid (a triangle's box holds its corners): the index by
+// vertex lists each triangle under one corner only.
+template <class Keep>
+Point Obstacles::AngleWeightedNormal(int32_t natural, Keep keep) const {
+  Point sum = Point::Zero();
+  if (!state_->current(natural)) return sum;
+  EnsureFreeGrids();
+  std::vector<int32_t> ring;
+  free_triangles_bin_.ForEachNear(
+      WorldPoint(natural), 0, [&](int32_t t, const FreeTriangle &tri, const Box &) {
+        if (std::find(tri.begin(), tri.begin() + 3, natural) != tri.begin() + 3) ring.push_back(t);
+      });
+  std::sort(ring.begin(), ring.end());
+  ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+  for (const int32_t t : ring) {
+    const auto &tri = free_triangle(t);
+    const int k = tri[0] == natural ? 0 : tri[1] == natural ? 1 : 2;
+    const Point a = WorldPoint(tri[k]), b = WorldPoint(tri[(k + 1) % 3]),
+                c = WorldPoint(tri[(k + 2) % 3]);
+    const Point normal = (b - a).cross(c - a);
+    if (normal.norm() > 0 && keep(Point(normal.normalized())))
+      sum += std::atan2(normal.norm(), (b - a).dot(c - a)) * normal.normalized();
+  }
+  return sum;
+}
+
+Point Obstacles::VertexNormal(int32_t natural) const {
+  const Point sum = AngleWeightedNormal(natural, [](const Point &) { return true; });
+  return sum.norm() > 0 ? Point(sum.normalized()) : Point(Point::Zero());
+}
+
+// The normal at the hit's point: each face vertex's normal over its faces
+// that face `own`, blended by the hit's weights (continuous over the
+// surface, and the same whichever of the faces at a vertex or edge the hit
+// took); the face's normal when that vanishes.
+void Obstacles::BlendFacingNormal(const Point &own, SurfaceHit *hit) const {
+  const auto &tri = free_triangle(hit->triangle);
+  Point blend = Point::Zero();
+  for (int k = 0; k < 3; ++k) {
+    if (!(hit->weights[k] > 0)) continue;
+    const Point node = AngleWeightedNormal(tri[k], [&](const Point &n) { return n.dot(own) < 0; });
+    if (node.norm() > 0) blend += hit->weights[k] * node.normalized();
+  }
+  if (blend.norm() > 0) hit->normal = blend.normalized();
+}
+
+// The closest face first; then, within its distance plus the slack, the
+// closest facing one (ties to the lower index, as in ClosestOnBody).
+bool Obstacles::ContactOnBody(const Point &p, int32_t natural, int32_t obstacle,
+                              SurfaceHit *hit) const {
+  if (!ClosestOnBody(p, obstacle, hit)) return false;
+  if (obstacle < 0 || scene_->bodies[obstacle].fixed) return true;
+  const Point own = VertexNormal(natural);
+  if (!(own.norm() > 0)) return true;
+  const double edge = state_->edge(state_->body_of(natural));
+  const bool shallow = (hit->point - p).norm() <= kBlendReach * edge;
+  if (hit->normal.dot(own) < 0) {
+    if (shallow) BlendFacingNormal(own, hit);
+    return true;
+  }
+  const double reach =
+      (hit->point - p).norm() + kFacingSlack * state_->edge(state_->body_of(natural));
+  const double tie = kTieOfEdge * state_->edge(obstacle);
+  double best = kUnbounded;
+  int32_t chosen = -1;
+  free_triangles_bin_.ForEachNear(p, reach, [&](int32_t t, const FreeTriangle &tri, const Box &) {
+    if (tri[3] != obstacle) return;
+    const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
+    const Point normal = (b - a).cross(c - a);
+    if (!(normal.norm() > 0) || !(normal.dot(own) < 0)) return;
+    Eigen::Vector3d w;
+    const Point q = ClosestPointOnTriangle(p, a, b, c, &w);
+    const double distance = (q - p).norm();
+    if (distance > reach || distance > best + tie || (distance >= best - tie && t >= chosen))
+      return;
+    best = distance;
+    chosen = t;
+    hit->point = q;
+    hit->normal = normal.normalized();
+    hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
+                    w[2] * state_->velocity(tri[2]);
+    hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) + w[1] * state_->inverse_mass(tri[1]) +
+                        w[2] * state_->inverse_mass(tri[2]);
+    hit->triangle = t;
+    hit->weights = w;
+  });
+  if (shallow) BlendFacingNormal(own, hit);
+  return true;
 }
 
 int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,

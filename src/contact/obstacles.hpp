@@ -7,11 +7,12 @@
 // once; the free bodies' boxes follow them (MoveFreeBodies) and their grids
 // are rebuilt lazily, when a query first needs them, so that a step whose
 // bodies' boxes stay apart builds none. Positions and velocities are read
-// from FreeState (world coordinates). The fixed bodies' tets and triangles are
-// held whole on every rank; of the free bodies' a rank holds only those listed
-// under its own, its halo's and the fixed set's vertices (free_items.hpp: they
-// travel with the halo), and the free grids bin those whose vertices are all
-// current, so both the lists and a rebuild are O(local + halo). Queries break
+// from FreeState (world coordinates). The fixed bodies' tets and triangles and
+// the free bodies' triangles are held whole on every rank; of the free bodies'
+// tets a rank holds only those listed under its own, its halo's and the fixed
+// and ring sets' vertices (free_items.hpp: they travel with the halo), and the
+// free grids bin the items whose vertices are all current, so the tets' lists
+// and a rebuild are O(local + halo). Queries break
 // ties of distance by the lower triangle or tet index (the item's index in the
 // scene's list), so that answers do not depend on which items a rank's grid
 // holds. Not collective.
@@ -40,6 +41,16 @@ struct SurfaceHit {
   int32_t triangle = -1;  // index into the obstacle's triangle list (-1: the ground)
   Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric coordinates of point in it
 };
+
+// A vertex against a free body meets the closest of the body's faces that
+// face it (outward normal at an obtuse angle to the vertex's own outward
+// normal) when that face lies at most this fraction of the vertex's body's mean
+// boundary edge farther than the closest face. A vertex on the edge of one of
+// two aligned stacked blocks is as close to the other block's side face as to
+// the face it rests on, and the side face's normal would push it sideways. A
+// tenth of an edge: the most a step's constraint takes a vertex out
+// (kMaxRecoveryPerStep), well above a resting step's sinking.
+constexpr double kFacingSlack = 0.1;
 
 // The obstacles constraining one vertex in a step (-1: the ground); at most
 // three (a corner).
@@ -75,10 +86,24 @@ class Obstacles {
   // The first obstacle other than `body` and those in `skip` that contains p
   // (the ground when p lies below it or within its margin), with its closest
   // surface point.
-  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip,
-                       SurfaceHit *hit) const;
+  // natural: the free vertex at p (-1: none); against a free body its contact
+  // point is then ContactOnBody's, and a free body whose surface lies within
+  // the ground's margin outside p counts too (its two-sided contact keeps the
+  // pair apart before the collision guard's separation would be reached).
+  bool FindPenetration(const Point &p, int32_t body, const VertexObstacles &skip, SurfaceHit *hit,
+                       int32_t natural = -1) const;
   // The closest point to p on the obstacle's surface (-1: the ground).
   bool ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const;
+  // Where free vertex `natural` at p meets the obstacle: ClosestOnBody, but on
+  // a free body the closest face facing the vertex when one lies within
+  // kFacingSlack of its body's edge of the closest (a vertex of no surface: the
+  // closest), and the normal there blended from the face vertices' normals
+  // over their faces that face the vertex (BlendFacingNormal).
+  bool ContactOnBody(const Point &p, int32_t natural, int32_t obstacle, SurfaceHit *hit) const;
+  // A free surface vertex's outward normal (unit; angle-weighted mean of its
+  // current boundary triangles' normals, Thuermer & Wuethrich 1998); zero for
+  // a vertex of no boundary triangle.
+  Point VertexNormal(int32_t natural) const;
   // Whether p lies in one of the obstacle body's tets (faces included).
   bool InsideBody(const Point &p, int32_t obstacle) const;
   // The free body's tet holding p with all barycentric coordinates above
@@ -94,15 +119,15 @@ class Obstacles {
   bool ground() const { return ground_; }
   double ground_y() const { return ground_y_; }
   const Box &body_box(size_t body) const { return body_box_[body]; }
-  // A free body's boundary triangle: natural vertices and body. t: a
-  // SurfaceHit's triangle on a free body, from a query since the free bodies
-  // last moved (the free grids hold it).
-  FreeTriangle free_triangle(int32_t t) const;
+  // A free body's boundary triangle: natural vertices and body (t: its index,
+  // 0 .. num_free_triangles() - 1).
+  const FreeTriangle &free_triangle(int32_t t) const { return free_items_.triangle(t); }
   size_t num_fixed_tets() const { return fixed_tets_.size(); }
   size_t num_free_tets() const { return static_cast<size_t>(free_items_.num_tets()); }
-  // Bytes of the bodies' item lists: the fixed bodies' (O(scene) on every
-  // rank) and the free items this rank holds (O(local + halo)); the grids and
-  // their items' boxes are not counted.
+  size_t num_free_triangles() const { return static_cast<size_t>(free_items_.num_triangles()); }
+  // Bytes of the bodies' item lists: the fixed bodies' and the free bodies'
+  // triangles (O(scene) on every rank) and the free tets this rank holds
+  // (O(local + halo)); the grids and their items' boxes are not counted.
   int64_t SceneBytes() const;
   // How often this rank built the free bodies' grids.
   PetscInt free_grid_builds() const { return free_grid_builds_; }
@@ -146,6 +171,12 @@ class Obstacles {
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
                          const VertexObstacles &skip) const;
+  // FindPenetration's last resort for free vertex `natural` at p.
+  bool NearFreeBody(const Point &p, int32_t natural, const VertexObstacles &skip,
+                    SurfaceHit *hit) const;
+  template <class Keep>
+  Point AngleWeightedNormal(int32_t natural, Keep keep) const;
+  void BlendFacingNormal(const Point &own, SurfaceHit *hit) const;
   // Whether free bodies a and b are a separating pair.
   bool Separating(int32_t a, int32_t b) const;
   Point WorldPoint(int32_t n) const { return state_->position(n); }

@@ -12,6 +12,7 @@
 
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "contact/geometry.hpp"
@@ -46,12 +47,20 @@ struct CollisionQuery {
 struct CollisionCount {
   int64_t candidates = 0;  // pairs tested by CCD
   int64_t close = 0;       // pairs already closer than the separation at the start (not guarded)
+  int64_t rebuilds = 0;    // self-contact candidate lists built
 };
 
 // Finds the colliding pairs. The primitives that never move (fixed bodies,
-// bodies at rest) are binned once; each call bins the moving ones: in the
-// world frame against the static ones and other moving bodies, and each
-// moving body in the frame of its mean displacement for self-contact.
+// bodies at rest) are binned once; each call bins the moving ones in the world
+// frame against the static ones and against other moving bodies (only those
+// near another body's box). Self-contact: each moving body in the frame of its
+// mean displacement, from a list of candidate pairs kept over steps (a Verlet
+// list, as molecular dynamics keeps neighbour lists): built from the boxes
+// grown by half a skin of kSkinOfEdge mean surface edges, and rebuilt when a
+// vertex leaves its box at the build (relative to the body's mean start
+// position) by more than half the skin, or the usable vertices change. Every
+// pair whose boxes meet in a step is in the list, and the same box test as a
+// fresh grid's picks the pairs CCD tests: the result is the same.
 class SurfaceCollisionFinder {
  public:
   // query.start must hold the static vertices' positions.
@@ -66,9 +75,34 @@ class SurfaceCollisionFinder {
     std::vector<Box> vertex_boxes, triangle_boxes, edge_boxes;
     UniformGrid vertex_grid, triangle_grid, edge_grid;
   };
+  // One moving body's self-contact candidates (surface indices).
+  struct SelfCandidates {
+    bool valid = false;
+    std::vector<int32_t> vertices;  // the body's usable vertices at the build
+    // Per vertex of `vertices`: its positions at the step's start and end
+    // (less the shift) at the build, relative to the mean start position.
+    std::vector<Box> vertex_boxes;
+    std::vector<std::array<int32_t, 2>> vertex_triangle, edge_edge;
+  };
+  void SelfPass(const CollisionQuery &query, size_t body, const std::vector<int32_t> &vertices,
+                std::vector<SurfaceCollision> *out, CollisionCount *count) const;
+  void SelfStepBoxes(const CollisionQuery &query, size_t body, const std::vector<int32_t> &vertices,
+                     const Point &shift) const;
+  bool SelfCandidatesHold(const CollisionQuery &query, const SelfCandidates &c,
+                          const std::vector<int32_t> &vertices, const Point &shift,
+                          const Point &mean, double half_skin) const;
+  void BuildSelfCandidates(const CollisionQuery &query, size_t body,
+                           const std::vector<int32_t> &vertices, const Point &shift,
+                           const Point &mean) const;
+
   std::vector<int32_t> moving_vertices_, moving_triangles_, moving_edges_;
   std::vector<size_t> moving_bodies_;
   Binned static_;
+  std::vector<double> half_skin_;             // per body (m)
+  mutable std::vector<SelfCandidates> self_;  // per body
+  // A self-contact pass's boxes over the step: per surface vertex, and per
+  // triangle and edge of the body.
+  mutable std::vector<Box> vertex_box_, triangle_box_, edge_box_;
 };
 
 }  // namespace softbody

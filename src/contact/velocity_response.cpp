@@ -11,6 +11,11 @@ namespace {
 // length to the surface ended the step on it (its constraint held, up to
 // round-off): no projection.
 constexpr double kOnSurface = 1e-6;
+// A two-sided contact rests into the next step when its impulse would change
+// its vertex's velocity by more than this (m/s): smaller ones are the
+// round-off of the solve (another rank count, another factorisation), and
+// must not decide which contacts the next step starts with.
+constexpr double kRestingSpeed = 1e-9;
 // Numbers per collision when collisions travel between ranks: vertex, body,
 // position (3), dv (3), the vertex's inverse mass.
 constexpr size_t kPackedCollision = 9;
@@ -51,7 +56,12 @@ std::vector<Collision> VelocityResponse::Respond(const ContactConstraints &const
                           ContactVelocityChange(contact, constraint, reactions[i],
                                                 friction_in_solve[i], position, velocity)});
     // Resting contacts stay constrained while the obstacle pushes; bouncing ones leave.
-    if (reactions[i] >= 0 && !(options_.restitution > 0 && contact.impact))
+    // A two-sided contact is an inequality: one that did not push this step
+    // is found again if its vertex sinks.
+    const bool pushes = constraint.two_sided
+                            ? reactions[i] * state_->inverse_mass(contact.natural) > kRestingSpeed
+                            : reactions[i] >= 0;
+    if (pushes && !(options_.restitution > 0 && contact.impact))
       resting->Add(constraint.vertex, contact);
   }
   return collisions;
@@ -67,11 +77,14 @@ Point VelocityResponse::ContactVelocityChange(const Contact &contact,
                                               bool friction_in_solve, const Point &position,
                                               const Point &velocity) const {
   const Point &n = constraint.normal;
-  Point dv = (contact.normal_velocity - n.dot(velocity)) * n;
+  // A two-sided contact's solve gave both sides their equal and opposite
+  // impulses: setting one side's normal velocity would break that balance.
+  Point dv = constraint.two_sided ? Point(Point::Zero())
+                                  : Point((contact.normal_velocity - n.dot(velocity)) * n);
   SurfaceHit hit;
   const double limit = options_.friction * std::max(reaction, 0.0);
   if (!friction_in_solve && options_.friction > 0 &&
-      obstacles_->ClosestOnBody(position, contact.body, &hit)) {
+      obstacles_->ContactOnBody(position, contact.natural, contact.body, &hit)) {
     const Point relative = velocity - hit.velocity;
     const Point tangential = relative - n.dot(relative) * n;
     const double slip = tangential.norm(), grip = limit * state_->inverse_mass(contact.natural);
@@ -89,7 +102,8 @@ PetscInt VelocityResponse::ProjectRemaining(
     SurfaceHit hit;
     // Only vertices truly inside: the ground's margin (within half the contact
     // gap above it) is for the constraints, and lifting such a vertex adds energy.
-    if (!obstacles_->FindPenetration(position, state_->body_of(natural), VertexObstacles(), &hit) ||
+    if (!obstacles_->FindPenetration(position, state_->body_of(natural), VertexObstacles(), &hit,
+                                     natural) ||
         hit.normal.dot(position - hit.point) >= 0 ||
         !ShouldProject(local, natural, position, hit, constraints))
       continue;

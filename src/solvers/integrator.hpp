@@ -87,9 +87,18 @@ struct IntegratorOptions {
   PetscReal rho_inf = 0.9;
   // -dt_adapt: each step of -dt (the interval between steps the time loop sees,
   // frames and -dt_schedule) is taken in substeps whose size follows a local
-  // error estimate: relative error per substep at most -tol (see Step).
+  // error estimate; -tol is about the relative error of x - X at the run's end
+  // in linear mode, the relative error per substep in corotational mode (see Step).
   PetscBool adaptive = PETSC_FALSE;
   PetscReal tolerance = 1e-4;
+  // -dt_adapt_horizon (s): the time over which -tol bounds the error (linear
+  // mode); 0: the run's length, -steps x -dt.
+  PetscReal horizon = 0;
+  // -dt_adapt_factors: linear mode keeps the systems (A and its factor) of this
+  // many substep sizes, the least recently used replaced first. 4: bdf2 moving
+  // between two sizes uses four systems (each size's own and the two of the
+  // step after a change); each holds a factor (20 MB at the default scene).
+  PetscInt factor_cache = 4;
   PetscReal dt = 0.02;  // s
   // -dt_schedule: from time .first (s) on, the step is .second (s); sorted by time.
   std::vector<std::pair<PetscReal, PetscReal>> dt_schedule;
@@ -170,7 +179,9 @@ class ImplicitEuler {
   PetscErrorCode SetTimeStep(PetscReal dt);
   // Collective. Advances positions x and velocities v by one step; with
   // -dt_adapt, by substeps of the step: each is repeated with a smaller size
-  // while its local error estimate exceeds -tol (relative to |x - X| + Dt |v|, Dt
+  // while its local error estimate exceeds -tol (linear mode: filtered by the
+  // damping over the run and, with history, taken per unit time times the
+  // run's length: SetDampingFilter, ScaleToRun; relative to |x - X| + Dt |v|, Dt
   // the step and |v| the larger of the substep's start and end speeds:
   // backward Euler h |v1 - v0| / 2, the second-order schemes
   // h |v1 - v0 - (h / h_prev)(v0 - v_prev)| / 6, the velocity's second difference),
@@ -263,6 +274,22 @@ class ImplicitEuler {
   PetscErrorCode SaveSubstepState(Vec x, Vec v, const ContactSolver *contact);
   PetscErrorCode RestoreSubstepState(Vec x, Vec v, ContactSolver *contact);
   PetscErrorCode SubstepError(Vec x, Vec v, PetscReal *error, bool *estimated);
+  // Linear mode with stiffness damping: factorises the damping filter B of the
+  // estimate (integrator.cpp) for the run's length (once).
+  PetscErrorCode SetDampingFilter();
+  // -dt_adapt, linear mode: makes A_ and ksp_ the cached system of the step sizes
+  // (h_f, h_x); *cached when it holds them already factorised (else the caller
+  // fills and factorises it: a new entry, or the least recently used one).
+  PetscErrorCode SelectCachedSystem(PetscReal hf, PetscReal hx, bool *cached);
+  // The estimate against -tol (scaled per unit time to the run's length, or
+  // not) and the exponent of tol / error in the next target size.
+  void ScaleToRun(PetscReal *error, PetscReal *exponent) const;
+  // -dt_adapt_horizon, by default the run's length -steps x -dt (s); at least
+  // the step of the time loop.
+  PetscReal RunLength() const {
+    return PetscMax(interval_,
+                    options_.horizon > 0 ? options_.horizon : options_.steps * options_.dt);
+  }
   PetscErrorCode FillSystem(PetscReal force_step, PetscReal position_step);
   PetscErrorCode BeginSchemeStep(Vec x, Vec v);
   PetscErrorCode FinishSchemeStep(Vec x, Vec v);
@@ -327,6 +354,8 @@ class ImplicitEuler {
   PetscReal target_step_ = 0, saved_previous_dt_ = 0;
   bool saved_acceleration_valid_ = false;
   RestingContacts saved_contact_;
+  // -dt_adapt: no substep accepted yet in this run (the history restarts after it).
+  bool first_substep_ = true;
   // The last step's contact constrained a vertex or changed x or v after the solve.
   bool contact_acted_ = false;
   Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
@@ -346,6 +375,21 @@ class ImplicitEuler {
   Mat A_ = nullptr;
   KSP ksp_ = nullptr;
   KSP fallback_ksp_ = nullptr;  // created at the first breakdown
+  // -dt_adapt's damping filter B, its solver, a work vector and the length (s)
+  // B was filled for (0: none).
+  struct CachedSystem {
+    PetscReal force_step, position_step;  // h_f, h_x (s) of its values
+    Mat matrix;
+    KSP solver;
+    uint64_t last_use;
+  };
+  std::vector<CachedSystem> systems_;  // -dt_adapt_factors; empty: A_, ksp_ own themselves
+  uint64_t cache_clock_ = 0;
+  bool warp_ = false;  // the warp preconditioner holds A_: no cache
+  Mat filter_matrix_ = nullptr;
+  KSP filter_ksp_ = nullptr;
+  Vec filter_work_ = nullptr;
+  PetscReal filter_horizon_ = 0;
   Vec elastic_force_ = nullptr, rhs_ = nullptr;
   Vec gravity_force_ = nullptr;  // M g, only when g != 0
   Vec x_start_ = nullptr;        // x0 during a step with contact

@@ -233,8 +233,25 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   PetscCall(KSPSetUp(solver));  // refreshes the preconditioner if A changed
   PetscCall(KSPGetOperators(solver, &A_, nullptr));
   PetscCall(KSPGetPC(solver, &unconstrained_pc_));
-  GroupByVertex(constraints);
   if (!inner_) PetscCall(CreateInnerSolver(b));
+  PetscInt two_sided =
+      static_cast<PetscInt>(std::count_if(constraints.begin(), constraints.end(),
+                                          [](const VelocityConstraint &c) { return c.two_sided; }));
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &two_sided, 1, MPIU_INT, MPI_SUM,
+                              PetscObjectComm((PetscObject)b)));
+  if (two_sided > 0)
+    PetscCall(SolveTwoSided(solver, b, constraints, v, reactions, iterations));
+  else
+    PetscCall(SolveProjected(b, constraints, v, reactions, iterations));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ProjectedSolver::SolveProjected(Vec b,
+                                               const std::vector<VelocityConstraint> &constraints,
+                                               Vec v, std::vector<PetscReal> *reactions,
+                                               PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  GroupByVertex(constraints);
   // z: the prescribed normal velocities; rhs = P (b - A z); w from the guess.
   PetscCall(SetPrescribedVelocities());
   PetscCall(MatMult(A_, z_, work_));

@@ -14,11 +14,23 @@
 // The constraint's reaction is lambda_i = n_i . (A v - b)_i (kg m/s, the normal
 // impulse the obstacle gives vertex i this step): positive pushes outward.
 // Options of the inner solve take the prefix -contact_ (e.g. -contact_ksp_rtol).
+//
+// Two-sided constraints (free-free contacts, VelocityConstraint::two_sided)
+// couple vertices of different bodies, possibly on other ranks, and are
+// inequalities. When any rank has one, every constraint becomes a row j of J
+// (a vertex constraint: its combined directions, CombineConstraints; a
+// two-sided one: its vertex and face), and the step solves the mixed
+// complementarity problem on the Delassus operator D = J A^-1 J^T (mixed_lcp.hpp):
+// D is built from one solve with the unconstrained solver per row (back-solves
+// with the direct preset), reduced over the ranks and solved identically on
+// each; then A v = b + J^T lambda. The rows are few (a stack of blocks: a few
+// hundred); scenes without two-sided constraints never take this path.
 #pragma once
 
 #include <petscksp.h>
 
 #include <Eigen/Core>
+#include <array>
 #include <vector>
 
 namespace softbody {
@@ -31,6 +43,18 @@ struct VelocityConstraint {
   // One of three orthonormal constraints that prescribe the whole velocity (the
   // collision guard's): they override every other constraint of the vertex.
   bool prescribes_all = false;
+  // Two-sided (a contact between two free bodies): the inequality
+  //   n . (v_vertex - sum_k weights_k v_{face_k}) >= velocity,
+  // face_k PETSc (global) vertex numbers of any rank (-1: none); its reaction
+  // lambda >= 0 acts as +lambda n on the vertex and -lambda w_k n on face_k, so
+  // the two bodies get equal and opposite impulses.
+  bool two_sided = false;
+  std::array<PetscInt, 3> face{{-1, -1, -1}};
+  Eigen::Vector3d weights = Eigen::Vector3d::Zero();
+  // A rank-independent number of the vertex (its natural number) that orders
+  // the rows of the two-sided solve, so that they come in the same order on
+  // any rank count; -1: the vertex's PETSc number (rank-dependent).
+  PetscInt order_key = -1;
 };
 // The constraints of one vertex: an orthonormal basis of their directions and
 // the velocity component in its span that satisfies them all.
@@ -83,6 +107,13 @@ class ProjectedSolver {
   PetscErrorCode SetPrescribedVelocities();
   PetscErrorCode Reactions(Vec b, Vec v, const std::vector<VelocityConstraint> &constraints,
                            std::vector<PetscReal> *reactions);
+  // The projected solve (no two-sided constraint on any rank).
+  PetscErrorCode SolveProjected(Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
+                                std::vector<PetscReal> *reactions, PetscInt *iterations);
+  // The Delassus path (file comment); collective.
+  PetscErrorCode SolveTwoSided(KSP solver, Vec b,
+                               const std::vector<VelocityConstraint> &constraints, Vec v,
+                               std::vector<PetscReal> *reactions, PetscInt *iterations);
 
   KSP inner_ = nullptr;
   Mat shell_ = nullptr;

@@ -23,7 +23,9 @@ For each of bdf2, newmark and alpha (be: test_restart.py), 2 ranks:
     error): be's checkpoint restarted with bdf2 runs to the end.
 (e) -dt_adapt -tol 1e-4: the struck bar restarts bit for bit with bdf2 (linear
     and corotational) and alpha (linear): the checkpoint holds the substep
-    size and the previous velocities the error estimate needs.
+    size and the previous velocities the error estimate needs (-dt_adapt_horizon
+    given: the first part runs fewer -steps, and the horizon of -tol defaults to
+    the run's length).
 """
 import os
 import sys
@@ -113,7 +115,8 @@ for scheme in SCHEMES:
 
 for scheme, mode in (("bdf2", "linear"), ("bdf2", "corotational"), ("alpha", "linear")):
     restart_case(f"adapt_{mode}_{scheme}", f"(e) {scheme}, {mode} struck bar, -dt_adapt", bar,
-                 ["-integrator", scheme, "-mode", mode, "-dt_adapt", "-tol", "1e-4", "-dt", "0.05"], 20)
+                 ["-integrator", scheme, "-mode", mode, "-dt_adapt", "-tol", "1e-4", "-dt", "0.05",
+                  "-dt_adapt_horizon", "1.0"], 20)  # 20 steps of 0.05 s: the first part runs only 10
 
 part = path("switch_part")
 harness.run(args, 2, ["-scene", beam, "-steps", 10, "-checkpoint_every", 10, "-output", part, "-quiet"])

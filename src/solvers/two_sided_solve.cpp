@@ -1,0 +1,241 @@
+// ProjectedSolver's Delassus path for two-sided constraints (projected_solve.hpp).
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "common/exchange.hpp"
+#include "solvers/mixed_lcp.hpp"
+#include "solvers/projected_solve.hpp"
+
+namespace softbody {
+
+namespace {
+
+// The complementarity problem is solved to this fraction of the largest
+// velocity it involves (m/s): far below the contact gap over a step, at the
+// round-off of the back-solves that built D.
+constexpr double kLcpRelativeTolerance = 1e-10;
+
+// One row of J: up to four vertices (PETSc numbers, -1: none) with weights,
+// a direction, the right-hand side, and whether it is an inequality; ordered
+// by (key, sub): the vertex's order key (VelocityConstraint::order_key) and
+// the row's place among the vertex's rows; rank and position: where it was made.
+struct Row {
+  PetscInt vertex[4];
+  double weight[4];
+  double direction[3];
+  double value;
+  PetscInt key;
+  int32_t sub;
+  int32_t unilateral;
+  int32_t rank;
+  int32_t position;
+};
+
+// This rank's rows: each constrained vertex's combined directions, then the
+// two-sided constraints in their order; *slot: the row of each two-sided
+// constraint (-1 for the others).
+std::vector<Row> LocalRows(const std::vector<ConstrainedVertex> &vertices,
+                           const std::vector<VelocityConstraint> &constraints, PetscInt first,
+                           int32_t rank, std::vector<PetscInt> *slot) {
+  std::map<PetscInt, PetscInt> key;  // local vertex -> order key
+  std::map<PetscInt, int32_t> subs;  // local vertex -> rows so far
+  for (const VelocityConstraint &c : constraints)
+    key[c.vertex] = c.order_key >= 0 ? c.order_key : first + c.vertex;
+  std::vector<Row> rows;
+  auto add = [&](Row row, PetscInt local) {
+    row.key = key[local];
+    row.sub = subs[local]++;
+    row.rank = rank;
+    row.position = static_cast<int32_t>(rows.size());
+    rows.push_back(row);
+  };
+  for (const ConstrainedVertex &c : vertices)
+    for (int j = 0; j < c.rank; ++j) {
+      const Eigen::Vector3d q = c.basis.col(j);
+      add({{first + c.vertex, -1, -1, -1},
+           {1, 0, 0, 0},
+           {q[0], q[1], q[2]},
+           q.dot(c.prescribed),
+           -1,
+           0,
+           0,
+           0,
+           0},
+          c.vertex);
+    }
+  slot->assign(constraints.size(), -1);
+  for (size_t i = 0; i < constraints.size(); ++i) {
+    const VelocityConstraint &c = constraints[i];
+    if (!c.two_sided) continue;
+    (*slot)[i] = static_cast<PetscInt>(rows.size());
+    add({{first + c.vertex, c.face[0], c.face[1], c.face[2]},
+         {1, -c.weights[0], -c.weights[1], -c.weights[2]},
+         {c.normal[0], c.normal[1], c.normal[2]},
+         c.velocity,
+         -1,
+         0,
+         1,
+         0,
+         0},
+        c.vertex);
+  }
+  return rows;
+}
+
+// Every rank's rows in (key, sub) order; *slot (LocalRows') renumbered to it.
+PetscErrorCode OrderedRows(MPI_Comm comm, const std::vector<Row> &mine, int32_t rank,
+                           std::vector<PetscInt> *slot, std::vector<Row> *rows) {
+  PetscFunctionBeginUser;
+  PetscCall(AllGatherRecords(comm, mine, rows));
+  std::sort(rows->begin(), rows->end(), [](const Row &a, const Row &b) {
+    return a.key != b.key ? a.key < b.key : a.sub < b.sub;
+  });
+  std::vector<PetscInt> row_of_position(mine.size(), -1);
+  for (size_t i = 0; i < rows->size(); ++i)
+    if ((*rows)[i].rank == rank) row_of_position[(*rows)[i].position] = static_cast<PetscInt>(i);
+  for (PetscInt &s : *slot)
+    if (s >= 0) s = row_of_position[s];
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// y[owned] += scale J_row^T (entries of owned vertices only); begin, end: the
+// owned PETSc vertex range.
+void AddRowTranspose(const Row &row, double scale, PetscInt begin, PetscInt end, PetscScalar *y) {
+  for (int a = 0; a < 4; ++a) {
+    const PetscInt p = row.vertex[a];
+    if (p < begin || p >= end) continue;
+    for (int k = 0; k < 3; ++k) y[3 * (p - begin) + k] += scale * row.weight[a] * row.direction[k];
+  }
+}
+
+// J_row x over the owned entries.
+double RowDot(const Row &row, PetscInt begin, PetscInt end, const PetscScalar *x) {
+  double sum = 0;
+  for (int a = 0; a < 4; ++a) {
+    const PetscInt p = row.vertex[a];
+    if (p < begin || p >= end) continue;
+    for (int k = 0; k < 3; ++k) sum += row.weight[a] * row.direction[k] * x[3 * (p - begin) + k];
+  }
+  return sum;
+}
+
+// Collective. x = A^-1 y with the unconstrained solver (zero initial guess).
+PetscErrorCode SolveUnconstrained(KSP solver, Vec y, Vec x, PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  PetscCall(VecZeroEntries(x));
+  PetscCall(KSPSolve(solver, y, x));
+  KSPConvergedReason reason;
+  PetscInt its;
+  PetscCall(KSPGetConvergedReason(solver, &reason));
+  PetscCall(KSPGetIterationNumber(solver, &its));
+  PetscCheck(reason >= 0, PetscObjectComm((PetscObject)y), PETSC_ERR_NOT_CONVERGED,
+             "a two-sided contact solve did not converge (%s after %" PetscInt_FMT " iterations)",
+             KSPConvergedReasons[reason], its);
+  *iterations += std::max<PetscInt>(its, 1);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// A two-sided row all of whose vertices have their whole velocity prescribed
+// (three bilateral rows: the collision guard's zones) can only conflict with
+// them: it leaves the problem (lambda 0). Returns the rows kept.
+std::vector<Eigen::Index> KeptRows(const std::vector<Row> &rows) {
+  std::map<PetscInt, int> bilateral;
+  for (const Row &row : rows)
+    if (!row.unilateral) ++bilateral[row.vertex[0]];
+  std::vector<Eigen::Index> kept;
+  for (size_t i = 0; i < rows.size(); ++i) {
+    bool determined = rows[i].unilateral;
+    for (int a = 0; a < 4 && determined; ++a)
+      determined = rows[i].vertex[a] < 0 || rows[i].weight[a] == 0 ||
+                   (bilateral.count(rows[i].vertex[a]) && bilateral[rows[i].vertex[a]] == 3);
+    if (!determined) kept.push_back(static_cast<Eigen::Index>(i));
+  }
+  return kept;
+}
+
+}  // namespace
+
+PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
+                                              const std::vector<VelocityConstraint> &constraints,
+                                              Vec v, std::vector<PetscReal> *reactions,
+                                              PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
+  std::vector<VelocityConstraint> one_sided;
+  for (const VelocityConstraint &c : constraints)
+    if (!c.two_sided) one_sided.push_back(c);
+  GroupByVertex(one_sided);
+  PetscInt begin, end;
+  PetscCall(VecGetOwnershipRange(b, &begin, &end));
+  begin /= 3, end /= 3;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  std::vector<PetscInt> slot;
+  const std::vector<Row> mine = LocalRows(vertices_, constraints, begin, rank, &slot);
+  std::vector<Row> rows;
+  PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
+  const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
+  // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned entries.
+  std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
+  *iterations = 0;
+  for (Eigen::Index j = 0; j <= m; ++j) {
+    if (j < m) {
+      PetscCall(VecZeroEntries(work2_));
+      PetscScalar *y;
+      PetscCall(VecGetArray(work2_, &y));
+      AddRowTranspose(rows[j], 1.0, begin, end, y);
+      PetscCall(VecRestoreArray(work2_, &y));
+    }
+    PetscCall(SolveUnconstrained(solver, j < m ? work2_ : b, work_, iterations));
+    const PetscScalar *x;
+    PetscCall(VecGetArrayRead(work_, &x));
+    for (Eigen::Index i = 0; i < m; ++i) partial[j * m + i] = RowDot(rows[i], begin, end, x);
+    PetscCall(VecRestoreArrayRead(work_, &x));
+  }
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, partial.data(),
+                              static_cast<PetscMPIInt>(partial.size()), MPIU_REAL, MPI_SUM, comm));
+  const std::vector<Eigen::Index> kept = KeptRows(rows);
+  const Eigen::Index k = static_cast<Eigen::Index>(kept.size());
+  Eigen::MatrixXd D(k, k);
+  Eigen::VectorXd g(k);
+  std::vector<char> unilateral(k);
+  double scale = 0;
+  for (Eigen::Index a = 0; a < k; ++a) {
+    const Eigen::Index i = kept[a];
+    for (Eigen::Index c = 0; c < k; ++c)  // symmetrised: round-off of the solves
+      D(a, c) = 0.5 * (partial[kept[c] * m + i] + partial[i * m + kept[c]]);
+    g[a] = partial[m * m + i] - rows[i].value;
+    unilateral[a] = rows[i].unilateral;
+    scale = std::max({scale, std::abs(rows[i].value), std::abs(g[a])});
+  }
+  const MixedLcpResult lcp = SolveMixedLcp(D, g, unilateral, kLcpRelativeTolerance * scale);
+  Eigen::VectorXd lambda = Eigen::VectorXd::Zero(m);
+  for (Eigen::Index a = 0; a < k; ++a) lambda[kept[a]] = lcp.lambda[a];
+  // v = A^-1 (b + J^T lambda); the one-sided reactions from A v - (b + J_two^T lambda).
+  PetscCall(VecCopy(b, rhs_));
+  PetscCall(VecCopy(b, z_));
+  PetscScalar *y, *two;
+  PetscCall(VecGetArray(rhs_, &y));
+  PetscCall(VecGetArray(z_, &two));
+  for (Eigen::Index j = 0; j < m; ++j) {
+    AddRowTranspose(rows[j], lambda[j], begin, end, y);
+    if (rows[j].unilateral) AddRowTranspose(rows[j], lambda[j], begin, end, two);
+  }
+  PetscCall(VecRestoreArray(rhs_, &y));
+  PetscCall(VecRestoreArray(z_, &two));
+  PetscCall(SolveUnconstrained(solver, rhs_, v, iterations));
+  PetscCall(Reactions(z_, v, constraints, reactions));
+  for (size_t i = 0; i < constraints.size(); ++i)
+    if (slot[i] >= 0) (*reactions)[i] = lambda[slot[i]];
+  PetscCall(
+      PetscInfo(solver,
+                "two-sided contact solve: %" PetscInt_FMT
+                " rows (%d two-sided), %d sweeps, %d active-set solves, residual %g m/s (%s)\n",
+                static_cast<PetscInt>(m),
+                static_cast<int>(std::count(unilateral.begin(), unilateral.end(), 1)), lcp.sweeps,
+                lcp.pivots, lcp.residual, lcp.exact ? "exact" : "Gauss-Seidel"));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
