@@ -119,6 +119,7 @@ PetscErrorCode FreeState::SetupFixedSet(Vec lumped_mass, const std::vector<int32
 PetscErrorCode FreeState::SetupRingSet(Vec lumped_mass, const std::vector<int32_t> &naturals) {
   PetscFunctionBeginUser;
   PetscCall(SetupScatteredSet(lumped_mass, naturals, &ring_set_));
+  if (items_) SetupItems();
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -149,6 +150,21 @@ PetscErrorCode FreeState::SetupScatteredSet(Vec lumped_mass, const std::vector<i
   }
   PetscCall(VecRestoreArrayRead(set->x, &mass));
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void FreeState::AttachItems(FreeItems *items) {
+  items_ = items;
+  SetupItems();
+}
+
+void FreeState::SetupItems() {
+  std::vector<int32_t> kept(owned_natural_);
+  for (const ScatteredSet *set : {&fixed_set_, &ring_set_})
+    kept.insert(kept.end(), set->naturals.begin(), set->naturals.end());
+  std::sort(kept.begin(), kept.end());
+  items_->Setup(
+      *scene_, [&](int32_t n) { return is_free(n); },
+      [&](int32_t n) { return std::binary_search(kept.begin(), kept.end(), n); });
 }
 
 PetscErrorCode FreeState::Exchange(Vec x, Vec v, PetscReal dt, const StateNeeds &needs) {
@@ -227,6 +243,7 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
   PetscInt64 bytes;
   PetscCall(neighbours_.Exchange(plan.ranks, plan.counts, records, &received, &bytes));
   bytes_sent_ += bytes;
+  if (items_) PetscCall(ExchangeItems(plan, records, received));
   for (const HaloVertex &h : received) {
     const int32_t n = h.natural, s = Slot(n);
     std::copy(h.x, h.x + 3, &x_[3 * s]);
@@ -234,6 +251,20 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
     inverse_mass_[s] = h.inverse_mass;
     MarkCurrent(n);
   }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The items of the halo's vertices (AttachItems), along the same ranks.
+PetscErrorCode FreeState::ExchangeItems(const HaloPlan &plan, const std::vector<HaloVertex> &sent,
+                                        const std::vector<HaloVertex> &received) {
+  PetscFunctionBeginUser;
+  std::vector<int32_t> sent_naturals, received_naturals;
+  for (const HaloVertex &h : sent) sent_naturals.push_back(h.natural);
+  for (const HaloVertex &h : received) received_naturals.push_back(h.natural);
+  PetscInt64 bytes;
+  PetscCall(items_->Exchange(neighbours_, plan.ranks, plan.counts, sent_naturals, received_naturals,
+                             &bytes));
+  bytes_sent_ += bytes;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -27,6 +27,8 @@
 // from the whole meshes at set-up), O(local + halo + fixed); the map from
 // natural vertex to slot, the body and the free flag stay natural-indexed on
 // every rank (9 B per scene vertex, SceneBytes); the messages are O(halo).
+// The free bodies' tets and triangles that the obstacles' grids need travel
+// with the halo's vertices (AttachItems, free_items.hpp).
 #pragma once
 
 #include <petscvec.h>
@@ -36,11 +38,14 @@
 #include <vector>
 
 #include "common/neighbour_exchange.hpp"
+#include "contact/free_items.hpp"
 #include "contact/geometry.hpp"
 #include "fem/partition.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
+
+struct HaloPlan;
 
 // What an Exchange brings besides this rank's own vertices.
 struct StateNeeds {
@@ -72,6 +77,12 @@ class FreeState {
   // boundary triangles at its own surface vertices, so that a vertex's normal
   // reads its whole ring on any rank count; their inverse masses fetched now.
   PetscErrorCode SetupRingSet(Vec lumped_mass, const std::vector<int32_t> &naturals);
+  // Not collective, after SetupMasses and SetupFixedSet, while the scene's
+  // meshes are held. Sets up *items (free_items.hpp: the items listed under
+  // this rank's own, the fixed set's and the ring set's vertices; SetupRingSet
+  // after it sets them up again) and has every halo exchange bring the items
+  // of the vertices it brings.
+  void AttachItems(FreeItems *items);
   // Collective. This rank's vertices at x + dt v (dt = 0: at x) and velocities
   // v, the free bodies' boxes there, and what `needs` asks for.
   PetscErrorCode Exchange(Vec x, Vec v, PetscReal dt, const StateNeeds &needs);
@@ -135,6 +146,10 @@ class FreeState {
   // Collective. body_box_: every rank's boxes joined, and the non-free vertices'.
   PetscErrorCode ReduceBodyBoxes(const std::vector<Box> &owned_boxes);
   PetscErrorCode ExchangeHalo(const std::vector<Box> &owned_boxes);
+  // items_->Setup for this rank's own, fixed-set and ring-set vertices.
+  void SetupItems();
+  PetscErrorCode ExchangeItems(const HaloPlan &plan, const std::vector<HaloVertex> &sent,
+                               const std::vector<HaloVertex> &received);
   // The vertex's slot in the per-slot arrays, given on first use (position
   // NaN, velocity and inverse mass 0 until written).
   int32_t Slot(int32_t natural);
@@ -169,6 +184,7 @@ class FreeState {
   std::vector<Box> body_box_;       // per body, at the last exchange
   std::vector<Box> static_box_;     // per body, its vertices without unknowns
   NeighbourExchange neighbours_;
+  FreeItems *items_ = nullptr;  // AttachItems
   PetscInt64 bytes_sent_ = 0;
   // Vertices fetched by a scatter of just them: their free vertices (natural)
   // and their DOFs gathered.

@@ -35,8 +35,8 @@ constexpr double kBlendReach = 0.1;
 
 }  // namespace
 
-void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool ground,
-                            double ground_y, double ground_margin) {
+void Obstacles::SetupGround(const Scene &scene, FreeState &state, bool ground, double ground_y,
+                            double ground_margin) {
   scene_ = &scene;
   state_ = &state;
   ground_ = ground;
@@ -45,84 +45,39 @@ void Obstacles::SetupGround(const Scene &scene, const FreeState &state, bool gro
 }
 
 int64_t Obstacles::SceneBytes() const {
-  return HeldBytes(fixed_tets_) + HeldBytes(free_tets_) + HeldBytes(fixed_triangles_) +
-         HeldBytes(free_triangles_) + HeldBytes(tets_start_) + HeldBytes(triangles_start_) +
-         HeldBytes(tets_of_vertex_) + HeldBytes(triangles_of_vertex_) + HeldBytes(static_tets_) +
-         HeldBytes(static_triangles_);
+  return HeldBytes(fixed_tets_) + HeldBytes(fixed_triangles_) + free_items_.HeldBytes();
 }
 
 void Obstacles::SetupBodies(bool track_free) {
-  // Exact sizes: the lists hold every tet of the scene's obstacle bodies.
-  size_t fixed_tets = 0, free_tets = 0;
-  for (const Body &body : scene_->bodies)
-    (body.fixed ? fixed_tets : free_tets) += body.fixed || track_free ? body.num_tets() : 0;
+  // Exact sizes: the fixed lists hold every tet of the scene's fixed bodies.
+  size_t fixed_tets = 0;
+  for (const Body &body : scene_->bodies) fixed_tets += body.fixed ? body.num_tets() : 0;
   fixed_tets_.reserve(fixed_tets);
-  free_tets_.reserve(free_tets);
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
-    if (scene_->bodies[b].fixed || track_free) AddBody(b);
+    if (scene_->bodies[b].fixed) AddFixedBody(b);
   fixed_triangles_.shrink_to_fit();
-  free_triangles_.shrink_to_fit();
   BuildFixedBodyBoxes();
-  std::vector<int32_t> tets(fixed_tets_.size()), triangles(fixed_triangles_.size());
-  std::iota(tets.begin(), tets.end(), 0);
-  std::iota(triangles.begin(), triangles.end(), 0);
-  BinItems(fixed_tets_, tets, &fixed_tets_bin_);
-  BinItems(fixed_triangles_, triangles, &fixed_triangles_bin_);
-  if (track_free) IndexFreeItems();
+  fixed_tets_bin_.base = fixed_tets_.data();
+  fixed_triangles_bin_.base = fixed_triangles_.data();
+  BinItems(fixed_tets_.size(), &fixed_tets_bin_);
+  BinItems(fixed_triangles_.size(), &fixed_triangles_bin_);
+  if (track_free) state_->AttachItems(&free_items_);
 }
 
-namespace {
-
-// CSR of the items (first N entries: natural vertices) by vertex, over V
-// vertices: each item once, under its first corner that `counts` accepts (an
-// item whose corners are all current has that corner current, so visiting the
-// current vertices' lists finds it; one entry per item instead of one per
-// corner). Items with no such corner are left out.
-template <size_t N, class Counts>
-void IndexByVertex(const std::vector<std::array<int32_t, N>> &items, size_t corners, int32_t V,
-                   Counts counts, std::vector<int64_t> *start, std::vector<int32_t> *of_vertex) {
-  auto key = [&](const std::array<int32_t, N> &item) {
-    const auto corner = std::find_if(item.begin(), item.begin() + corners, counts);
-    return corner == item.begin() + corners ? -1 : *corner;
-  };
-  start->assign(static_cast<size_t>(V) + 1, 0);
-  for (const auto &item : items)
-    if (const int32_t n = key(item); n >= 0) ++(*start)[n + 1];
-  for (int32_t n = 0; n < V; ++n) (*start)[n + 1] += (*start)[n];
-  of_vertex->resize((*start)[V]);
-  std::vector<int64_t> next(start->begin(), start->end() - 1);
-  for (size_t t = 0; t < items.size(); ++t)
-    if (const int32_t n = key(items[t]); n >= 0) (*of_vertex)[next[n]++] = static_cast<int32_t>(t);
-}
-
-}  // namespace
-
-void Obstacles::IndexFreeItems() {
-  const int32_t V = scene_->num_vertices();
-  auto is_free = [&](int32_t n) { return state_->is_free(n); };
-  IndexByVertex(free_tets_, 4, V, is_free, &tets_start_, &tets_of_vertex_);
-  IndexByVertex(free_triangles_, 3, V, is_free, &triangles_start_, &triangles_of_vertex_);
-  for (size_t t = 0; t < free_tets_.size(); ++t)
-    if (std::none_of(free_tets_[t].begin(), free_tets_[t].begin() + 4, is_free))
-      static_tets_.push_back(static_cast<int32_t>(t));
-  for (size_t t = 0; t < free_triangles_.size(); ++t)
-    if (std::none_of(free_triangles_[t].begin(), free_triangles_[t].begin() + 3, is_free))
-      static_triangles_.push_back(static_cast<int32_t>(t));
-}
-
-void Obstacles::AddBody(size_t b) {
+void Obstacles::AddFixedBody(size_t b) {
   const Body &body = scene_->bodies[b];
   const auto boundary = BoundaryTriangles(body.mesh);
-  auto &tets = body.fixed ? fixed_tets_ : free_tets_;
-  auto &triangles = body.fixed ? fixed_triangles_ : free_triangles_;
+  const int32_t first = body.first_vertex, body_id = static_cast<int32_t>(b);
   for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-    tets.push_back({body.first_vertex + body.mesh.tets(t, 0),
-                    body.first_vertex + body.mesh.tets(t, 1),
-                    body.first_vertex + body.mesh.tets(t, 2),
-                    body.first_vertex + body.mesh.tets(t, 3), static_cast<int32_t>(b)});
+    fixed_tets_.push_back({-1,
+                           static_cast<int32_t>(fixed_tets_.size()),
+                           {first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
+                            first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id}});
   for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-    triangles.push_back({body.first_vertex + boundary(f, 0), body.first_vertex + boundary(f, 1),
-                         body.first_vertex + boundary(f, 2), static_cast<int32_t>(b)});
+    fixed_triangles_.push_back(
+        {-1,
+         static_cast<int32_t>(fixed_triangles_.size()),
+         {first + boundary(f, 0), first + boundary(f, 1), first + boundary(f, 2), body_id}});
 }
 
 void Obstacles::MoveFreeBodies() {
@@ -142,42 +97,54 @@ void Obstacles::BuildFixedBodyBoxes() {
   }
 }
 
-template <size_t N>
-void Obstacles::BinItems(const std::vector<std::array<int32_t, N>> &items,
-                         const std::vector<int32_t> &which, Binned *bin) const {
-  bin->ids = which;
-  bin->boxes.assign(which.size(), Box());
-  for (size_t slot = 0; slot < which.size(); ++slot)
-    for (size_t a = 0; a + 1 < N; ++a) bin->boxes[slot].Extend(WorldPoint(items[which[slot]][a]));
+template <class Item>
+void Obstacles::BinItems(size_t count, Binned<Item> *bin) const {
+  bin->boxes.assign(count, Box());
+  for (size_t slot = 0; slot < count; ++slot) {
+    const Item &item = bin->at(slot).item;
+    for (size_t a = 0; a + 1 < item.size(); ++a) bin->boxes[slot].Extend(WorldPoint(item[a]));
+  }
   bin->grid.Build(bin->boxes);
 }
 
-template <size_t N>
-std::vector<int32_t> Obstacles::CurrentItems(const std::vector<std::array<int32_t, N>> &items,
-                                             const std::vector<int64_t> &start,
-                                             const std::vector<int32_t> &of_vertex,
-                                             const std::vector<int32_t> &static_items) const {
-  std::vector<int32_t> current = static_items;
+template <class Item, class ForEachOf>
+void Obstacles::BinCurrent(const std::vector<IndexedItem<Item>> &static_items,
+                           ForEachOf for_each_of, Binned<Item> *bin) const {
+  auto all_current = [&](const IndexedItem<Item> &i) {
+    return std::all_of(i.item.begin(), i.item.end() - 1,
+                       [&](int32_t m) { return state_->current(m); });
+  };
+  // Counted first, so that the list is allocated once at its size.
+  size_t count = static_items.size();
   for (const int32_t n : state_->current_free())
-    for (int64_t k = start[n]; k < start[n + 1]; ++k) {
-      const auto &item = items[of_vertex[k]];
-      if (std::all_of(item.begin(), item.begin() + (N - 1),
-                      [&](int32_t m) { return state_->current(m); }))
-        current.push_back(of_vertex[k]);
-    }
-  std::sort(current.begin(), current.end());
-  current.erase(std::unique(current.begin(), current.end()), current.end());
-  return current;
+    for_each_of(n, [&](const IndexedItem<Item> &i) { count += all_current(i); });
+  auto &items = bin->items;
+  items.clear();
+  items.shrink_to_fit();
+  items.reserve(count);
+  for (const IndexedItem<Item> &i : static_items) items.push_back(&i);
+  for (const int32_t n : state_->current_free())
+    for_each_of(n, [&](const IndexedItem<Item> &i) {
+      if (all_current(i)) items.push_back(&i);
+    });
+  std::sort(items.begin(), items.end(), [](auto a, auto b) { return a->id < b->id; });
+  items.erase(
+      std::unique(items.begin(), items.end(), [](auto a, auto b) { return a->id == b->id; }),
+      items.end());
+  BinItems(items.size(), bin);
 }
 
 void Obstacles::EnsureFreeGrids() const {
-  if (free_grids_current_) return;
-  BinItems(free_tets_, CurrentItems(free_tets_, tets_start_, tets_of_vertex_, static_tets_),
-           &free_tets_bin_);
-  BinItems(free_triangles_,
-           CurrentItems(free_triangles_, triangles_start_, triangles_of_vertex_, static_triangles_),
-           &free_triangles_bin_);
+  if (free_grids_current_ && binned_generation_ == free_items_.generation()) return;
+  BinCurrent(
+      free_items_.static_tets(), [&](int32_t n, auto visit) { free_items_.ForEachTetOf(n, visit); },
+      &free_tets_bin_);
+  BinCurrent(
+      free_items_.static_triangles(),
+      [&](int32_t n, auto visit) { free_items_.ForEachTriangleOf(n, visit); },
+      &free_triangles_bin_);
   free_grids_current_ = true;
+  binned_generation_ = free_items_.generation();
   ++free_grid_builds_;
 }
 
@@ -192,8 +159,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
-  const Binned &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
+  const Binned<FreeTriangle> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const UniformGrid &grid = bin.grid;
   if (grid.empty()) return false;
   const double limit = (grid.bounds().upper - grid.bounds().lower).norm() +
@@ -205,8 +171,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
   // searched: every triangle nearer than it meets that neighbourhood.
   for (double radius = grid.cell_size(), searched = 0; best > searched && searched < 2 * limit;
        searched = radius, radius *= 2)
-    bin.ForEachNear(p, radius, [&](int32_t t, const Box &) {
-      const auto &tri = triangles[t];
+    bin.ForEachNear(p, radius, [&](int32_t t, const FreeTriangle &tri, const Box &) {
       if (tri[3] != obstacle) return;
       const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
       Eigen::Vector3d w;
@@ -233,11 +198,9 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
 bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
   bool inside = false;
   (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
-      .ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
-        const auto &tet = tets[t];
+      .ForEachNear(p, 0.0, [&](int32_t, const FreeTet &tet, const Box &box) {
         if (inside || tet[4] != obstacle || !box.Contains(p, kBoxMargin)) return;
         inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
                              WorldPoint(tet[3]))
@@ -250,8 +213,7 @@ bool Obstacles::LocateInFreeBody(const Point &p, int32_t body, double margin,
                                  Point *velocity) const {
   EnsureFreeGrids();
   bool found = false;
-  free_tets_bin_.ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
-    const auto &tet = free_tets_[t];
+  free_tets_bin_.ForEachNear(p, 0.0, [&](int32_t, const FreeTet &tet, const Box &box) {
     if (found || tet[4] != body || !box.Contains(p, kBoxMargin)) return;
     const Eigen::Vector4d w = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]),
                                           WorldPoint(tet[2]), WorldPoint(tet[3]));
@@ -267,14 +229,13 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
                             SurfaceHit *hit) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeGrids();
-  const auto &triangles = fixed_part ? fixed_triangles_ : free_triangles_;
-  const Binned &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
+  const Binned<FreeTriangle> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const Point direction = end - start;
   double first = kNoCrossing;
   int32_t chosen = -1;
   bin.ForEachNear(
-      0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(), [&](int32_t t, const Box &) {
-        const auto &tri = triangles[t];
+      0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(),
+      [&](int32_t t, const FreeTriangle &tri, const Box &) {
         if (tri[3] != obstacle) return;
         const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
         const Point normal = (b - a).cross(c - a);
@@ -352,14 +313,14 @@ Point Obstacles::AngleWeightedNormal(int32_t natural, Keep keep) const {
   if (!state_->current(natural)) return sum;
   EnsureFreeGrids();
   std::vector<int32_t> ring;
-  free_triangles_bin_.ForEachNear(WorldPoint(natural), 0, [&](int32_t t, const Box &) {
-    const auto &tri = free_triangles_[t];
-    if (std::find(tri.begin(), tri.begin() + 3, natural) != tri.begin() + 3) ring.push_back(t);
-  });
+  free_triangles_bin_.ForEachNear(
+      WorldPoint(natural), 0, [&](int32_t t, const FreeTriangle &tri, const Box &) {
+        if (std::find(tri.begin(), tri.begin() + 3, natural) != tri.begin() + 3) ring.push_back(t);
+      });
   std::sort(ring.begin(), ring.end());
   ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
   for (const int32_t t : ring) {
-    const auto &tri = free_triangles_[t];
+    const auto &tri = free_triangle(t);
     const int k = tri[0] == natural ? 0 : tri[1] == natural ? 1 : 2;
     const Point a = WorldPoint(tri[k]), b = WorldPoint(tri[(k + 1) % 3]),
                 c = WorldPoint(tri[(k + 2) % 3]);
@@ -380,7 +341,7 @@ Point Obstacles::VertexNormal(int32_t natural) const {
 // surface, and the same whichever of the faces at a vertex or edge the hit
 // took); the face's normal when that vanishes.
 void Obstacles::BlendFacingNormal(const Point &own, SurfaceHit *hit) const {
-  const auto &tri = free_triangles_[hit->triangle];
+  const auto &tri = free_triangle(hit->triangle);
   Point blend = Point::Zero();
   for (int k = 0; k < 3; ++k) {
     if (!(hit->weights[k] > 0)) continue;
@@ -409,8 +370,7 @@ bool Obstacles::ContactOnBody(const Point &p, int32_t natural, int32_t obstacle,
   const double tie = kTieOfEdge * state_->edge(obstacle);
   double best = kUnbounded;
   int32_t chosen = -1;
-  free_triangles_bin_.ForEachNear(p, reach, [&](int32_t t, const Box &) {
-    const auto &tri = free_triangles_[t];
+  free_triangles_bin_.ForEachNear(p, reach, [&](int32_t t, const FreeTriangle &tri, const Box &) {
     if (tri[3] != obstacle) return;
     const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
     const Point normal = (b - a).cross(c - a);
@@ -437,20 +397,20 @@ bool Obstacles::ContactOnBody(const Point &p, int32_t natural, int32_t obstacle,
 
 int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
                                   const VertexObstacles &skip) const {
-  const auto &tets = fixed_part ? fixed_tets_ : free_tets_;
-  int32_t first = -1;  // the lowest tet holding p
+  int32_t first = -1, first_body = -1;  // the lowest tet holding p, its body
   (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
-      .ForEachNear(p, 0.0, [&](int32_t t, const Box &box) {
-        const auto &tet = tets[t];
+      .ForEachNear(p, 0.0, [&](int32_t t, const FreeTet &tet, const Box &box) {
         if ((first >= 0 && t >= first) || tet[4] == body || skip.Has(tet[4]) ||
             !box.Contains(p, kBoxMargin) || (!fixed_part && Separating(body, tet[4])))
           return;
         if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
                         WorldPoint(tet[3]))
-                .minCoeff() >= -kInsideTolerance)
+                .minCoeff() >= -kInsideTolerance) {
           first = t;
+          first_body = tet[4];
+        }
       });
-  return first >= 0 ? tets[first][4] : -1;
+  return first_body;
 }
 
 bool Obstacles::Separating(int32_t a, int32_t b) const {

@@ -7,11 +7,15 @@
 // once; the free bodies' boxes follow them (MoveFreeBodies) and their grids
 // are rebuilt lazily, when a query first needs them, so that a step whose
 // bodies' boxes stay apart builds none. Positions and velocities are read
-// from FreeState (world coordinates); the free grids hold only the tets and
-// triangles whose vertices are all current there (this rank's and its halo's),
-// found from the current vertices, so a rebuild costs O(local + halo). Queries
-// break ties of distance by the lower triangle or tet index, so that answers
-// do not depend on which items a rank's grid holds. Not collective.
+// from FreeState (world coordinates). The fixed bodies' tets and triangles and
+// the free bodies' triangles are held whole on every rank; of the free bodies'
+// tets a rank holds only those listed under its own, its halo's and the fixed
+// and ring sets' vertices (free_items.hpp: they travel with the halo), and the
+// free grids bin the items whose vertices are all current, so the tets' lists
+// and a rebuild are O(local + halo). Queries break
+// ties of distance by the lower triangle or tet index (the item's index in the
+// scene's list), so that answers do not depend on which items a rank's grid
+// holds. Not collective.
 #pragma once
 
 #include <algorithm>
@@ -20,6 +24,7 @@
 #include <utility>
 #include <vector>
 
+#include "contact/free_items.hpp"
 #include "contact/free_state.hpp"
 #include "contact/geometry.hpp"
 #include "io/scene.hpp"
@@ -61,11 +66,14 @@ class Obstacles {
  public:
   // First: the scene, the state the queries read, and the ground (an obstacle
   // when `ground`, at height ground_y in m; a point less than ground_margin of
-  // its body's mean boundary edge above it counts as inside).
-  void SetupGround(const Scene &scene, const FreeState &state, bool ground, double ground_y,
+  // its body's mean boundary edge above it counts as inside). The state's
+  // halo exchanges bring the free items (SetupBodies).
+  void SetupGround(const Scene &scene, FreeState &state, bool ground, double ground_y,
                    double ground_margin);
-  // The bodies: fixed ones always, free ones when `track_free` (they are
-  // obstacles to each other or meet sharp edges); builds the fixed grids.
+  // While the scene's meshes are held. The bodies: fixed ones always, free
+  // ones when `track_free` (they are obstacles to each other or meet sharp
+  // edges; their items then travel with the state's halo); builds the fixed
+  // grids.
   void SetupBodies(bool track_free);
 
   // The free bodies moved (FreeState holds their new positions and boxes):
@@ -111,47 +119,54 @@ class Obstacles {
   bool ground() const { return ground_; }
   double ground_y() const { return ground_y_; }
   const Box &body_box(size_t body) const { return body_box_[body]; }
-  // A free body's boundary triangle: natural vertices and body.
-  const std::array<int32_t, 4> &free_triangle(int32_t t) const { return free_triangles_[t]; }
+  // A free body's boundary triangle: natural vertices and body (t: its index,
+  // 0 .. num_free_triangles() - 1).
+  const FreeTriangle &free_triangle(int32_t t) const { return free_items_.triangle(t); }
   size_t num_fixed_tets() const { return fixed_tets_.size(); }
-  size_t num_free_tets() const { return free_tets_.size(); }
-  size_t num_free_triangles() const { return free_triangles_.size(); }
-  // Bytes of the bodies' item lists and their index by vertex (O(scene) on
-  // every rank; the grids, O(local + halo) for free bodies, not counted).
+  size_t num_free_tets() const { return static_cast<size_t>(free_items_.num_tets()); }
+  size_t num_free_triangles() const { return static_cast<size_t>(free_items_.num_triangles()); }
+  // Bytes of the bodies' item lists: the fixed bodies' and the free bodies'
+  // triangles (O(scene) on every rank) and the free tets this rank holds
+  // (O(local + halo)); the grids and their items' boxes are not counted.
   int64_t SceneBytes() const;
   // How often this rank built the free bodies' grids.
   PetscInt free_grid_builds() const { return free_grid_builds_; }
 
  private:
-  // A body's tets and boundary triangles, as natural vertices + body.
-  void AddBody(size_t b);
+  // A fixed body's tets and boundary triangles, as natural vertices + body,
+  // indexed in the scene's list of fixed items.
+  void AddFixedBody(size_t b);
   void BuildFixedBodyBoxes();
-  // Each free vertex's tets and triangles (CSR), and those with no free vertex.
-  void IndexFreeItems();
-  // The free items (tets: 4 vertices, triangles: 3) whose vertices are all current.
-  template <size_t N>
-  std::vector<int32_t> CurrentItems(const std::vector<std::array<int32_t, N>> &items,
-                                    const std::vector<int64_t> &start,
-                                    const std::vector<int32_t> &of_vertex,
-                                    const std::vector<int32_t> &static_items) const;
   void EnsureFreeGrids() const;
-  // Items (tets or triangles) binned in a uniform grid over their boxes: the
-  // grid holds slots, ids[slot] the item and boxes[slot] its box. Only the
-  // binned items' boxes are kept, so a free grid costs O(local + halo).
+  // Items (tets or triangles: vertices and the body) binned in a uniform grid
+  // over their boxes: the grid holds slots, at(slot) the item (from `base`,
+  // slot = index, or `items`: free grids hold only the current items, O(local +
+  // halo), pointers into FreeItems' lists) and boxes[slot] its box.
+  template <class Item>
   struct Binned {
-    std::vector<int32_t> ids;
+    const IndexedItem<Item> *base = nullptr;
+    std::vector<const IndexedItem<Item> *> items;  // id increasing
     std::vector<Box> boxes;
     UniformGrid grid;
-    // visit(item, box) for the items whose cells meet the box around p of half-width radius.
+    const IndexedItem<Item> &at(size_t slot) const { return base ? base[slot] : *items[slot]; }
+    // visit(id, item, box) for the items whose cells meet the box around p of half-width radius.
     template <typename Visit>
     void ForEachNear(const Point &p, double radius, Visit visit) const {
-      grid.ForEachNear(p, radius, [&](int32_t slot) { visit(ids[slot], boxes[slot]); });
+      grid.ForEachNear(p, radius, [&](int32_t slot) {
+        const IndexedItem<Item> &i = at(slot);
+        visit(i.id, i.item, boxes[slot]);
+      });
     }
   };
-  // The listed items (`which`, increasing) binned at the world positions.
-  template <size_t N>
-  void BinItems(const std::vector<std::array<int32_t, N>> &items, const std::vector<int32_t> &which,
-                Binned *bin) const;
+  // The bin's boxes at the world positions and its grid, for its `count` items.
+  template <class Item>
+  void BinItems(size_t count, Binned<Item> *bin) const;
+  // The free items whose vertices are all current, binned: those under the
+  // current free vertices (for_each_of: free_items_'s ForEachTetOf or
+  // ForEachTriangleOf) and the static ones.
+  template <class Item, class ForEachOf>
+  void BinCurrent(const std::vector<IndexedItem<Item>> &static_items, ForEachOf for_each_of,
+                  Binned<Item> *bin) const;
   // The first body other than `body` and those in `skip` in whose tets of the
   // fixed or free part p lies; -1 if none.
   int32_t BodyContaining(const Point &p, bool fixed_part, int32_t body,
@@ -167,22 +182,22 @@ class Obstacles {
   Point WorldPoint(int32_t n) const { return state_->position(n); }
 
   const Scene *scene_ = nullptr;
-  const FreeState *state_ = nullptr;
+  FreeState *state_ = nullptr;  // read by the queries; its halo brings free_items_
   bool ground_ = false;
   double ground_y_ = 0;
-  double ground_margin_ = 0;  // in mean boundary edges of the point's body
-  std::vector<std::array<int32_t, 5>> fixed_tets_, free_tets_;
-  std::vector<std::array<int32_t, 4>> fixed_triangles_, free_triangles_;
-  Binned fixed_tets_bin_, fixed_triangles_bin_;
-  mutable Binned free_tets_bin_, free_triangles_bin_;
+  double ground_margin_ = 0;                      // in mean boundary edges of the point's body
+  std::vector<IndexedItem<FreeTet>> fixed_tets_;  // the fixed bodies' (key -1)
+  std::vector<IndexedItem<FreeTriangle>> fixed_triangles_;
+  Binned<FreeTet> fixed_tets_bin_;
+  Binned<FreeTriangle> fixed_triangles_bin_;
+  FreeItems free_items_;
+  mutable Binned<FreeTet> free_tets_bin_;
+  mutable Binned<FreeTriangle> free_triangles_bin_;
   mutable bool free_grids_current_ = false;
+  mutable uint64_t binned_generation_ = 0;  // free_items_'s, when the free grids were built
   mutable PetscInt free_grid_builds_ = 0;
   std::vector<std::pair<size_t, size_t>> separating_;  // (a < b), SetSeparating
   std::vector<Box> body_box_;  // broad phase: each obstacle body's bounding box
-  // Free items by vertex (CSR over natural vertices) and those without a free vertex.
-  std::vector<int64_t> tets_start_, triangles_start_;
-  std::vector<int32_t> tets_of_vertex_, triangles_of_vertex_;
-  std::vector<int32_t> static_tets_, static_triangles_;
 };
 
 }  // namespace softbody

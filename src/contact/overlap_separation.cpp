@@ -58,6 +58,13 @@ void OverlapSeparation::NumberSurface() {
   positions_.assign(3 * surface_.size(), 0.0);
 }
 
+void OverlapSeparation::ReleaseSurfaces() {
+  std::vector<std::vector<std::pair<int32_t, int32_t>>>().swap(edges_);
+  std::vector<std::vector<std::array<int32_t, 3>>>().swap(triangles_);
+  std::vector<int32_t>().swap(surface_);
+  std::vector<double>().swap(positions_);
+}
+
 int32_t OverlapSeparation::SurfaceIndex(int32_t natural) const {
   const auto at = std::lower_bound(surface_.begin(), surface_.end(), natural);
   return at != surface_.end() && *at == natural ? static_cast<int32_t>(at - surface_.begin()) : -1;
@@ -74,6 +81,7 @@ PetscErrorCode OverlapSeparation::FindOverlaps(Vec x, size_t *found) {
   initial_pairs_ = pairs_.size();
   obstacles_->SetSeparating(pairs_);
   *found = pairs_.size();
+  if (pairs_.empty()) ReleaseSurfaces();
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -90,7 +98,10 @@ PetscErrorCode OverlapSeparation::Step(Vec x, bool *moved) {
     pairs_ = crossing;
     obstacles_->SetSeparating(pairs_);
   }
-  if (pairs_.empty()) PetscFunctionReturn(PETSC_SUCCESS);
+  if (pairs_.empty()) {
+    ReleaseSurfaces();
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
   ++steps_;
   std::vector<Point> shift(scene_->bodies.size(), Point::Zero());
   for (const auto &[a, b] : pairs_) {

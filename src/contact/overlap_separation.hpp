@@ -21,6 +21,8 @@
 // while a pair separates) and their mass centroids reduced, so every rank takes
 // the same decisions and writes its own vertices. It reads nothing of the free
 // state but the bodies, masses and owned vertices. Collective where noted.
+// The surfaces are released once no pair separates (at the start of most runs):
+// FindOverlaps runs once, and nothing reads them afterwards.
 #pragma once
 
 #include <petscvec.h>
@@ -48,9 +50,9 @@ class OverlapSeparation {
  public:
   void Setup(MPI_Comm comm, const Scene &scene, const FreeState &state, Obstacles *obstacles);
 
-  // Collective. At positions x (PETSc order, this rank's vertices): the pairs
-  // of free bodies whose surfaces cross become the separating pairs (the start
-  // of the run); their vertex contacts are turned off. *found: how many.
+  // Collective, once. At positions x (PETSc order, this rank's vertices): the
+  // pairs of free bodies whose surfaces cross become the separating pairs (the
+  // start of the run); their vertex contacts are turned off. *found: how many.
   PetscErrorCode FindOverlaps(Vec x, size_t *found);
   bool active() const { return !pairs_.empty(); }
   // Collective. Translates the separating pairs that still cross at x (this
@@ -59,7 +61,8 @@ class OverlapSeparation {
 
   // Steps taken while some pair was separating; pairs found at the start.
   PetscInt steps() const { return steps_; }
-  // Bytes of the free bodies' surfaces (O(scene surface) on every rank).
+  // Bytes of the free bodies' surfaces (O(scene surface) on every rank, 0
+  // once released).
   int64_t SceneBytes() const {
     return HeldBytes(edges_) + HeldBytes(triangles_) + HeldBytes(surface_) + HeldBytes(positions_);
   }
@@ -78,6 +81,8 @@ class OverlapSeparation {
   // The translation of each of the pair's bodies this step.
   std::pair<Point, Point> Translations(size_t a, size_t b) const;
   void NumberSurface();
+  // Frees the surfaces: no pair separates any more.
+  void ReleaseSurfaces();
   // The surface index of a natural vertex, -1 if not on a free body's surface.
   int32_t SurfaceIndex(int32_t natural) const;
   Point At(int32_t surface) const { return Point(&positions_[3 * surface]); }

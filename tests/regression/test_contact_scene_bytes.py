@@ -1,21 +1,29 @@
 """What a rank holds of the whole scene with contact, as the run summary counts it.
 
-Two free boxes (tools/box_mesh.py, 4 x 2 x 2 cells each) stacked above the ground,
-under gravity, 2 steps, on 1 and 3 ranks. Contact between free bodies still builds
-natural-indexed arrays from the whole meshes (src/contact/free_state.hpp,
-obstacles.hpp); the meshes themselves are released once contact is set up.
+Two free boxes (tools/box_mesh.py, 4 x 0.5 x 0.5 m of 32 x 4 x 4 cells each)
+stacked above the ground, under gravity, 2 steps, on 1 and 4 ranks. The meshes
+are released once contact is set up; the free bodies' tets and triangles a rank
+holds are those listed under its own vertices and its halo's
+(src/contact/free_items.hpp); the free state keeps natural-indexed slot, body and
+flag arrays (src/contact/free_state.hpp).
 
 Expected, from the mesh file alone (V vertices and T tets per box, F boundary
 triangles per box counted here as the faces that one tet only names):
-(a) the "scene" line says the meshes were released after contact's set-up (3 ranks),
-    and the "whole scene" line counts 0 MB of meshes on every rank (1 and 3 ranks);
-(b) the obstacles' lists: per tet its 4 vertices and body (20 B) and one index
-    entry (4 B), per boundary triangle 3 vertices and body (16 B) and one index
-    entry (4 B), and two CSR starts of 8 B per scene vertex, plus one:
-    24 T + 20 F + 16 (V + 1) over the scene, within the summary's 3 digits (1 %);
+(a) the "scene" line says the meshes were released after contact's set-up (4 ranks),
+    and the "whole scene" line counts 0 MB of meshes on every rank (1 and 4 ranks);
+(b) the obstacles' lists on 1 rank: every tet (its 4 vertices and body, its key
+    vertex and its index: 28 B) and boundary triangle (3 vertices and body, key and
+    index, and its place by index: 28 B), once: 28 T + 28 F over the scene, within
+    the summary's 3 digits (1 %). The triangles stay whole on every rank; of the
+    tets, on 4 ranks the largest rank holds less than 3/4 of 28 T: a quarter as its
+    own, and the other body's tets listed under the vertices within the halo's
+    reach of its part (0.66 measured). Lists replicated on every rank would hold
+    the same on any rank count;
 (c) the free state: 9 B per scene vertex (body 4, free flag 1, slot 4; positions,
     velocities and masses are kept per slot, for this rank's own and received
-    vertices only), within 1 %.
+    vertices only), within 1 %;
+(d) overlap separation holds nothing at the end: no pair starts overlapping, and
+    its surfaces are released after the first check.
 """
 import os
 import re
@@ -30,7 +38,9 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
                                 "tools"))
 from softbody_tools import read_medit  # noqa: E402
 
-BOX = ((1.0, 0.5, 0.5), (4, 2, 2))
+BOX = ((4.0, 0.5, 0.5), (32, 4, 4))
+RANKS = (1, 4)
+HELD_FRACTION = 0.75  # the largest rank's tets on 4 ranks over the scene's, at most
 TOLERANCE = 0.01  # relative: the summary prints 3 significant digits
 RELEASED = "meshes whole on every rank until contact's set-up, then released"
 PART = r"{} (?P<{}>[0-9.e+-]+) MB"
@@ -51,7 +61,8 @@ def line(stdout, start):
 def scene_bytes(text):
     """The "whole scene" line's parts (bytes), or {} when it is missing."""
     parts = {}
-    for label, key in (("meshes", "meshes"), ("free state", "free_state"), ("obstacles", "obstacles")):
+    for label, key in (("meshes", "meshes"), ("free state", "free_state"), ("obstacles", "obstacles"),
+                       ("overlap separation", "separation")):
         match = re.search(PART.format(label, key), text)
         if match:
             parts[key] = float(match.group(key)) * 1e6
@@ -73,23 +84,32 @@ def main():
         f.write("2\n")
         for y in (0.3, 0.85):
             f.write(f"box.mesh 1000 1e5 0.3 0 0 {y} 0 1 0 0 0\n")
-    for ranks in (1, 3):
+    expected = 28 * T + 28 * F
+    for ranks in RANKS:
         stdout = harness.run(args, ranks, ["-scene", scene, "-steps", "2", "-dt", "0.01", "-ground", "0",
                                            "-gravity", "0,-9.81,0"]).stdout
         whole = line(stdout, "whole scene")
         parts = scene_bytes(whole)
-        checks.check(len(parts) == 3, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
-        if len(parts) != 3:
+        checks.check(len(parts) == 4, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
+        if len(parts) != 4:
             continue
         if ranks > 1:
             checks.check(RELEASED in line(stdout, "scene "), f"{ranks} ranks: {line(stdout, 'scene ')!r}")
         checks.check(parts["meshes"] == 0, f"{ranks} ranks: no rank keeps the meshes ({parts['meshes']:.0f} B)")
-        expected = 24 * T + 20 * F + 16 * (V + 1)
-        checks.check(close(parts["obstacles"], expected),
-                     f"{ranks} ranks: obstacles {parts['obstacles']:.0f} B, expected 24 T + 20 F + 16 (V + 1) = "
-                     f"{expected} B (T {T}, F {F}, V {V})")
+        if ranks == 1:
+            checks.check(close(parts["obstacles"], expected),
+                         f"{ranks} rank: obstacles {parts['obstacles']:.0f} B, expected 28 T + 28 F = "
+                         f"{expected} B (T {T}, F {F})")
+        else:
+            tets = parts["obstacles"] - 28 * F
+            checks.check(tets <= HELD_FRACTION * 28 * T,
+                         f"{ranks} ranks: obstacles {parts['obstacles']:.0f} B on the largest rank, of which "
+                         f"tets {tets:.0f} B (all but 28 F), {tets / (28 * T):.2f} of the scene's 28 T "
+                         f"(at most {HELD_FRACTION})")
         checks.check(close(parts["free_state"], 9 * V),
                      f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 9 V = {9 * V} B")
+        checks.check(parts["separation"] == 0,
+                     f"{ranks} ranks: overlap separation {parts['separation']:.0f} B, expected 0 (released)")
     checks.exit()
 
 

@@ -1,0 +1,151 @@
+#include "contact/free_items.hpp"
+
+#include "common/held_bytes.hpp"
+#include "fem/mesh.hpp"
+
+namespace softbody {
+
+namespace {
+
+// An item's key: its first corner with unknowns (-1: none, a static item).
+template <class Item>
+int32_t KeyOf(const Item &item, const std::function<bool(int32_t)> &is_free) {
+  const auto corner = std::find_if(item.begin(), item.end() - 1, is_free);
+  return corner == item.end() - 1 ? -1 : *corner;
+}
+
+// Exact capacity: the lists' bytes are what the run summary counts.
+template <class T>
+void Fit(std::vector<T> *v) {
+  v->shrink_to_fit();
+}
+
+}  // namespace
+
+// A tet travelling with its key vertex.
+struct FreeItems::Record {
+  int32_t key, id, corner[4], body;
+};
+
+void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is_free,
+                      const std::function<bool(int32_t)> &kept) {
+  const uint64_t generation = generation_ + 1;  // grids of the lists before are stale
+  *this = FreeItems();
+  generation_ = generation;
+  int32_t tet_id = 0, triangle_id = 0;
+  auto add = [&](const auto &item, int32_t id, auto *own, auto *stat, bool all = false) {
+    const int32_t key = KeyOf(item, is_free);
+    if (key < 0)
+      stat->push_back({key, id, item});
+    else if (all || kept(key))
+      own->push_back({key, id, item});
+  };
+  auto tet = [&](const Body &body, int32_t t, int32_t body_id) {
+    const int32_t first = body.first_vertex;
+    return FreeTet{first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
+                   first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id};
+  };
+  // The tets counted first, so that their lists are allocated once at their size.
+  size_t own = 0, stat = 0;
+  for (size_t b = 0; b < scene.bodies.size(); ++b)
+    for (int32_t t = 0; !scene.bodies[b].fixed && t < scene.bodies[b].mesh.num_tets(); ++t) {
+      const int32_t key = KeyOf(tet(scene.bodies[b], t, 0), is_free);
+      own += key >= 0 && kept(key);
+      stat += key < 0;
+    }
+  own_tets_.reserve(own);
+  static_tets_.reserve(stat);
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const Body &body = scene.bodies[b];
+    if (body.fixed) continue;
+    const int32_t first = body.first_vertex, body_id = static_cast<int32_t>(b);
+    for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
+      add(tet(body, t, body_id), tet_id++, &own_tets_, &static_tets_);
+    const auto boundary = BoundaryTriangles(body.mesh);
+    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
+      add(FreeTriangle{first + boundary(f, 0), first + boundary(f, 1), first + boundary(f, 2),
+                       body_id},
+          triangle_id++, &triangles_, &static_triangles_, true);
+  }
+  num_tets_ = tet_id;
+  std::sort(own_tets_.begin(), own_tets_.end());
+  std::sort(triangles_.begin(), triangles_.end());
+  Fit(&triangles_);
+  Fit(&static_triangles_);
+  triangle_at_.assign(triangle_id, 0);
+  for (size_t k = 0; k < triangles_.size(); ++k)
+    triangle_at_[triangles_[k].id] = static_cast<int32_t>(k);
+  for (size_t k = 0; k < static_triangles_.size(); ++k)
+    triangle_at_[static_triangles_[k].id] = -static_cast<int32_t>(k) - 1;
+}
+
+int64_t FreeItems::HeldBytes() const {
+  using softbody::HeldBytes;
+  return HeldBytes(own_tets_) + HeldBytes(halo_tets_) + HeldBytes(triangles_) +
+         HeldBytes(triangle_at_) + HeldBytes(static_tets_) + HeldBytes(static_triangles_) +
+         HeldBytes(sent_) + HeldBytes(received_);
+}
+
+void FreeItems::Pack(const std::vector<PetscMPIInt> &to_ranks,
+                     const std::vector<PetscMPIInt> &to_counts, const std::vector<int32_t> &sent,
+                     std::vector<Record> *records, std::vector<PetscMPIInt> *counts) {
+  std::vector<std::pair<PetscMPIInt, int32_t>> now;
+  now.reserve(sent.size());
+  for (size_t i = 0, k = 0; i < to_ranks.size(); ++i) {
+    const size_t before = records->size();
+    for (PetscMPIInt c = 0; c < to_counts[i]; ++c, ++k) {
+      const std::pair<PetscMPIInt, int32_t> pair(to_ranks[i], sent[k]);
+      now.push_back(pair);
+      if (std::binary_search(sent_.begin(), sent_.end(), pair)) continue;
+      ForEachOf(own_tets_, sent[k], [&](const IndexedItem<FreeTet> &i) {
+        const FreeTet &t = i.item;
+        records->push_back({sent[k], i.id, {t[0], t[1], t[2], t[3]}, t[4]});
+      });
+    }
+    counts->push_back(static_cast<PetscMPIInt>(records->size() - before));
+  }
+  std::sort(now.begin(), now.end());
+  sent_ = std::move(now);
+}
+
+void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<Record> &records) {
+  std::vector<int32_t> now(received);
+  std::sort(now.begin(), now.end());
+  // Counted first, so that the lists are allocated once at their size.
+  size_t num_tets = records.size();
+  for (const int32_t n : now)
+    if (std::binary_search(received_.begin(), received_.end(), n)) {
+      ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &) { ++num_tets; });
+    }
+  List<FreeTet> tets;
+  tets.reserve(num_tets);
+  for (const int32_t n : now) {
+    if (!std::binary_search(received_.begin(), received_.end(), n)) continue;
+    ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &i) { tets.push_back(i); });
+  }
+  for (const Record &r : records)
+    tets.push_back({r.key, r.id, {r.corner[0], r.corner[1], r.corner[2], r.corner[3], r.body}});
+  std::sort(tets.begin(), tets.end());
+  halo_tets_ = std::move(tets);
+  received_ = std::move(now);
+  ++generation_;
+}
+
+PetscErrorCode FreeItems::Exchange(const NeighbourExchange &neighbours,
+                                   const std::vector<PetscMPIInt> &to_ranks,
+                                   const std::vector<PetscMPIInt> &to_counts,
+                                   const std::vector<int32_t> &sent,
+                                   const std::vector<int32_t> &received, PetscInt64 *bytes_sent) {
+  PetscFunctionBeginUser;
+  std::vector<Record> records, arrived;
+  std::vector<PetscMPIInt> ranks, counts;
+  Pack(to_ranks, to_counts, sent, &records, &counts);
+  for (size_t i = 0; i < to_ranks.size(); ++i)
+    if (counts[i] > 0) ranks.push_back(to_ranks[i]);
+  counts.erase(std::remove(counts.begin(), counts.end(), 0), counts.end());
+  PetscCall(neighbours.Exchange(ranks, counts, records, &arrived, bytes_sent));
+  Unpack(received, arrived);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
