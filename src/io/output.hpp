@@ -19,7 +19,9 @@
 // ParaView time series of the deformed mesh with velocity and body index as
 // point fields) is written when the file is opened and extended after every
 // flush, listing only the frames already on disk: a run killed at any moment
-// leaves a file and an .xdmf that open, with every frame up to the last flush.
+// leaves a file and an .xdmf that open, with every frame up to the last flush
+// listed. The file may hold up to -flush_every unlisted (possibly torn) frames
+// beyond them, being written at the kill; -restart cuts them.
 // Root attributes (rank 0's values, written by every rank): "complete" is 0
 // until the run has finished (1); "interrupted" is the signal that stopped the
 // run early (0: none); "gravity" [3] (m/s^2) and "ground_y" (m, only with a
