@@ -75,6 +75,8 @@ MixedLcpResult SolveMixedLcp(const Eigen::MatrixXd &D, const Eigen::VectorXd &g,
   MixedLcpResult result;
   const Eigen::Index m = g.size();
   result.lambda = Eigen::VectorXd::Zero(m);
+  result.exact = m == 0;
+  if (m == 0) return result;
   for (; result.sweeps < kWarmSweeps; ++result.sweeps) Sweep(D, g, unilateral, &result.lambda);
   std::vector<char> active(m);
   for (Eigen::Index i = 0; i < m; ++i) active[i] = !unilateral[i] || result.lambda[i] > 0;

@@ -26,6 +26,15 @@ constexpr double kNoCandidate = 1e300;
 constexpr PetscReal kInnerRelativeTolerance = 1e-10;
 constexpr PetscReal kNoDivergenceTest = 1e300;
 constexpr PetscInt kInnerMaxIterations = 10000;
+// Solve's choice between the two paths for two-sided constraints: the
+// projected Delassus path costs m2 + 2 projected solves of about this many CG
+// iterations each (one back-solve per iteration with the direct preset), the
+// Delassus path m1 + m2 + 1 back-solves and a dense problem of that size. It
+// is taken when the m1 one-sided rows are at least this many times m2 + 2.
+// Measured on infomgp-p3/fertility (two statues pressed into each other and
+// the ground; 2 ranks, direct preset: 700-900 one-sided rows, 1-3 two-sided):
+// 13 iterations per projected solve on average, at most 34.
+constexpr PetscInt kProjectedSolveCost = 16;
 
 // A candidate set of imposed constraints, ranked by CombineConstraints' order.
 struct Candidate {
@@ -62,6 +71,8 @@ ProjectedSolver::~ProjectedSolver() {
   VecDestroy(&z_);
   VecDestroy(&rhs_);
   VecDestroy(&w_);
+  VecDestroy(&column_);
+  VecDestroy(&column_rhs_);
 }
 
 void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &constraints) {
@@ -234,15 +245,53 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   PetscCall(KSPGetOperators(solver, &A_, nullptr));
   PetscCall(KSPGetPC(solver, &unconstrained_pc_));
   if (!inner_) PetscCall(CreateInnerSolver(b));
-  PetscInt two_sided =
-      static_cast<PetscInt>(std::count_if(constraints.begin(), constraints.end(),
-                                          [](const VelocityConstraint &c) { return c.two_sided; }));
-  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &two_sided, 1, MPIU_INT, MPI_SUM,
+  std::vector<VelocityConstraint> one_sided;
+  for (const VelocityConstraint &c : constraints)
+    if (!c.two_sided) one_sided.push_back(c);
+  GroupByVertex(one_sided);
+  // Global counts: two-sided rows, one-sided rows (combined directions).
+  PetscInt counts[2] = {static_cast<PetscInt>(constraints.size() - one_sided.size()), 0};
+  for (const ConstrainedVertex &c : vertices_) counts[1] += c.rank;
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM,
                               PetscObjectComm((PetscObject)b)));
-  if (two_sided > 0)
-    PetscCall(SolveTwoSided(solver, b, constraints, v, reactions, iterations));
-  else
+  *iterations = 0;
+  if (counts[0] == 0)
     PetscCall(SolveProjected(b, constraints, v, reactions, iterations));
+  else if (path_ == TwoSidedPath::kProjected ||
+           (path_ == TwoSidedPath::kAuto && counts[1] >= kProjectedSolveCost * (counts[0] + 2)))
+    PetscCall(SolveTwoSidedProjected(solver, b, constraints, v, reactions, iterations));
+  else
+    PetscCall(SolveTwoSided(solver, b, constraints, v, reactions, iterations));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// v = z + P w with (P A P + I - P) w = P (f - A z), z the prescribed velocities
+// (prescribed) or zero: A v = f under the one-sided constraints (homogeneous
+// ones when !prescribed). v: the initial guess on entry.
+PetscErrorCode ProjectedSolver::SolveConstrained(Vec f, bool prescribed, Vec v,
+                                                 PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  if (prescribed) {
+    PetscCall(SetPrescribedVelocities());
+    PetscCall(MatMult(A_, z_, work_));
+    PetscCall(VecAYPX(work_, -1.0, f));
+    PetscCall(ProjectVec(work_, rhs_, true));
+  } else {
+    PetscCall(ProjectVec(f, rhs_, true));
+  }
+  PetscCall(ProjectVec(v, w_, true));
+  PetscCall(KSPSolve(inner_, rhs_, w_));
+  KSPConvergedReason reason;
+  PetscInt its;
+  PetscCall(KSPGetConvergedReason(inner_, &reason));
+  PetscCall(KSPGetIterationNumber(inner_, &its));
+  PetscCheck(reason >= 0, PetscObjectComm((PetscObject)f), PETSC_ERR_NOT_CONVERGED,
+             "the contact-constrained solve did not converge (%s after %" PetscInt_FMT
+             " iterations)",
+             KSPConvergedReasons[reason], its);
+  *iterations += its;
+  PetscCall(ProjectVec(w_, v, true));
+  if (prescribed) PetscCall(VecAXPY(v, 1.0, z_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -251,24 +300,7 @@ PetscErrorCode ProjectedSolver::SolveProjected(Vec b,
                                                Vec v, std::vector<PetscReal> *reactions,
                                                PetscInt *iterations) {
   PetscFunctionBeginUser;
-  GroupByVertex(constraints);
-  // z: the prescribed normal velocities; rhs = P (b - A z); w from the guess.
-  PetscCall(SetPrescribedVelocities());
-  PetscCall(MatMult(A_, z_, work_));
-  PetscCall(VecAYPX(work_, -1.0, b));
-  PetscCall(ProjectVec(work_, rhs_, true));
-  PetscCall(ProjectVec(v, w_, true));
-  PetscCall(KSPSolve(inner_, rhs_, w_));
-  KSPConvergedReason reason;
-  PetscCall(KSPGetConvergedReason(inner_, &reason));
-  PetscCall(KSPGetIterationNumber(inner_, iterations));
-  PetscCheck(reason >= 0, PetscObjectComm((PetscObject)b), PETSC_ERR_NOT_CONVERGED,
-             "the contact-constrained solve did not converge (%s after %" PetscInt_FMT
-             " iterations)",
-             KSPConvergedReasons[reason], *iterations);
-  // v = P w + z; reactions from A v - b.
-  PetscCall(ProjectVec(w_, v, true));
-  PetscCall(VecAXPY(v, 1.0, z_));
+  PetscCall(SolveConstrained(b, true, v, iterations));
   PetscCall(Reactions(b, v, constraints, reactions));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -25,6 +25,16 @@
 // with the direct preset), reduced over the ranks and solved identically on
 // each; then A v = b + J^T lambda. The rows are few (a stack of blocks: a few
 // hundred); scenes without two-sided constraints never take this path.
+// When the one-sided rows far outnumber the two-sided ones (m1 >= 16 (m2 + 2),
+// kProjectedSolveCost in projected_solve.cpp; e.g. two bodies pressed into each other and the
+// ground, held by the collision guard's zones), the projected Delassus path
+// keeps the one-sided constraints in the projection: with S(f) the projected
+// solve of A v = f, affine, S(f) = z + G (f - A z), G = P (P A P + I - P)^-1 P,
+// it solves the problem of the m2 two-sided rows J_2 on D_2 = J_2 G J_2^T
+// (m2 homogeneous projected solves) and g = J_2 S(b) - c, then
+// v = S(b + J_2^T lambda): m2 + 2 projected solves instead of m1 + m2 + 1
+// back-solves and a dense problem of size m1 + m2. The same solution, to the
+// inner CG's tolerance.
 #pragma once
 
 #include <petscksp.h>
@@ -81,6 +91,10 @@ constexpr double kMinSeparation = 0.1;
 ConstrainedVertex CombineConstraints(PetscInt vertex,
                                      const std::vector<VelocityConstraint> &constraints);
 
+// How Solve treats two-sided constraints: by kProjectedSolveCost (auto), or
+// always by one path (the tests compare them).
+enum class TwoSidedPath { kAuto, kDelassus, kProjected };
+
 class ProjectedSolver {
  public:
   ProjectedSolver() = default;
@@ -92,6 +106,7 @@ class ProjectedSolver {
   // constraint. `solver` is the set-up unconstrained KSP of A.
   PetscErrorCode Solve(KSP solver, Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
                        std::vector<PetscReal> *reactions, PetscInt *iterations);
+  void set_two_sided_path(TwoSidedPath path) { path_ = path; }
 
  private:
   static PetscErrorCode ApplyOperator(Mat shell, Vec w, Vec y);
@@ -107,13 +122,20 @@ class ProjectedSolver {
   PetscErrorCode SetPrescribedVelocities();
   PetscErrorCode Reactions(Vec b, Vec v, const std::vector<VelocityConstraint> &constraints,
                            std::vector<PetscReal> *reactions);
+  // A v = f under the one-sided constraints (vertices_): prescribed velocities
+  // when `prescribed`, zero otherwise; v: initial guess in, solution out; adds
+  // the inner CG's iterations.
+  PetscErrorCode SolveConstrained(Vec f, bool prescribed, Vec v, PetscInt *iterations);
   // The projected solve (no two-sided constraint on any rank).
   PetscErrorCode SolveProjected(Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
                                 std::vector<PetscReal> *reactions, PetscInt *iterations);
-  // The Delassus path (file comment); collective.
+  // The Delassus path and the projected Delassus path (file comment); collective.
   PetscErrorCode SolveTwoSided(KSP solver, Vec b,
                                const std::vector<VelocityConstraint> &constraints, Vec v,
                                std::vector<PetscReal> *reactions, PetscInt *iterations);
+  PetscErrorCode SolveTwoSidedProjected(KSP solver, Vec b,
+                                        const std::vector<VelocityConstraint> &constraints, Vec v,
+                                        std::vector<PetscReal> *reactions, PetscInt *iterations);
 
   KSP inner_ = nullptr;
   Mat shell_ = nullptr;
@@ -121,6 +143,8 @@ class ProjectedSolver {
   PC unconstrained_pc_ = nullptr;  // not owned
   std::vector<ConstrainedVertex> vertices_;
   Vec work_ = nullptr, work2_ = nullptr, z_ = nullptr, rhs_ = nullptr, w_ = nullptr;
+  Vec column_ = nullptr, column_rhs_ = nullptr;  // the projected Delassus path's
+  TwoSidedPath path_ = TwoSidedPath::kAuto;
 };
 
 }  // namespace softbody

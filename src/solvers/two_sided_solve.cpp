@@ -1,4 +1,5 @@
-// ProjectedSolver's Delassus path for two-sided constraints (projected_solve.hpp).
+// ProjectedSolver's two paths for two-sided constraints (projected_solve.hpp):
+// the Delassus path and the projected Delassus path.
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -120,6 +121,17 @@ double RowDot(const Row &row, PetscInt begin, PetscInt end, const PetscScalar *x
   return sum;
 }
 
+// out[i] = J_i x over the owned entries, for every row i.
+PetscErrorCode RowDots(const std::vector<Row> &rows, PetscInt begin, PetscInt end, Vec x,
+                       double *out) {
+  PetscFunctionBeginUser;
+  const PetscScalar *values;
+  PetscCall(VecGetArrayRead(x, &values));
+  for (size_t i = 0; i < rows.size(); ++i) out[i] = RowDot(rows[i], begin, end, values);
+  PetscCall(VecRestoreArrayRead(x, &values));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // Collective. x = A^-1 y with the unconstrained solver (zero initial guess).
 PetscErrorCode SolveUnconstrained(KSP solver, Vec y, Vec x, PetscInt *iterations) {
   PetscFunctionBeginUser;
@@ -154,48 +166,14 @@ std::vector<Eigen::Index> KeptRows(const std::vector<Row> &rows) {
   return kept;
 }
 
-}  // namespace
-
-PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
-                                              const std::vector<VelocityConstraint> &constraints,
-                                              Vec v, std::vector<PetscReal> *reactions,
-                                              PetscInt *iterations) {
+// The complementarity problem of the rows `kept` (partial: D's columns j * m
+// + i, then J v0 at m * m + i, reduced over the ranks); *lambda: every row's
+// (0 for the rows left out). Reports the solve with PetscInfo on `object`.
+PetscErrorCode SolveRows(PetscObject object, const std::vector<Row> &rows,
+                         const std::vector<Eigen::Index> &kept, const std::vector<double> &partial,
+                         Eigen::VectorXd *lambda) {
   PetscFunctionBeginUser;
-  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
-  std::vector<VelocityConstraint> one_sided;
-  for (const VelocityConstraint &c : constraints)
-    if (!c.two_sided) one_sided.push_back(c);
-  GroupByVertex(one_sided);
-  PetscInt begin, end;
-  PetscCall(VecGetOwnershipRange(b, &begin, &end));
-  begin /= 3, end /= 3;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  std::vector<PetscInt> slot;
-  const std::vector<Row> mine = LocalRows(vertices_, constraints, begin, rank, &slot);
-  std::vector<Row> rows;
-  PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
   const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
-  // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned entries.
-  std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
-  *iterations = 0;
-  for (Eigen::Index j = 0; j <= m; ++j) {
-    if (j < m) {
-      PetscCall(VecZeroEntries(work2_));
-      PetscScalar *y;
-      PetscCall(VecGetArray(work2_, &y));
-      AddRowTranspose(rows[j], 1.0, begin, end, y);
-      PetscCall(VecRestoreArray(work2_, &y));
-    }
-    PetscCall(SolveUnconstrained(solver, j < m ? work2_ : b, work_, iterations));
-    const PetscScalar *x;
-    PetscCall(VecGetArrayRead(work_, &x));
-    for (Eigen::Index i = 0; i < m; ++i) partial[j * m + i] = RowDot(rows[i], begin, end, x);
-    PetscCall(VecRestoreArrayRead(work_, &x));
-  }
-  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, partial.data(),
-                              static_cast<PetscMPIInt>(partial.size()), MPIU_REAL, MPI_SUM, comm));
-  const std::vector<Eigen::Index> kept = KeptRows(rows);
   const Eigen::Index k = static_cast<Eigen::Index>(kept.size());
   Eigen::MatrixXd D(k, k);
   Eigen::VectorXd g(k);
@@ -210,8 +188,52 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
     scale = std::max({scale, std::abs(rows[i].value), std::abs(g[a])});
   }
   const MixedLcpResult lcp = SolveMixedLcp(D, g, unilateral, kLcpRelativeTolerance * scale);
-  Eigen::VectorXd lambda = Eigen::VectorXd::Zero(m);
-  for (Eigen::Index a = 0; a < k; ++a) lambda[kept[a]] = lcp.lambda[a];
+  *lambda = Eigen::VectorXd::Zero(m);
+  for (Eigen::Index a = 0; a < k; ++a) (*lambda)[kept[a]] = lcp.lambda[a];
+  PetscCall(PetscInfo(object,
+                      "two-sided contact solve: %" PetscInt_FMT
+                      " rows (%d two-sided), %d sweeps, %d active-set solves, residual %g m/s (%s)\n",
+                      static_cast<PetscInt>(m),
+                      static_cast<int>(std::count(unilateral.begin(), unilateral.end(), 1)),
+                      lcp.sweeps, lcp.pivots, lcp.residual, lcp.exact ? "exact" : "Gauss-Seidel"));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
+PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
+                                              const std::vector<VelocityConstraint> &constraints,
+                                              Vec v, std::vector<PetscReal> *reactions,
+                                              PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
+  PetscInt begin, end;
+  PetscCall(VecGetOwnershipRange(b, &begin, &end));
+  begin /= 3, end /= 3;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  std::vector<PetscInt> slot;
+  const std::vector<Row> mine = LocalRows(vertices_, constraints, begin, rank, &slot);
+  std::vector<Row> rows;
+  PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
+  const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
+  // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned entries.
+  std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
+  for (Eigen::Index j = 0; j <= m; ++j) {
+    if (j < m) {
+      PetscCall(VecZeroEntries(work2_));
+      PetscScalar *y;
+      PetscCall(VecGetArray(work2_, &y));
+      AddRowTranspose(rows[j], 1.0, begin, end, y);
+      PetscCall(VecRestoreArray(work2_, &y));
+    }
+    PetscCall(SolveUnconstrained(solver, j < m ? work2_ : b, work_, iterations));
+    PetscCall(RowDots(rows, begin, end, work_, partial.data() + j * m));
+  }
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, partial.data(),
+                              static_cast<PetscMPIInt>(partial.size()), MPIU_REAL, MPI_SUM, comm));
+  Eigen::VectorXd lambda;
+  PetscCall(SolveRows((PetscObject)solver, rows, KeptRows(rows), partial, &lambda));
   // v = A^-1 (b + J^T lambda); the one-sided reactions from A v - (b + J_two^T lambda).
   PetscCall(VecCopy(b, rhs_));
   PetscCall(VecCopy(b, z_));
@@ -228,13 +250,62 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
   PetscCall(Reactions(z_, v, constraints, reactions));
   for (size_t i = 0; i < constraints.size(); ++i)
     if (slot[i] >= 0) (*reactions)[i] = lambda[slot[i]];
-  PetscCall(
-      PetscInfo(solver,
-                "two-sided contact solve: %" PetscInt_FMT
-                " rows (%d two-sided), %d sweeps, %d active-set solves, residual %g m/s (%s)\n",
-                static_cast<PetscInt>(m),
-                static_cast<int>(std::count(unilateral.begin(), unilateral.end(), 1)), lcp.sweeps,
-                lcp.pivots, lcp.residual, lcp.exact ? "exact" : "Gauss-Seidel"));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ProjectedSolver::SolveTwoSidedProjected(
+    KSP solver, Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
+    std::vector<PetscReal> *reactions, PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
+  PetscInt begin, end;
+  PetscCall(VecGetOwnershipRange(b, &begin, &end));
+  begin /= 3, end /= 3;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  std::vector<PetscInt> slot;
+  const std::vector<Row> mine = LocalRows({}, constraints, begin, rank, &slot);  // J_2's rows
+  std::vector<Row> rows;
+  PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
+  const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
+  if (!column_) {
+    PetscCall(VecDuplicate(b, &column_));
+    PetscCall(VecDuplicate(b, &column_rhs_));
+  }
+  // v0 = S(b) (from the guess v), then the columns G J_2j^T: partial sums of
+  // D_2 = J_2 G J_2^T and of J_2 v0 over the owned entries.
+  std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
+  PetscCall(SolveConstrained(b, true, v, iterations));
+  PetscCall(RowDots(rows, begin, end, v, partial.data() + m * m));
+  for (Eigen::Index j = 0; j < m; ++j) {
+    PetscCall(VecZeroEntries(column_rhs_));
+    PetscScalar *y;
+    PetscCall(VecGetArray(column_rhs_, &y));
+    AddRowTranspose(rows[j], 1.0, begin, end, y);
+    PetscCall(VecRestoreArray(column_rhs_, &y));
+    PetscCall(VecZeroEntries(column_));
+    PetscCall(SolveConstrained(column_rhs_, false, column_, iterations));
+    PetscCall(RowDots(rows, begin, end, column_, partial.data() + j * m));
+  }
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, partial.data(),
+                              static_cast<PetscMPIInt>(partial.size()), MPIU_REAL, MPI_SUM, comm));
+  // A row whose vertices are all held has a zero column (P removes them): it
+  // can only conflict with the one-sided constraints and leaves (lambda 0).
+  std::vector<Eigen::Index> kept;
+  for (Eigen::Index i = 0; i < m; ++i)
+    if (partial[i * m + i] > 0) kept.push_back(i);
+  Eigen::VectorXd lambda;
+  PetscCall(SolveRows((PetscObject)solver, rows, kept, partial, &lambda));
+  // v = S(b + J_2^T lambda) from v0; the one-sided reactions from A v - (b + J_2^T lambda).
+  PetscCall(VecCopy(b, column_rhs_));
+  PetscScalar *y;
+  PetscCall(VecGetArray(column_rhs_, &y));
+  for (Eigen::Index j = 0; j < m; ++j) AddRowTranspose(rows[j], lambda[j], begin, end, y);
+  PetscCall(VecRestoreArray(column_rhs_, &y));
+  PetscCall(SolveConstrained(column_rhs_, true, v, iterations));
+  PetscCall(Reactions(column_rhs_, v, constraints, reactions));
+  for (size_t i = 0; i < constraints.size(); ++i)
+    if (slot[i] >= 0) (*reactions)[i] = lambda[slot[i]];
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
