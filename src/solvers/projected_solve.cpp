@@ -252,8 +252,8 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   // Global counts: two-sided rows, one-sided rows (combined directions).
   PetscInt counts[2] = {static_cast<PetscInt>(constraints.size() - one_sided.size()), 0};
   for (const ConstrainedVertex &c : vertices_) counts[1] += c.rank;
-  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM,
-                              PetscObjectComm((PetscObject)b)));
+  PetscCallMPI(
+      MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM, PetscObjectComm((PetscObject)b)));
   *iterations = 0;
   if (counts[0] == 0)
     PetscCall(SolveProjected(b, constraints, v, reactions, iterations));

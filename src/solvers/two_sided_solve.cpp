@@ -190,12 +190,13 @@ PetscErrorCode SolveRows(PetscObject object, const std::vector<Row> &rows,
   const MixedLcpResult lcp = SolveMixedLcp(D, g, unilateral, kLcpRelativeTolerance * scale);
   *lambda = Eigen::VectorXd::Zero(m);
   for (Eigen::Index a = 0; a < k; ++a) (*lambda)[kept[a]] = lcp.lambda[a];
-  PetscCall(PetscInfo(object,
-                      "two-sided contact solve: %" PetscInt_FMT
-                      " rows (%d two-sided), %d sweeps, %d active-set solves, residual %g m/s (%s)\n",
-                      static_cast<PetscInt>(m),
-                      static_cast<int>(std::count(unilateral.begin(), unilateral.end(), 1)),
-                      lcp.sweeps, lcp.pivots, lcp.residual, lcp.exact ? "exact" : "Gauss-Seidel"));
+  PetscCall(
+      PetscInfo(object,
+                "two-sided contact solve: %" PetscInt_FMT
+                " rows (%d two-sided), %d sweeps, %d active-set solves, residual %g m/s (%s)\n",
+                static_cast<PetscInt>(m),
+                static_cast<int>(std::count(unilateral.begin(), unilateral.end(), 1)), lcp.sweeps,
+                lcp.pivots, lcp.residual, lcp.exact ? "exact" : "Gauss-Seidel"));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

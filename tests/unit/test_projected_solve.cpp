@@ -36,7 +36,7 @@ struct Problem {
   Mat A = nullptr;
   Vec b = nullptr;
   KSP ksp = nullptr;
-  PetscInt begin = 0, end = 0;  // owned vertices
+  PetscInt begin = 0, end = 0;             // owned vertices
   std::vector<VelocityConstraint> global;  // vertex: the natural (= PETSc) number
   ~Problem() {
     KSPDestroy(&ksp);
@@ -53,9 +53,9 @@ Eigen::Vector3d RandomUnit(std::mt19937 &random) {
 // A (3 kVertices DOFs): mass 1 per vertex, spring e between vertices e and
 // e + 1 with stiffness Q diag(d) Q^T (Q random rotation, d in [1, 20]).
 void Assemble(Problem *p) {
-  PetscCallAbort(PETSC_COMM_WORLD, MatCreateAIJ(PETSC_COMM_WORLD, PETSC_DECIDE, PETSC_DECIDE,
-                                                3 * kVertices, 3 * kVertices, 9, nullptr, 6,
-                                                nullptr, &p->A));
+  PetscCallAbort(PETSC_COMM_WORLD,
+                 MatCreateAIJ(PETSC_COMM_WORLD, PETSC_DECIDE, PETSC_DECIDE, 3 * kVertices,
+                              3 * kVertices, 9, nullptr, 6, nullptr, &p->A));
   PetscCallAbort(PETSC_COMM_WORLD, MatSetBlockSize(p->A, 3));
   PetscInt rows_begin, rows_end;
   PetscCallAbort(PETSC_COMM_WORLD, MatGetOwnershipRange(p->A, &rows_begin, &rows_end));
@@ -192,8 +192,8 @@ Solution SolveBy(Problem *p, TwoSidedPath path) {
   for (size_t g = 0; g < p->global.size(); ++g)
     if (p->global[g].vertex >= p->begin && p->global[g].vertex < p->end)
       s.reactions[g] = reactions[k++];
-  MPI_Allreduce(MPI_IN_PLACE, s.reactions.data(), static_cast<int>(s.reactions.size()),
-                MPI_DOUBLE, MPI_SUM, PETSC_COMM_WORLD);
+  MPI_Allreduce(MPI_IN_PLACE, s.reactions.data(), static_cast<int>(s.reactions.size()), MPI_DOUBLE,
+                MPI_SUM, PETSC_COMM_WORLD);
   VecDestroy(&v);
   return s;
 }
