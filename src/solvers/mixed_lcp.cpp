@@ -41,7 +41,7 @@ void Sweep(const Eigen::MatrixXd &D, const Eigen::VectorXd &g, const std::vector
            Eigen::VectorXd *lambda) {
   for (Eigen::Index i = 0; i < g.size(); ++i) {
     if (!(D(i, i) > 0)) continue;
-    const double r = D.row(i).dot(*lambda) + g[i];
+    const double r = D.col(i).dot(*lambda) + g[i];  // D symmetric: its column is contiguous
     double next = (*lambda)[i] - r / D(i, i);
     if (unilateral[i]) next = std::max(next, 0.0);
     (*lambda)[i] = next;
