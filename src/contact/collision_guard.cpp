@@ -154,9 +154,9 @@ std::vector<std::pair<PetscInt, int32_t>> CollisionGuard::OwnedMoved() const {
   return owned;
 }
 
-std::vector<std::pair<PetscInt, Point>> CollisionGuard::MovedEnds() const {
-  std::vector<std::pair<PetscInt, Point>> moved;
-  for (const auto &[local, s] : OwnedMoved()) moved.push_back({local, end_[s]});
+std::vector<CollisionGuard::MovedVertex> CollisionGuard::MovedEnds() const {
+  std::vector<MovedVertex> moved;
+  for (const auto &[local, s] : OwnedMoved()) moved.push_back({local, end_[s], frozen_[s] != 0});
   return moved;
 }
 
@@ -236,6 +236,7 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
   query_.owned = parallel_ ? &owned_mask_ : nullptr;
   // Pairs tested, pairs close at the start, self-contact candidate lists built.
   PetscInt rounds = 0, counts[3] = {0, 0, 0};
+  bool stopped_all = false;  // every free vertex stays where it started (no zone settled)
   for (;; ++rounds) {
     CollisionCount count;
     std::vector<SurfaceCollision> collisions = finder_.Find(query_, &count);
@@ -247,6 +248,7 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
     stats_.collisions += static_cast<PetscInt>(collisions.size());
     if (rounds == kMaxRounds) {
       for (const int32_t v : free_vertices_) end_[v] = start_[v], (*moved)[v] = 1;
+      stopped_all = true;
       break;
     }
     MergeZones(collisions);
@@ -262,10 +264,12 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
   if (rounds > 0) ++stats_.passes_guarded;
   stats_.rounds += rounds;
   stats_.max_rounds = std::max(stats_.max_rounds, rounds);
+  frozen_.assign(n, 0);
   for (int32_t v = 0; v < n; ++v)
     if ((*moved)[v] && moving_[v]) {
       ++stats_.zone_vertices;
-      if (zones_.immobile(v)) ++stats_.frozen_vertices;
+      frozen_[v] = stopped_all || zones_.immobile(v);
+      if (frozen_[v]) ++stats_.frozen_vertices;
     }
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -78,7 +78,12 @@ class CollisionGuard {
   PetscErrorCode Probe(Vec x0, Vec x, bool *moved);
   // Not collective. After Probe: this rank's vertices the zones moved, as
   // (local vertex, the zone's end position).
-  std::vector<std::pair<PetscInt, Point>> MovedEnds() const;
+  struct MovedVertex {
+    PetscInt local;
+    Point end;
+    bool frozen;  // its zone touched something immobile and stayed where it started
+  };
+  std::vector<MovedVertex> MovedEnds() const;
   // Collective. Probe, then the moved vertices written: x = the zone's end
   // position, v = (x - x0) / dt; *changed as Probe's *moved.
   PetscErrorCode Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
@@ -94,7 +99,7 @@ class CollisionGuard {
     return HeldBytes(surface_.natural) + HeldBytes(surface_.body) + HeldBytes(surface_.triangles) +
            HeldBytes(surface_.edges) + HeldBytes(owned_mask_) + HeldBytes(usable_) +
            HeldBytes(moving_) + HeldBytes(mass_) + HeldBytes(rest_) + HeldBytes(start_) +
-           HeldBytes(end_) + HeldBytes(moved_);
+           HeldBytes(end_) + HeldBytes(moved_) + HeldBytes(frozen_);
   }
   double separation() const { return query_.tolerance.separation; }
   std::string Description() const;
@@ -142,7 +147,8 @@ class CollisionGuard {
   std::vector<char> moving_;            // per surface vertex
   std::vector<double> mass_;            // per surface vertex (kg; 0 when it does not move)
   std::vector<Point> rest_, start_, end_;
-  std::vector<char> moved_;  // per surface vertex: moved by the last Apply
+  std::vector<char> moved_;   // per surface vertex: moved by the last Apply
+  std::vector<char> frozen_;  // per surface vertex: moved, in an immobile zone
   CollisionQuery query_;
   SurfaceCollisionFinder finder_;
   ImpactZones zones_;

@@ -366,8 +366,8 @@ PetscErrorCode ContactSolver::HoldGuardedVertices(const StepMotion &motion, Vec 
   if (moved) {
     const PetscScalar *base;
     PetscCall(VecGetArrayRead(motion.base, &base));
-    for (const auto &[local, end] : guard_.MovedEnds()) {
-      constraints_.Hold(local, (end - Point(&base[3 * local])) / motion.h);
+    for (const auto &[local, end, frozen] : guard_.MovedEnds()) {
+      constraints_.Hold(local, (end - Point(&base[3 * local])) / motion.h, frozen);
       held_.push_back(local);
     }
     PetscCall(VecRestoreArrayRead(motion.base, &base));
@@ -378,6 +378,54 @@ PetscErrorCode ContactSolver::HoldGuardedVertices(const StepMotion &motion, Vec 
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &released, 1, MPIU_INT, MPI_SUM, comm_));
   *held = moved || released > 0;
   if (*held) PetscCall(constraints_.Combine(comm_, friction_.tangents()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The velocity change is uniform, not projected off each vertex's constraint
+// directions: projected, it strained the bodies and the guard acted more
+// (stack, 1 000 steps: kinetic energy 2.4e-2 J linear and 11.9 J corotational
+// against 7.4e-3 and 3.1e-2 J uniform). Vertices it moves into an obstacle by
+// |Delta P| / M dt (a few 1e-7 m) are the contacts' and the guard's again.
+PetscErrorCode ContactSolver::CancelHeldImpulse(const std::vector<PetscReal> &reactions, Vec mass,
+                                                Vec u) {
+  PetscFunctionBeginUser;
+  if (!holding_) PetscFunctionReturn(PETSC_SUCCESS);
+  Timing timing(this);
+  const size_t bodies = scene_->bodies.size();
+  auto body_of = [this](PetscInt local) {
+    const int32_t natural = static_cast<int32_t>(layout_->natural_of_owned[local]);
+    size_t b = 0;
+    while (b + 1 < scene_->bodies.size() && scene_->bodies[b + 1].first_vertex <= natural) ++b;
+    return b;
+  };
+  // Delta P (3), then per body: 1 when it has such a held vertex.
+  std::vector<double> sums(3 + bodies, 0.0);
+  const std::vector<VelocityConstraint> &constraints = velocity_constraints();
+  for (size_t i = 0; i < constraints.size(); ++i) {
+    const VelocityConstraint &c = constraints[i];
+    if (!c.prescribes_all || c.immobile) continue;
+    for (int k = 0; k < 3; ++k) sums[k] += reactions[i] * c.normal[k];
+    sums[3 + body_of(c.vertex)] = 1;
+  }
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, sums.data(), static_cast<PetscMPIInt>(sums.size()),
+                              MPIU_REAL, MPI_SUM, comm_));
+  if (sums[0] == 0 && sums[1] == 0 && sums[2] == 0) PetscFunctionReturn(PETSC_SUCCESS);
+  const PetscInt owned = layout_->local_count();
+  std::vector<char> involved(owned);
+  for (PetscInt local = 0; local < owned; ++local) involved[local] = sums[3 + body_of(local)] > 0;
+  const PetscScalar *m;
+  PetscCall(VecGetArrayRead(mass, &m));
+  double total = 0;  // M (kg)
+  for (PetscInt local = 0; local < owned; ++local)
+    if (involved[local]) total += m[3 * local];
+  PetscCall(VecRestoreArrayRead(mass, &m));
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &total, 1, MPIU_REAL, MPI_SUM, comm_));
+  PetscScalar *values;
+  PetscCall(VecGetArray(u, &values));
+  for (PetscInt local = 0; local < owned; ++local)
+    if (involved[local])
+      for (int k = 0; k < 3; ++k) values[3 * local + k] -= sums[k] / total;
+  PetscCall(VecRestoreArray(u, &values));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

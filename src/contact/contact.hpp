@@ -135,6 +135,16 @@ class ContactSolver {
   //    (EndStep) has the last word.
   PetscErrorCode HoldGuardedVertices(const StepMotion &motion, Vec x,
                                      const std::vector<PetscReal> &reactions, bool *held);
+  // 2d. After a solve with held vertices (reactions: its constraints'): the
+  //    held vertices of zones that touch nothing immobile push with reactions
+  //    whose sum Delta P (kg m/s) no outside body gave (a zone between free
+  //    bodies is internal to them). It is taken back from the bodies those
+  //    vertices belong to as one velocity change, u -= Delta P / M (M their
+  //    mass; mass: lumped, per DOF), the same for all of them, so their motion
+  //    relative to each other stays as the solve left it. Without it a
+  //    frictionless resting stack, held by the guard at its blocks' rims in
+  //    most steps, drifted sideways (2.6 N along x = z).
+  PetscErrorCode CancelHeldImpulse(const std::vector<PetscReal> &reactions, Vec mass, Vec u);
   // 3. After the step's x1, v1 with the constraints' reactions: velocity
   //    response, impulse spreading, resting contacts for the next step,
   //    last-resort projection, distance constraints, and last the collision

@@ -245,13 +245,14 @@ PetscInt ContactConstraints::AddFeaturePenetrationsOf(size_t f, size_t b, PetscR
   return found;
 }
 
-void ContactConstraints::Hold(PetscInt local, const Point &velocity) {
+void ContactConstraints::Hold(PetscInt local, const Point &velocity, bool immobile) {
   ptrdiff_t &slot = held_slot_[local];
   if (slot < 0) {
     slot = static_cast<ptrdiff_t>(held_.size());
     held_.resize(held_.size() + 3);
   }
-  for (int k = 0; k < 3; ++k) held_[slot + k] = {local, Point::Unit(k), velocity[k], true, true};
+  for (int k = 0; k < 3; ++k)
+    held_[slot + k] = {local, Point::Unit(k), velocity[k], immobile, true};
 }
 
 PetscInt ContactConstraints::ReleasePulling(const std::vector<PetscReal> &reactions) {

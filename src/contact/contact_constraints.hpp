@@ -101,8 +101,9 @@ class ContactConstraints {
 
   // Prescribes owned vertex `local`'s whole velocity (m/s) for the rest of the
   // step (the collision guard's zones), overriding its other constraints;
-  // a later call for the same vertex replaces the prescription.
-  void Hold(PetscInt local, const Point &velocity);
+  // a later call for the same vertex replaces the prescription. immobile: its
+  // zone touched something immobile (VelocityConstraint::immobile).
+  void Hold(PetscInt local, const Point &velocity, bool immobile);
   // After a solve (reactions in contact order, ByContact): releases the vertex
   // contacts that pull (lambda < 0 beyond round-off) for the rest of the step: they leave the
   // solve, and their vertex may be constrained again if it sinks. Friction

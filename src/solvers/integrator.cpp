@@ -1012,6 +1012,10 @@ PetscErrorCode ImplicitEuler::SolveWithGuardedVertices(const StepMotion &motion,
       PetscCall(contact->AddPenetrations(motion, v, &added));
     }
     if (added) PetscCall(Solve(v, contact));
+    {
+      StageScope stage(Stages().contact);
+      PetscCall(contact->CancelHeldImpulse(reactions_, mass_, v));
+    }
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
