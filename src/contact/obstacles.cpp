@@ -148,9 +148,19 @@ void Obstacles::EnsureFreeGrids() const {
   ++free_grid_builds_;
 }
 
-// ClosestOnBody and EntryOnBody fill the hit inside their grid visits, not in
-// a shared helper: the compiler's fused multiply-adds follow the code's shape,
-// and a helper changed the last bits of the normals.
+void Obstacles::SetHit(const Point &point, const Point &normal, const Eigen::Vector3d &w,
+                       const FreeTriangle &tri, int32_t t, SurfaceHit *hit) const {
+  hit->point = point;
+  hit->normal = normal.normalized();
+  hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
+                  w[2] * state_->velocity(tri[2]);
+  hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) + w[1] * state_->inverse_mass(tri[1]) +
+                      w[2] * state_->inverse_mass(tri[2]);
+  hit->body = tri[3];
+  hit->triangle = t;
+  hit->weights = w;
+}
+
 bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
   if (obstacle < 0) {  // the ground
     *hit = {Point(p[0], ground_y_, p[2]), Point(0, 1, 0), Point::Zero(), 0.0, -1, -1,
@@ -182,15 +192,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
         return;
       best = distance;
       chosen = t;
-      hit->point = q;
-      hit->normal = normal.normalized();
-      hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
-                      w[2] * state_->velocity(tri[2]);
-      hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) +
-                          w[1] * state_->inverse_mass(tri[1]) + w[2] * state_->inverse_mass(tri[2]);
-      hit->body = obstacle;
-      hit->triangle = t;
-      hit->weights = w;
+      SetHit(q, normal, w, tri, t, hit);
     });
   return best < kUnbounded;
 }
@@ -233,31 +235,22 @@ bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstac
   const Point direction = end - start;
   double first = kNoCrossing;
   int32_t chosen = -1;
-  bin.ForEachNear(
-      0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(),
-      [&](int32_t t, const FreeTriangle &tri, const Box &) {
-        if (tri[3] != obstacle) return;
-        const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]), c = WorldPoint(tri[2]);
-        const Point normal = (b - a).cross(c - a);
-        double along;
-        Eigen::Vector3d w;
-        if (normal.dot(direction) >= 0 ||
-            !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) || along > first ||
-            (along == first && t >= chosen))
-          return;
-        first = along;
-        chosen = t;
-        hit->point = start + along * direction;
-        hit->normal = normal.normalized();
-        hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
-                        w[2] * state_->velocity(tri[2]);
-        hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) +
-                            w[1] * state_->inverse_mass(tri[1]) +
-                            w[2] * state_->inverse_mass(tri[2]);
-        hit->body = obstacle;
-        hit->triangle = t;
-        hit->weights = w;
-      });
+  bin.ForEachNear(0.5 * (start + end), 0.5 * direction.cwiseAbs().maxCoeff(),
+                  [&](int32_t t, const FreeTriangle &tri, const Box &) {
+                    if (tri[3] != obstacle) return;
+                    const Point a = WorldPoint(tri[0]), b = WorldPoint(tri[1]),
+                                c = WorldPoint(tri[2]);
+                    const Point normal = (b - a).cross(c - a);
+                    double along;
+                    Eigen::Vector3d w;
+                    if (normal.dot(direction) >= 0 ||
+                        !SegmentCrossesTriangle(start, end, a, b, c, &along, &w) || along > first ||
+                        (along == first && t >= chosen))
+                      return;
+                    first = along;
+                    chosen = t;
+                    SetHit(start + along * direction, normal, w, tri, t, hit);
+                  });
   return first <= 1;
 }
 
@@ -382,14 +375,7 @@ bool Obstacles::ContactOnBody(const Point &p, int32_t natural, int32_t obstacle,
       return;
     best = distance;
     chosen = t;
-    hit->point = q;
-    hit->normal = normal.normalized();
-    hit->velocity = w[0] * state_->velocity(tri[0]) + w[1] * state_->velocity(tri[1]) +
-                    w[2] * state_->velocity(tri[2]);
-    hit->inverse_mass = w[0] * state_->inverse_mass(tri[0]) + w[1] * state_->inverse_mass(tri[1]) +
-                        w[2] * state_->inverse_mass(tri[2]);
-    hit->triangle = t;
-    hit->weights = w;
+    SetHit(q, normal, w, tri, t, hit);
   });
   if (shallow) BlendFacingNormal(own, hit);
   return true;

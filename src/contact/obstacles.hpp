@@ -177,6 +177,11 @@ class Obstacles {
   template <class Keep>
   Point AngleWeightedNormal(int32_t natural, Keep keep) const;
   void BlendFacingNormal(const Point &own, SurfaceHit *hit) const;
+  // The hit at `point` on free or fixed triangle t (`tri`, its body tri[3]) with
+  // barycentric weights w: the triangle's unit normal from `normal` (its
+  // unnormalised (b - a) x (c - a)), velocity and inverse mass interpolated by w.
+  void SetHit(const Point &point, const Point &normal, const Eigen::Vector3d &w,
+              const FreeTriangle &tri, int32_t t, SurfaceHit *hit) const;
   // Whether free bodies a and b are a separating pair.
   bool Separating(int32_t a, int32_t b) const;
   Point WorldPoint(int32_t n) const { return state_->position(n); }
