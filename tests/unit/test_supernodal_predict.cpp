@@ -1,11 +1,15 @@
 // The supernodal factor's size predictor (PCSupernodalPredict) against the
 // factor the set-up then builds, on one rank, and the choice between that
 // factor and multigrid (ChooseFactorOrMultigrid) at a budget below and above
-// the prediction; the separator's dense blocks in 64-bit arithmetic past the
-// size whose square overflows an int (n_S = 46 341).
+// the prediction; the set-up's measured peak memory against the prediction;
+// the separator's dense blocks in 64-bit arithmetic past the size whose
+// square overflows an int (n_S = 46 341).
 #include <gtest/gtest.h>
+#include <malloc.h>
 #include <petscksp.h>
 
+#include <cstdio>
+#include <fstream>
 #include <string>
 
 #include "petsc_environment.hpp"
@@ -15,6 +19,13 @@
 using namespace softbody;
 
 namespace {
+
+// How far the set-up's measured peak may lie from the prediction (ratio): the
+// set-up also holds a copy of A's lower triangle for CHOLMOD, its workspace
+// and 2 MB pages (1.18 x the prediction measured on the grid below), and
+// without the release behind the copy it grew by 1.41 x (single) and 1.78 x
+// (double) the prediction.
+constexpr double kPeakTolerance = 1.3;
 
 // A symmetric, strictly diagonally dominant (so SPD) matrix with block size 3
 // and the pattern of a 3D mesh: every component of a node of an n x n x n grid
@@ -88,9 +99,62 @@ TEST(SupernodalPredict, FactorEntriesEqualTheSetUp) {
               PETSC_SUCCESS);
     EXPECT_GT(stored, 3 * 12 * 12 * 12);
     EXPECT_EQ(prediction.factor_entries, stored) << precision;
-    // CHOLMOD's factor in double and its copy for the solves at 8 or 4 bytes.
-    EXPECT_DOUBLE_EQ(prediction.bytes, stored * (8 + bytes_per_entry)) << precision;
+    // At least CHOLMOD's factor in double, whole once factorised.
+    EXPECT_GE(prediction.bytes, stored * 8) << precision;
     KSPDestroy(&ksp);
+  }
+  PetscOptionsClearValue(nullptr, "-pc_supernodal_precision");
+  MatDestroy(&A);
+}
+
+// This process's resident memory now (field "VmRSS:") or its peak since the
+// last ResetPeak ("VmHWM:"), bytes, from /proc/self/status.
+double StatusBytes(const std::string &field) {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line))
+    if (line.rfind(field, 0) == 0) return 1024.0 * std::stod(line.substr(field.size()));
+  ADD_FAILURE() << "no " << field << " in /proc/self/status";
+  return 0;
+}
+
+// Resets the kernel's peak (VmHWM) to the present resident set (Linux >= 4.0).
+void ResetPeak() {
+  std::ofstream("/proc/self/clear_refs") << "5";
+}
+
+// The set-up's measured peak against the prediction. Copying the factor for
+// the solves releases CHOLMOD's values behind the copy; without that, the
+// set-up held both at once (kPeakTolerance).
+TEST(SupernodalPredict, SetUpPeaksAsPredicted) {
+  // A 24^3-node grid: a factor of 1.8e7 entries (146 MB), five times A.
+  Mat A;
+  ASSERT_EQ(GridMatrix(24, &A), PETSC_SUCCESS);
+  // The first set-up is not measured: it also allocates what stays for the
+  // process (BLAS's buffers, about 80 MB here).
+  const char *const precisions[] = {"double", "single", "double"};
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_EQ(PetscOptionsSetValue(nullptr, "-pc_supernodal_precision", precisions[i]),
+              PETSC_SUCCESS);
+    KSP ksp;
+    ASSERT_EQ(SupernodalSolver(A, "1e6", &ksp), PETSC_SUCCESS);
+    PC pc;
+    ASSERT_EQ(KSPGetPC(ksp, &pc), PETSC_SUCCESS);
+    SupernodalPrediction prediction;
+    ASSERT_EQ(PCSupernodalPredict(pc, &prediction), PETSC_SUCCESS);
+    // Memory freed earlier but kept by the C library is given back first: the
+    // set-up would grow into it unseen.
+    malloc_trim(0);
+    const double before = StatusBytes("VmRSS:");
+    ResetPeak();
+    ASSERT_EQ(PCSetUp(pc), PETSC_SUCCESS);
+    const double growth = StatusBytes("VmHWM:") - before;
+    KSPDestroy(&ksp);
+    if (i == 0) continue;
+    std::printf("%s: the set-up grew by %.1f MB at its peak, predicted %.1f MB\n", precisions[i],
+                growth / 1048576.0, prediction.bytes / 1048576.0);
+    EXPECT_LT(growth, kPeakTolerance * prediction.bytes) << precisions[i];
+    EXPECT_GT(growth, prediction.bytes / kPeakTolerance) << precisions[i];
   }
   PetscOptionsClearValue(nullptr, "-pc_supernodal_precision");
   MatDestroy(&A);

@@ -15,6 +15,7 @@
 
 #include "common/exchange.hpp"
 #include "common/large_array.hpp"
+#include "common/release_pages.hpp"
 #include "solvers/supernodal/tiled_factor.hpp"
 
 // LAPACK / BLAS (Fortran interface): the separator's dense Schur complement.
@@ -41,6 +42,11 @@ enum SupernodalPrecision { kDouble, kSingle };
 constexpr size_t kReduceChunk = size_t{1} << 24;
 // CHOLMOD factorises in double precision, whatever the solves use.
 constexpr double kCholmodBytesPerEntry = sizeof(double);
+// The copy for the solves releases CHOLMOD's values behind it (MoveFrom), so the
+// values peak at the larger of the two, over CHOLMOD's entries: the tiles' zero
+// padding in double (3.9 % on the 104k-tet TetGen mesh, docs/performance.md)
+// and one release batch above one factor.
+constexpr double kCopyPeakOverFactor = 1.05;
 // The default memory budget of the factor: three quarters of a rank's share of
 // its node's physical memory. The factor dominates a direct run (5.8 KB per tet
 // at 1e6 tets against about 1.1 KB for everything else, docs/performance.md);
@@ -68,7 +74,9 @@ struct PackedFactor {
   std::vector<Real> inverse_diagonal;  // per column: 1 / L_jj
   std::vector<Real> y, work;
 
-  void From(const cholmod_factor *L) {
+  // Copies L's values, consuming them: the whole pages of L->x are returned to
+  // the system behind the copy (release_pages.hpp); the caller drops them after.
+  void MoveFrom(cholmod_factor *L) {
     CopyStructure(L);
     CopyValues(L);
     y.resize(n);
@@ -105,7 +113,9 @@ struct PackedFactor {
     const double *x = static_cast<const double *>(L->x);
     values.resize(value_start[supernodes]);
     inverse_diagonal.resize(n);
+    ReleaseBehind behind(x, true);
     for (int k = 0; k < supernodes; ++k) {
+      behind.Consumed(x + px[k]);
       const int columns = first_column[k + 1] - first_column[k],
                 height = row_start[k + 1] - row_start[k];
       Real *out = values.data() + value_start[k];
@@ -395,8 +405,9 @@ PetscErrorCode PCSetFromOptions_Supernodal(PC pc, PetscOptionItems *PetscOptions
     PetscCall(DefaultBudget(PetscObjectComm((PetscObject)pc), &s->limits));
   PetscCall(PetscOptionsReal(
       "-pc_supernodal_budget_mb",
-      "Largest predicted memory per rank of the factor (MB): the factor in double, its copy "
-      "for the solves and, on several ranks, the separator's dense blocks; a default solver "
+      "Largest predicted memory per rank of the factor (MB): the factor in double (its copy "
+      "for the solves replaces it) and, on several ranks, the separator's dense blocks; a default "
+      "solver "
       "whose factor would need more switches to CG + GAMG (default: three quarters of the "
       "node's physical memory over the ranks on the node)",
       nullptr, s->limits.budget_mb, &s->limits.budget_mb, nullptr));
@@ -553,9 +564,9 @@ PetscErrorCode SetUpOneRank(Supernodal *s, Mat A, bool new_pattern) {
   s->nonzeros = s->common.lnz;
   s->flops = s->common.fl;
   if (s->precision == kSingle)
-    s->single.From(s->factor);
+    s->single.MoveFrom(s->factor);
   else
-    s->full.From(s->factor);
+    s->full.MoveFrom(s->factor);
   PetscCall(DropValues(s, s->factor));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -740,10 +751,10 @@ PetscErrorCode KeepLocalFactor(Supernodal *s, std::vector<double> *schur, double
   const int interior = static_cast<int>(p.interior), separator = static_cast<int>(p.separator);
   const std::vector<double> trailing = TrailingBlock(p.factor, interior, separator);
   if (s->precision == kSingle) {
-    p.single.From(p.factor);
+    p.single.MoveFrom(p.factor);
     *entries = p.single.EntriesBefore(interior);
   } else {
-    p.full.From(p.factor, interior);
+    p.full.MoveFrom(p.factor, interior);
     *entries = p.full.EntriesBefore(interior);
   }
   *flops = s->common.fl;
@@ -1076,7 +1087,6 @@ PetscErrorCode PCSupernodalPredict(PC pc, SupernodalPrediction *prediction) {
   *prediction = SupernodalPrediction();
   prediction->limits = s->limits;
   const double budget_bytes = s->limits.budget_mb * kBytesPerMB;
-  const int bytes_per_entry = s->precision == kSingle ? 4 : 8;
   PetscMPIInt size;
   PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)pc), &size));
   if (size == 1)
@@ -1087,9 +1097,9 @@ PetscErrorCode PCSupernodalPredict(PC pc, SupernodalPrediction *prediction) {
                                        prediction->separator <= s->limits.max_separator);
   if (prediction->analysed) {
     PetscCall(MatGetNonzeroState(pc->pmat, &s->pattern_state));  // the set-up reuses the analysis
-    // The numeric factor in double and its copy in the solves' precision
-    // (CHOLMOD's values are dropped after the copy) beside the separator's blocks.
-    prediction->bytes = prediction->factor_entries * (kCholmodBytesPerEntry + bytes_per_entry) +
+    // The numeric factor in double, replaced by its copy in the solves'
+    // precision (double or single) as the copy is made, beside the separator's blocks.
+    prediction->bytes = prediction->factor_entries * kCholmodBytesPerEntry * kCopyPeakOverFactor +
                         prediction->separator_bytes;
   } else {
     prediction->bytes = prediction->separator_bytes;

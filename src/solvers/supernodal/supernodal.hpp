@@ -9,8 +9,9 @@
 //
 // One rank: CHOLMOD's factor copied into softbody's streaming layout with its
 // own sweeps (tiled_factor.hpp; double precision), or a single-precision packed
-// copy (half the bytes); CHOLMOD's values are dropped after the copy. The split
-// factor's pieces on several ranks are copied alike.
+// copy (half the bytes); CHOLMOD's values are released behind the copy as it
+// is made and dropped after it, so a set-up peaks at about one factor in double
+// (release_pages.hpp). The split factor's pieces on several ranks are copied alike.
 // Several ranks: the factor is split at a separator (the DOFs coupled to a
 // higher rank): every rank factors the piece of A of its own interior plus the
 // separator, rank 0 the separator's dense Schur complement, and a solve sweeps
@@ -71,8 +72,8 @@ struct SupernodalPrediction {
   bool analysed = false;            // the symbolic factors were computed (below)
   double factor_entries = 0;        // largest rank: entries of CHOLMOD's factor (xsize)
   double factor_entries_total = 0;  // the same summed over the ranks
-  // Largest rank: the factor in double, its copy in the solves' precision and
-  // the separator's blocks, bytes (only separator_bytes when not analysed).
+  // Largest rank: the factor in double while its copy for the solves replaces
+  // it, and the separator's blocks, bytes (only separator_bytes when not analysed).
   double bytes = 0;
 };
 

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstring>
 
+#include "common/release_pages.hpp"
+
 namespace softbody {
 
 namespace {
@@ -107,6 +109,14 @@ size_t TiledFactor::SupernodeEntries(int columns, int height) {
 }
 
 void TiledFactor::From(const cholmod_factor *L, int limit) {
+  Copy(L, limit, false);
+}
+
+void TiledFactor::MoveFrom(cholmod_factor *L, int limit) {
+  Copy(L, limit, true);
+}
+
+void TiledFactor::Copy(const cholmod_factor *L, int limit, bool release) {
   n_ = static_cast<int>(L->n);
   const int *perm = static_cast<const int *>(L->Perm), *super = static_cast<const int *>(L->super),
             *pi = static_cast<const int *>(L->pi), *s = static_cast<const int *>(L->s),
@@ -145,7 +155,12 @@ void TiledFactor::From(const cholmod_factor *L, int limit) {
   value_start_[supernodes_] = entries;
   values_.resize(entries);
   inverse_diagonal_.resize(n_);
-  for (int k = 0; k < supernodes_; ++k) CopySupernode(x + source[k], stride[k], k);
+  // The stored supernodes read x in increasing order: below source[k + 1] is done.
+  ReleaseBehind behind(x, release);
+  for (int k = 0; k < supernodes_; ++k) {
+    CopySupernode(x + source[k], stride[k], k);
+    if (k + 1 < supernodes_) behind.Consumed(x + source[k + 1]);
+  }
   y_.assign(n_, 0.0);
   work_.assign(largest + kPanel, 0.0);
 }

@@ -44,6 +44,11 @@ class TiledFactor {
   // Copies CHOLMOD's factor L (supernodal, real, double; its values present),
   // with a supernode boundary at column `limit` (none when limit >= n).
   void From(const cholmod_factor *L, int limit = std::numeric_limits<int>::max());
+  // From, consuming L's values: the whole pages of L->x are returned to the
+  // system behind the copy (release_pages.hpp), so the copy's peak is about one
+  // factor, not two. L's values must not be read afterwards: the caller drops
+  // them (CHOLMOD_PATTERN).
+  void MoveFrom(cholmod_factor *L, int limit = std::numeric_limits<int>::max());
   // x = A^-1 b (b and x of size n, in A's order; they may be the same array).
   void Solve(const double *b, double *x);
   // On y() (the permuted vector, size n): y <- L^-1 y over the columns
@@ -66,6 +71,7 @@ class TiledFactor {
   // Entries of the panels of a supernode (columns, height), without its plain columns.
   static size_t PanelEntries(int columns, int height);
   static size_t SupernodeEntries(int columns, int height);
+  void Copy(const cholmod_factor *L, int limit, bool release);
   void CopySupernode(const double *x, int stride, int k);
   void ForwardSupernode(int k);
   void BackwardSupernode(int k);
