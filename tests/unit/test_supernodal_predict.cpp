@@ -79,17 +79,26 @@ PetscErrorCode SupernodalSolver(Mat A, const char *budget_mb, KSP *ksp) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// SupernodalSolver with an ample budget, solves in `precision`, and the
+// prediction of its PC's set-up.
+PetscErrorCode PredictedSolver(Mat A, const char *precision, KSP *ksp, PC *pc,
+                               SupernodalPrediction *prediction) {
+  PetscFunctionBeginUser;
+  PetscCall(PetscOptionsSetValue(nullptr, "-pc_supernodal_precision", precision));
+  PetscCall(SupernodalSolver(A, "1e6", ksp));
+  PetscCall(KSPGetPC(*ksp, pc));
+  PetscCall(PCSupernodalPredict(*pc, prediction));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 TEST(SupernodalPredict, FactorEntriesEqualTheSetUp) {
   Mat A;
   ASSERT_EQ(GridMatrix(12, &A), PETSC_SUCCESS);
   for (const char *precision : {"double", "single"}) {
-    ASSERT_EQ(PetscOptionsSetValue(nullptr, "-pc_supernodal_precision", precision), PETSC_SUCCESS);
     KSP ksp;
-    ASSERT_EQ(SupernodalSolver(A, "1e6", &ksp), PETSC_SUCCESS);
     PC pc;
-    ASSERT_EQ(KSPGetPC(ksp, &pc), PETSC_SUCCESS);
     SupernodalPrediction prediction;
-    ASSERT_EQ(PCSupernodalPredict(pc, &prediction), PETSC_SUCCESS);
+    ASSERT_EQ(PredictedSolver(A, precision, &ksp, &pc, &prediction), PETSC_SUCCESS);
     EXPECT_TRUE(prediction.analysed && prediction.affordable);
     EXPECT_EQ(prediction.separator, 0);  // one rank: no split
     ASSERT_EQ(PCSetUp(pc), PETSC_SUCCESS);
@@ -134,14 +143,10 @@ TEST(SupernodalPredict, SetUpPeaksAsPredicted) {
   // process (BLAS's buffers, about 80 MB here).
   const char *const precisions[] = {"double", "single", "double"};
   for (int i = 0; i < 3; ++i) {
-    ASSERT_EQ(PetscOptionsSetValue(nullptr, "-pc_supernodal_precision", precisions[i]),
-              PETSC_SUCCESS);
     KSP ksp;
-    ASSERT_EQ(SupernodalSolver(A, "1e6", &ksp), PETSC_SUCCESS);
     PC pc;
-    ASSERT_EQ(KSPGetPC(ksp, &pc), PETSC_SUCCESS);
     SupernodalPrediction prediction;
-    ASSERT_EQ(PCSupernodalPredict(pc, &prediction), PETSC_SUCCESS);
+    ASSERT_EQ(PredictedSolver(A, precisions[i], &ksp, &pc, &prediction), PETSC_SUCCESS);
     // Memory freed earlier but kept by the C library is given back first: the
     // set-up would grow into it unseen.
     malloc_trim(0);
