@@ -262,8 +262,9 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
                                nullptr, path, path, sizeof(path), nullptr));
   PetscCall(PetscOptionsBool("-scene_replicate",
-                             "Hold every mesh whole on every rank even when contact does not need "
-                             "them (by default they are distributed in slabs then)",
+                             "Hold every mesh whole on every rank (by default each rank holds its "
+                             "slabs, and with contact the fixed bodies' meshes whole until "
+                             "contact's set-up)",
                              nullptr, options->replicate, &options->replicate, nullptr));
   PetscOptionsEnd();
   options->path = path;
