@@ -157,11 +157,11 @@ PetscErrorCode Simulation::ReadScene() {
   const ContactOptions &contact = options_.contact;
   // Whether contact may need the meshes is known for sure only once the
   // bodies are counted; .h5 meshes are left unread until then unless it will.
-  const bool may_need = options_.scene.replicate || ContactMayNeedWholeMeshes(contact, 1);
+  const bool may_need = options_.scene.replicate || ContactMayRun(contact, 1);
   PetscCall(LoadScene(comm_, options_.scene, !may_need, &scene_));
   PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
   holding_ = options_.scene.replicate ? MeshHolding::kWhole
-             : may_need || ContactMayNeedWholeMeshes(contact, scene_.bodies.size())
+             : may_need || ContactMayRun(contact, scene_.bodies.size())
                  ? MeshHolding::kSlabsAndFixed
                  : MeshHolding::kSlabs;
   PetscCall(DistributeScene(comm_, options_.scene.meshing, holding_, &scene_, &share_));

@@ -49,12 +49,12 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
   layout_ = &layout;
   options_ = options;
   DecideParts(scene, layout);
-  if (!ContactMayNeedWholeMeshes(options, scene.bodies.size())) PetscFunctionReturn(PETSC_SUCCESS);
+  if (!ContactMayRun(options, scene.bodies.size())) PetscFunctionReturn(PETSC_SUCCESS);
   PetscCheck(scene.fixed_meshes_held &&
                  static_cast<PetscInt>(layout.free_of_natural.size()) == scene.num_vertices(),
              comm, PETSC_ERR_PLIB,
              "contact needs the fixed bodies' meshes and the replicated numbering on every rank "
-             "(ContactMayNeedWholeMeshes)");
+             "(ContactMayRun)");
   ContactMeshes meshes;
   PetscCall(meshes.Build(comm, scene, layout, share));
   PetscCall(meshes.FetchRest(RestVerticesNeeded(meshes)));
