@@ -74,6 +74,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
                          kGroundMarginOfGap * options.gap);
   if (body_obstacles_) SetupBodyObstacles(candidates);
   if (free_obstacles_) PetscCall(state_.SetupRingSet(lumped_mass, RingNeighbours()));
+  meshes.ReleaseFreeTets();  // the free items have taken theirs
   CollectCheckedVertices();
   constraints_.Setup(scene, layout, state_, obstacles_, features_, options.gap);
   friction_.Setup(options.friction, [this](int32_t n) { return 1 / state_.inverse_mass(n); });

@@ -206,8 +206,10 @@ PetscErrorCode ContactMeshes::FetchFreeTets(const std::vector<int32_t> &keys) {
       ++counts[request.rank];
     }
   }
+  std::vector<IndexedItem<FreeTet>>().swap(keyed_);
   PetscCall(ExchangeRecords(comm_, replies, counts, &free_tets_));
   free_tets_.insert(free_tets_.end(), static_.begin(), static_.end());
+  std::vector<IndexedItem<FreeTet>>().swap(static_);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

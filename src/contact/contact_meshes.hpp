@@ -51,10 +51,12 @@ class ContactMeshes {
   // Collective. Adds the rest positions of `naturals` (any order, repeats
   // allowed; each rank its own list).
   PetscErrorCode FetchRest(const std::vector<int32_t> &naturals);
-  // Collective. free_tets(): the free tets listed under `keys` (natural
+  // Collective, once. free_tets(): the free tets listed under `keys` (natural
   // vertices, any order, repeats allowed; each rank its own list) and those
-  // without a key; replaces what an earlier call fetched.
+  // without a key. The tets held for other ranks' requests are freed.
   PetscErrorCode FetchFreeTets(const std::vector<int32_t> &keys);
+  // Not collective. Frees free_tets() once nothing reads them.
+  void ReleaseFreeTets() { std::vector<IndexedItem<FreeTet>>().swap(free_tets_); }
 
   const Triangles &boundary(size_t body) const { return boundary_[body]; }
   double longest_edge(size_t body) const { return longest_edge_[body]; }
