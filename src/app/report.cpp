@@ -61,6 +61,9 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
                      : scene.meshes_held ? "; meshes whole on every rank"
                      : scene.meshes_released
                          ? "; meshes whole on every rank until contact's set-up, then released"
+                     : scene.fixed_meshes_released
+                         ? "; meshes read on rank 0, then held in slabs (the fixed bodies' also "
+                           "whole on every rank until contact's set-up)"
                          : "; meshes read on rank 0, then held in slabs";
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
@@ -180,23 +183,30 @@ PetscErrorCode PrintSceneBytes(MPI_Comm comm, const Scene &scene, const DofLayou
   PetscFunctionBeginUser;
   if (!contact.active()) PetscFunctionReturn(PETSC_SUCCESS);
   const ContactSceneBytes c = contact.scene_bytes();
-  int64_t meshes = HeldBytes(scene.initial_velocities);
-  for (const Body &body : scene.bodies)
-    meshes += HeldBytes(body.mesh.vertices) + HeldBytes(body.mesh.tets);
+  const int64_t meshes = scene.MeshBytes();
   const int64_t numbering = HeldBytes(layout.free_of_natural) + HeldBytes(layout.natural_of_free) +
                             HeldBytes(layout.petsc_of_free);
-  int64_t bytes[] = {meshes, numbering, c.free_state, c.obstacles, c.guard, c.separation, 0};
+  int64_t bytes[] = {meshes,
+                     numbering,
+                     c.free_state,
+                     c.obstacles,
+                     c.guard,
+                     c.separation,
+                     0,
+                     scene.contact_setup_mesh_bytes};
   constexpr int kParts = 6;
   for (int k = 0; k < kParts; ++k) bytes[kParts] += bytes[k];
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bytes, kParts + 1, MPI_INT64_T, MPI_MAX, comm));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bytes, kParts + 2, MPI_INT64_T, MPI_MAX, comm));
   const double MB = 1e6;
   PetscCall(PetscPrintf(comm,
                         "  whole scene  held per rank, largest rank: meshes %.3g MB, numbering "
                         "%.3g MB; contact's free state %.3g MB, obstacles %.3g MB, guard %.3g MB, "
-                        "overlap separation %.3g MB; %.3g MB in all, %.0f B per scene vertex\n",
+                        "overlap separation %.3g MB; %.3g MB in all, %.0f B per scene vertex; "
+                        "meshes during contact's set-up %.3g MB\n",
                         bytes[0] / MB, bytes[1] / MB, bytes[2] / MB, bytes[3] / MB, bytes[4] / MB,
                         bytes[5] / MB, bytes[kParts] / MB,
-                        double(bytes[kParts]) / std::max<int32_t>(1, scene.num_vertices())));
+                        double(bytes[kParts]) / std::max<int32_t>(1, scene.num_vertices()),
+                        bytes[kParts + 1] / MB));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -126,6 +126,7 @@ PetscErrorCode Simulation::SetUp() {
   PetscCall(DistributeMesh());
   PetscCall(CreateInitialState());
   PetscCall(OpenOutput());
+  PetscCall(SetUpContact());
   share_ = MeshShare();  // set-up only: the state and the result file hold what they need
   PetscCall(SetUpSolvers());
   PetscCall(StartTimeLoop());
@@ -144,22 +145,26 @@ PetscErrorCode Simulation::CheckFiles() {
 }
 
 // Rank 0 reads and validates the scene and its meshes; every rank the -deform
-// events. The meshes then reach every rank whole only when contact may need them,
-// else each rank gets its shares (mesh_share.hpp): a scene of one .h5 body is read
-// in slabs by every rank, never whole. Bodies that nothing can set
-// in motion add no unknowns (partition.hpp); not on a restart (its bodies move as
-// the checkpoint says) or when -export_matrices asks for the matrices of every
-// free body.
+// events. Each rank gets its shares of the meshes (mesh_share.hpp): a scene of
+// one .h5 body is read in slabs by every rank, never whole. When contact may
+// need them, the fixed bodies' meshes reach every rank whole (contact builds
+// the rest from the shares); -scene_replicate sends every mesh whole to every
+// rank. Bodies that nothing can set in motion add no unknowns (partition.hpp);
+// not on a restart (its bodies move as the checkpoint says) or when
+// -export_matrices asks for the matrices of every free body.
 PetscErrorCode Simulation::ReadScene() {
   PetscFunctionBeginUser;
   const ContactOptions &contact = options_.contact;
-  // Whether contact may need the meshes whole is known for sure only once the
+  // Whether contact may need the meshes is known for sure only once the
   // bodies are counted; .h5 meshes are left unread until then unless it will.
-  const bool may_replicate = options_.scene.replicate || ContactMayNeedWholeMeshes(contact, 1);
-  PetscCall(LoadScene(comm_, options_.scene, !may_replicate, &scene_));
+  const bool may_need = options_.scene.replicate || ContactMayRun(contact, 1);
+  PetscCall(LoadScene(comm_, options_.scene, !may_need, &scene_));
   PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
-  const bool replicate = may_replicate || ContactMayNeedWholeMeshes(contact, scene_.bodies.size());
-  PetscCall(DistributeScene(comm_, options_.scene.meshing, replicate, &scene_, &share_));
+  holding_ = options_.scene.replicate ? MeshHolding::kWhole
+             : may_need || ContactMayRun(contact, scene_.bodies.size())
+                 ? MeshHolding::kSlabsAndFixed
+                 : MeshHolding::kSlabs;
+  PetscCall(DistributeScene(comm_, options_.scene.meshing, holding_, &scene_, &share_));
   if (!restart() && options_.output.matrix_dir.empty()) {
     MotionSources sources{options_.integration.gravity.squaredNorm() > 0, bool(contact.ground),
                           !contact.constraints_path.empty() || contact.edge_bounds,
@@ -168,6 +173,7 @@ PetscErrorCode Simulation::ReadScene() {
     int marked;
     PetscCall(MarkBodiesAtRest(comm_, sources, &scene_, &share_, &marked));
   }
+  if (holding_ == MeshHolding::kSlabsAndFixed) PetscCall(KeepFixedMeshes(comm_, &scene_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -176,9 +182,8 @@ PetscErrorCode Simulation::ReadScene() {
 PetscErrorCode Simulation::DistributeMesh() {
   PetscFunctionBeginUser;
   PetscCall(BuildDofLayout(comm_, options_.partition, &share_, &layout_));
-  // Contact (which may run only with whole meshes) and -export_matrices still
-  // read the replicated numbering.
-  if (scene_.meshes_held || !options_.output.matrix_dir.empty())
+  // Contact (when it may run) and -export_matrices still read the replicated numbering.
+  if (holding_ != MeshHolding::kSlabs || !options_.output.matrix_dir.empty())
     PetscCall(ReplicateNumbering(comm_, share_, &layout_));
   PetscCall(MigrateTets(comm_, share_, layout_, &tets_));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -217,19 +222,23 @@ PetscErrorCode Simulation::OpenOutput() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Collision structures and constraints, only as far as the scene needs them;
+// Collision structures and constraints, only as far as the scene needs them,
+// built from the shares and the fixed bodies' meshes; none of these is kept
+// after it, so the solver's set-up runs without them.
+PetscErrorCode Simulation::SetUpContact() {
+  PetscFunctionBeginUser;
+  options_.contact.gravity = options_.integration.gravity.norm();
+  PetscCall(contact_.Setup(comm_, scene_, share_, layout_, state_.lumped_mass, options_.contact));
+  if (scene_.fixed_meshes_held) scene_.ReleaseMeshes();
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // A = (1 + a dt) M + (b dt + dt^2) K and its solver (linear: factorised once).
 PetscErrorCode Simulation::SetUpSolvers() {
   PetscFunctionBeginUser;
   IntegratorOptions &integration = options_.integration;
   dt_first_ = TimeStepAt(integration, 0.0);
   integration.dt = TimeStepAt(integration, start_.time);
-  // Contact first: it builds its structures from the whole meshes, which no
-  // rank keeps after it, so the solver's set-up runs without them.
-  options_.contact.gravity = integration.gravity.norm();
-  PetscCall(contact_.Setup(comm_, scene_, layout_, state_.lumped_mass, options_.contact));
-  // Contact has built its structures from the whole meshes; nothing reads them later.
-  if (scene_.meshes_held) scene_.ReleaseMeshes();
   if (has_unknowns()) {
     PetscCall(integrator_.Setup(comm_, scene_, layout_, std::move(tets_), elements_,
                                 state_.rest_positions, state_.lumped_mass, integration));

@@ -65,6 +65,7 @@ class Simulation {
   PetscErrorCode DistributeMesh();
   PetscErrorCode CreateInitialState();
   PetscErrorCode OpenOutput();
+  PetscErrorCode SetUpContact();
   PetscErrorCode SetUpSolvers();
   PetscErrorCode StartTimeLoop();
   PetscErrorCode TimeLoop();
@@ -87,7 +88,8 @@ class Simulation {
   RunOptions options_;
   Scene scene_;
   std::vector<Deformation> deformations_;
-  MeshShare share_;  // this rank's shares of the meshes (set-up only: freed after OpenOutput)
+  MeshHolding holding_ = MeshHolding::kSlabs;  // how the meshes are held (DistributeScene)
+  MeshShare share_;  // this rank's shares of the meshes (set-up only: freed after contact's)
   DofLayout layout_;
   LocalTets tets_;  // the free tets with an owned vertex (set-up only: the integrator takes them)
   LocalElements elements_;

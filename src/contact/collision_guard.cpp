@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "common/exchange.hpp"
+#include "contact/contact_meshes.hpp"
 #include "contact/halo.hpp"
 
 namespace softbody {
@@ -25,25 +26,24 @@ constexpr int kMaxRounds = 1000;
 
 }  // namespace
 
-PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                                     Vec lumped_mass, const ContactOptions &options,
-                                     bool self_contact, double min_edge,
-                                     const std::vector<double> &reach) {
+PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const ContactMeshes &meshes,
+                                     const DofLayout &layout, Vec lumped_mass,
+                                     const ContactOptions &options, bool self_contact,
+                                     double min_edge, const std::vector<double> &reach) {
   PetscFunctionBeginUser;
   comm_ = comm;
   PetscMPIInt size;
   PetscCallMPI(MPI_Comm_size(comm, &size));
   parallel_ = size > 1;
   reach_ = reach;
-  surface_.Build(scene);
+  surface_.Build(scene, meshes);
   const int32_t n = surface_.num_vertices();
   moving_.assign(n, 0);
   owned_mask_.assign(n, 0);
   rest_.resize(n);
   for (int32_t v = 0; v < n; ++v) {
     const int32_t natural = surface_.natural[v];
-    const Body &body = scene.bodies[surface_.body[v]];
-    rest_[v] = body.mesh.vertices.row(natural - body.first_vertex).transpose();
+    rest_[v] = meshes.rest(natural);
     if (layout.PetscVertexOfNatural(natural) < 0) continue;
     moving_[v] = 1;
     free_vertices_.push_back(v);

@@ -65,13 +65,14 @@ class CollisionGuard {
   CollisionGuard(const CollisionGuard &) = delete;
   CollisionGuard &operator=(const CollisionGuard &) = delete;
 
-  // Collective. scene (whole meshes) and layout (replicated numbering) must
-  // outlive the guard; lumped_mass per DOF (kg), PETSc order; min_edge: the
-  // smallest free body's mean boundary edge (m); reach: the halo's reach per
-  // body (m).
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
-                       const ContactOptions &options, bool self_contact, double min_edge,
-                       const std::vector<double> &reach);
+  // Collective. scene and layout (replicated numbering) must outlive the
+  // guard; meshes (contact_meshes.hpp: every body's boundary, the rest
+  // positions of the free bodies' surface vertices) is read here only;
+  // lumped_mass per DOF (kg), PETSc order; min_edge: the smallest free body's
+  // mean boundary edge (m); reach: the halo's reach per body (m).
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const ContactMeshes &meshes,
+                       const DofLayout &layout, Vec lumped_mass, const ContactOptions &options,
+                       bool self_contact, double min_edge, const std::vector<double> &reach);
   // Collective. Detection and zones on the motion from x0 (the step's start
   // positions) to x (its end positions), PETSc order; nothing written.
   // *moved: zones moved vertices (the same on every rank).

@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "common/exchange.hpp"
+#include "contact/contact_meshes.hpp"
 
 namespace softbody {
 
@@ -36,8 +37,9 @@ ContactSolver::Timing::~Timing() {
   PetscCallVoid(PetscLogEventEnd(solver_->event_, 0, 0, 0, 0));
 }
 
-PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
-                                    Vec lumped_mass, const ContactOptions &options) {
+PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const MeshShare &share,
+                                    const DofLayout &layout, Vec lumped_mass,
+                                    const ContactOptions &options) {
   PetscFunctionBeginUser;
   PetscClassId class_id;
   PetscCall(PetscClassIdRegister("softbody contact", &class_id));
@@ -47,15 +49,20 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
   layout_ = &layout;
   options_ = options;
   DecideParts(scene, layout);
-  PetscCall(distance_.Setup(comm, scene, options));
-  if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
-  PetscCheck(scene.meshes_held &&
+  if (!ContactMayRun(options, scene.bodies.size())) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscCheck(scene.fixed_meshes_held &&
                  static_cast<PetscInt>(layout.free_of_natural.size()) == scene.num_vertices(),
              comm, PETSC_ERR_PLIB,
-             "contact needs every mesh and the replicated numbering on every rank "
-             "(ContactMayNeedWholeMeshes)");
+             "contact needs the fixed bodies' meshes and the replicated numbering on every rank "
+             "(ContactMayRun)");
+  ContactMeshes meshes;
+  PetscCall(meshes.Build(comm, scene, layout, share));
+  PetscCall(meshes.FetchRest(RestVerticesNeeded(meshes)));
+  PetscCall(distance_.Setup(comm, scene, &meshes, options));
+  if (!active()) PetscFunctionReturn(PETSC_SUCCESS);
+  if (body_obstacles_) PetscCall(meshes.FetchFreeTets(KeysNeeded(meshes)));
 
-  state_.SetupBodies(scene, options.halo_reach);
+  state_.SetupBodies(scene, meshes, options.halo_reach);
   SharpFeatures::Candidates candidates;
   if (body_obstacles_ && options.sharp_edges) candidates = SharpFeatures::Sample(scene, state_);
   track_free_ = free_obstacles_ || !candidates.empty();
@@ -67,13 +74,56 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Dof
                          kGroundMarginOfGap * options.gap);
   if (body_obstacles_) SetupBodyObstacles(candidates);
   if (free_obstacles_) PetscCall(state_.SetupRingSet(lumped_mass, RingNeighbours()));
+  meshes.ReleaseFreeTets();  // the free items have taken theirs
   CollectCheckedVertices();
   constraints_.Setup(scene, layout, state_, obstacles_, features_, options.gap);
   friction_.Setup(options.friction, [this](int32_t n) { return 1 / state_.inverse_mass(n); });
   response_.Setup(comm, scene, layout, state_, obstacles_, options);
-  if (guard_on_) PetscCall(SetupGuard(lumped_mass));
-  if (free_obstacles_) separation_.Setup(comm, scene, state_, &obstacles_);
+  if (guard_on_) PetscCall(SetupGuard(meshes, lumped_mass));
+  if (free_obstacles_) separation_.Setup(comm, scene, meshes, state_, &obstacles_);
+  state_.EndSetup();
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The vertices whose rest positions the set-up reads besides the fixed bodies'
+// (ContactMeshes holds those): this rank's own, the free bodies' surface
+// vertices (the guard, the mean boundary edges, the edge bounds) and their
+// vertices without unknowns (stray vertices no tet names).
+std::vector<int32_t> ContactSolver::RestVerticesNeeded(const ContactMeshes &meshes) const {
+  std::vector<int32_t> naturals(layout_->natural_of_owned.begin(), layout_->natural_of_owned.end());
+  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
+    const Body &body = scene_->bodies[b];
+    if (body.fixed) continue;
+    const auto &boundary = meshes.boundary(b);
+    for (Eigen::Index k = 0; k < boundary.size(); ++k)
+      naturals.push_back(body.first_vertex + boundary.data()[k]);
+    for (int32_t v = body.first_vertex; v < body.first_vertex + body.num_vertices(); ++v)
+      if (layout_->free_of_natural[v] < 0) naturals.push_back(v);
+  }
+  return naturals;
+}
+
+// The key vertices whose free tets this rank may keep (FreeState::SetupItems):
+// its own, the distance constraints' and the other corners of the free
+// boundary triangles at its own vertices (the ring set, RingNeighbours).
+std::vector<int32_t> ContactSolver::KeysNeeded(const ContactMeshes &meshes) const {
+  std::vector<int32_t> owned(layout_->natural_of_owned.begin(), layout_->natural_of_owned.end());
+  std::vector<int32_t> keys = distance_.vertices();
+  keys.insert(keys.end(), owned.begin(), owned.end());
+  std::sort(owned.begin(), owned.end());
+  auto own = [&](int32_t n) { return std::binary_search(owned.begin(), owned.end(), n); };
+  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
+    const Body &body = scene_->bodies[b];
+    if (body.fixed) continue;
+    const auto &boundary = meshes.boundary(b);
+    for (Eigen::Index f = 0; f < boundary.rows(); ++f) {
+      const int32_t corners[3] = {body.first_vertex + boundary(f, 0),
+                                  body.first_vertex + boundary(f, 1),
+                                  body.first_vertex + boundary(f, 2)};
+      if (std::any_of(corners, corners + 3, own)) keys.insert(keys.end(), corners, corners + 3);
+    }
+  }
+  return keys;
 }
 
 std::vector<int32_t> ContactSolver::RingNeighbours() const {
@@ -89,15 +139,15 @@ std::vector<int32_t> ContactSolver::RingNeighbours() const {
   return ring;
 }
 
-PetscErrorCode ContactSolver::SetupGuard(Vec lumped_mass) {
+PetscErrorCode ContactSolver::SetupGuard(const ContactMeshes &meshes, Vec lumped_mass) {
   PetscFunctionBeginUser;
   double min_edge = kUnbounded;
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (!scene_->bodies[b].fixed) min_edge = std::min(min_edge, state_.edge(b));
   std::vector<double> reach(scene_->bodies.size());
   for (size_t b = 0; b < reach.size(); ++b) reach[b] = state_.reach(b);
-  PetscCall(guard_.Setup(comm_, *scene_, *layout_, lumped_mass, options_, options_.self_contact,
-                         min_edge, reach));
+  PetscCall(guard_.Setup(comm_, *scene_, meshes, *layout_, lumped_mass, options_,
+                         options_.self_contact, min_edge, reach));
   const PetscInt close = guard_.statistics().initial_close_pairs;
   if (close > 0)
     PetscCall(PetscPrintf(comm_,

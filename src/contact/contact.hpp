@@ -53,11 +53,14 @@
 #include "contact/resting_contacts.hpp"
 #include "contact/sharp_features.hpp"
 #include "contact/velocity_response.hpp"
+#include "fem/mesh_share.hpp"
 #include "fem/partition.hpp"
 #include "io/scene.hpp"
 #include "solvers/projected_solve.hpp"
 
 namespace softbody {
+
+class ContactMeshes;
 
 struct ContactStatistics {
   PetscInt collisions = 0;         // new vertex contacts, all steps, all ranks
@@ -99,11 +102,14 @@ class ContactSolver {
   ContactSolver &operator=(const ContactSolver &) = delete;
 
   // Collective. Builds only what the scene and options need. scene and layout
-  // must outlive the solver; lumped_mass: per DOF (kg), PETSc order. The
-  // bodies' meshes are read here only: the caller may release them after
-  // (Scene::ReleaseMeshes); the counts, flags and first vertices stay read.
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const DofLayout &layout, Vec lumped_mass,
-                       const ContactOptions &options);
+  // (its replicated numbering, when contact may need it) must outlive the
+  // solver; lumped_mass: per DOF (kg), PETSc order. The meshes are read here
+  // only: the free bodies' from the ranks' shares (contact_meshes.hpp), the
+  // fixed bodies' whole (Scene::fixed_meshes_held); the caller may release
+  // both after (Scene::ReleaseMeshes); the counts, flags and first vertices
+  // stay read.
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const MeshShare &share,
+                       const DofLayout &layout, Vec lumped_mass, const ContactOptions &options);
   // Anything to resolve at all.
   bool active() const { return ground_ || body_obstacles_ || !distance_.empty() || guard_on_; }
 
@@ -195,7 +201,10 @@ class ContactSolver {
   // Which parts the scene and options need.
   void DecideParts(const Scene &scene, const DofLayout &layout);
   // Collective. The guard over every body's surface.
-  PetscErrorCode SetupGuard(Vec lumped_mass);
+  PetscErrorCode SetupGuard(const ContactMeshes &meshes, Vec lumped_mass);
+  // What the set-up fetches of the meshes beyond the boundaries (Setup's comments).
+  std::vector<int32_t> RestVerticesNeeded(const ContactMeshes &meshes) const;
+  std::vector<int32_t> KeysNeeded(const ContactMeshes &meshes) const;
   // Collective. The obstacle bodies, their grids and the sharp features kept.
   void SetupBodyObstacles(const SharpFeatures::Candidates &candidates);
   // The (local, natural) vertices checked against obstacles.

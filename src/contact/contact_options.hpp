@@ -38,11 +38,11 @@ struct ContactOptions {
 // -edge_bounds -contact_guard -contact_gap -self_contact -contact_halo_reach.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
-// Not collective. Whether contact may need the bodies' whole meshes on every
-// rank (ContactSolver reads them when it is active): with a ground, distance
-// constraints or edge bounds, with more than one body (obstacles), or with
-// -self_contact 1.
-inline bool ContactMayNeedWholeMeshes(const ContactOptions &options, size_t num_bodies) {
+// Not collective. Whether contact may run (ContactSolver builds its structures,
+// from the ranks' shares and the fixed bodies' meshes, which are then held
+// whole on every rank until its set-up): with a ground, distance constraints
+// or edge bounds, with more than one body (obstacles), or with -self_contact 1.
+inline bool ContactMayRun(const ContactOptions &options, size_t num_bodies) {
   return options.ground || !options.constraints_path.empty() || options.edge_bounds ||
          num_bodies > 1 || (options.self_contact_set && options.self_contact && options.guard);
 }

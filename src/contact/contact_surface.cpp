@@ -1,23 +1,24 @@
 #include "contact/contact_surface.hpp"
 
 #include <algorithm>
+#include <unordered_map>
 
-#include "fem/mesh.hpp"
+#include "contact/contact_meshes.hpp"
 
 namespace softbody {
 
-void ContactSurface::Build(const Scene &scene) {
+void ContactSurface::Build(const Scene &scene, const ContactMeshes &meshes) {
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
-    const auto faces = BoundaryTriangles(body.mesh);
-    std::vector<int32_t> surface_of(body.mesh.num_vertices(), -1);
+    const auto &faces = meshes.boundary(b);
+    std::unordered_map<int32_t, int32_t> surface_of;  // body-local vertex -> surface vertex
     auto surface_vertex = [&](int32_t local) {
-      if (surface_of[local] < 0) {
-        surface_of[local] = num_vertices();
+      const auto [at, added] = surface_of.emplace(local, num_vertices());
+      if (added) {
         natural.push_back(body.first_vertex + local);
         this->body.push_back(static_cast<int32_t>(b));
       }
-      return surface_of[local];
+      return at->second;
     };
     std::vector<std::array<int32_t, 2>> body_edges;
     for (Eigen::Index f = 0; f < faces.rows(); ++f) {

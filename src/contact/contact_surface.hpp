@@ -1,7 +1,7 @@
 // The bodies' boundary surfaces as the collision guard sees them: the surface
 // vertices of every body (fixed ones too), their triangles and their edges,
-// numbered by surface vertex. Built from the whole meshes (Scene::meshes_held).
-// Not collective.
+// numbered by surface vertex. Built from the bodies' boundary triangles
+// (contact_meshes.hpp). Not collective.
 #pragma once
 
 #include <array>
@@ -12,6 +12,8 @@
 
 namespace softbody {
 
+class ContactMeshes;
+
 struct ContactSurface {
   std::vector<int32_t> natural;                   // surface vertex -> natural vertex
   std::vector<int32_t> body;                      // surface vertex -> body
@@ -21,7 +23,8 @@ struct ContactSurface {
   // [x_start[b], x_start[b + 1]) of the lists above (size bodies + 1).
   std::vector<int32_t> vertex_start = {0}, triangle_start = {0}, edge_start = {0};
 
-  void Build(const Scene &scene);
+  // Surface vertices numbered in the order the boundary triangles first name them.
+  void Build(const Scene &scene, const ContactMeshes &meshes);
   int32_t num_vertices() const { return static_cast<int32_t>(natural.size()); }
   size_t num_bodies() const { return vertex_start.size() - 1; }
 };

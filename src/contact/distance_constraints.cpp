@@ -5,6 +5,7 @@
 
 #include "common/errors.hpp"
 #include "common/text_reader.hpp"
+#include "contact/contact_meshes.hpp"
 #include "contact/geometry.hpp"
 
 namespace softbody {
@@ -21,11 +22,11 @@ constexpr PetscInt kMaxConstraintSweeps = 500;
 
 }  // namespace
 
-std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene) {
+std::vector<ConstraintLine> ParseConstraints(const std::string &path, const Scene &scene) {
   TextReader in(path);
   std::vector<std::string_view> fields;
-  std::vector<DistanceConstraint> constraints;
-  if (!in.NextLine(&fields)) return constraints;  // an empty file: no constraints
+  std::vector<ConstraintLine> lines;
+  if (!in.NextLine(&fields)) return lines;  // an empty file: no constraints
   if (fields.size() != 1) in.Fail("expected one field, the number of constraints");
   const long n = in.ParseInteger(fields[0], "number of constraints");
   if (n < 0) in.Fail("number of constraints must be >= 0");
@@ -34,13 +35,12 @@ std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const S
     if (m < 0 || m >= static_cast<long>(scene.bodies.size()))
       in.Fail("mesh index " + std::to_string(m) + " out of range 0.." +
               std::to_string(scene.bodies.size() - 1));
-    const TetMesh &mesh = scene.bodies[m].mesh;
+    const long count = scene.bodies[m].num_vertices();
     const long v = in.ParseInteger(vertex_field, "vertex index");
-    if (v < 0 || v >= mesh.num_vertices())
+    if (v < 0 || v >= count)
       in.Fail("vertex index " + std::to_string(v) + " out of range 0.." +
-              std::to_string(mesh.num_vertices() - 1) + " of mesh " + std::to_string(m));
-    return std::pair<int32_t, Point>(scene.bodies[m].first_vertex + static_cast<int32_t>(v),
-                                     mesh.vertices.row(v).transpose());
+              std::to_string(count - 1) + " of mesh " + std::to_string(m));
+    return scene.bodies[m].first_vertex + static_cast<int32_t>(v);
   };
   for (long i = 0; i < n; ++i) {
     if (!in.NextLine(&fields))
@@ -48,34 +48,65 @@ std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const S
     if (fields.size() != 4 && fields.size() != 6)
       in.Fail("expected 'm1 v1 m2 v2' or 'm1 v1 m2 v2 lo hi', found " +
               std::to_string(fields.size()) + " fields");
-    const auto [a, xa] = vertex(fields[0], fields[1]);
-    const auto [b, xb] = vertex(fields[2], fields[3]);
-    const double rest = (xb - xa).norm();
-    if (!(rest > 0)) in.Fail("the two vertices coincide: no rest distance to keep");
-    double lo = 1, hi = 1;
+    ConstraintLine line;
+    line.a = vertex(fields[0], fields[1]);
+    line.b = vertex(fields[2], fields[3]);
+    line.line = in.line();
     if (fields.size() == 6) {
-      lo = in.ParseReal(fields[4], "lower bound");
-      hi = in.ParseReal(fields[5], "upper bound");
-      if (!(lo >= 0 && lo <= hi)) in.Fail("need 0 <= lo <= hi");
+      line.lo = in.ParseReal(fields[4], "lower bound");
+      line.hi = in.ParseReal(fields[5], "upper bound");
+      if (!(line.lo >= 0 && line.lo <= line.hi)) in.Fail("need 0 <= lo <= hi");
     }
-    constraints.push_back({a, b, lo * rest, hi * rest});
+    lines.push_back(line);
   }
   if (in.NextLine(&fields)) in.Fail("unexpected content after the constraints");
+  return lines;
+}
+
+std::vector<DistanceConstraint> RestDistances(const std::string &path,
+                                              const std::vector<ConstraintLine> &lines,
+                                              const std::function<Point(int32_t)> &rest) {
+  std::vector<DistanceConstraint> constraints;
+  constraints.reserve(lines.size());
+  for (const ConstraintLine &line : lines) {
+    const Point xa = rest(line.a), xb = rest(line.b);
+    const double distance = (xb - xa).norm();
+    if (!(distance > 0))
+      throw InputError(
+          Where(path, line.line, "the two vertices coincide: no rest distance to keep"));
+    constraints.push_back({line.a, line.b, line.lo * distance, line.hi * distance});
+  }
   return constraints;
 }
 
-PetscErrorCode DistanceConstraints::Setup(MPI_Comm comm, const Scene &scene,
+std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene) {
+  return RestDistances(path, ParseConstraints(path, scene), [&](int32_t natural) {
+    const Body &body = scene.bodies[BodyOfNatural(scene, natural)];
+    return Point(body.mesh.vertices.row(natural - body.first_vertex).transpose());
+  });
+}
+
+PetscErrorCode DistanceConstraints::Setup(MPI_Comm comm, const Scene &scene, ContactMeshes *meshes,
                                           const ContactOptions &options) {
   PetscFunctionBeginUser;
-  if (!options.constraints_path.empty())
-    SOFTBODY_CATCH_INPUT(comm, constraints_ = ReadConstraints(options.constraints_path, scene));
+  const std::string &path = options.constraints_path;
+  std::vector<ConstraintLine> lines;
+  if (!path.empty()) SOFTBODY_CATCH_INPUT(comm, lines = ParseConstraints(path, scene));
+  std::vector<int32_t> ends;
+  for (const ConstraintLine &line : lines) ends.insert(ends.end(), {line.a, line.b});
+  PetscCall(meshes->FetchRest(ends));
+  SOFTBODY_CATCH_INPUT(comm, constraints_ = RestDistances(path, lines, [&](int32_t natural) {
+                               return meshes->rest(natural);
+                             }));
   if (!options.edge_bounds) PetscFunctionReturn(PETSC_SUCCESS);
-  for (const Body &body : scene.bodies) {
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const Body &body = scene.bodies[b];
     if (body.fixed) continue;
-    for (const auto &[a, b] : BoundaryEdges(body.mesh)) {
-      const double rest = (body.mesh.vertices.row(b) - body.mesh.vertices.row(a)).norm();
-      constraints_.push_back({body.first_vertex + a, body.first_vertex + b,
-                              options.edge_lower * rest, options.edge_upper * rest});
+    const int32_t first = body.first_vertex;
+    for (const auto &[a, c] : BoundaryEdges(meshes->boundary(b))) {
+      const double rest = (meshes->rest_row(first + c) - meshes->rest_row(first + a)).norm();
+      constraints_.push_back(
+          {first + a, first + c, options.edge_lower * rest, options.edge_upper * rest});
     }
   }
   PetscFunctionReturn(PETSC_SUCCESS);

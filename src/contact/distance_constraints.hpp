@@ -17,11 +17,13 @@
 #include <petscsys.h>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "contact/contact_options.hpp"
 #include "contact/free_state.hpp"
+#include "contact/geometry.hpp"
 #include "io/scene.hpp"
 
 namespace softbody {
@@ -32,9 +34,29 @@ struct DistanceConstraint {
   double lower, upper;
 };
 
-// Reads a constraints file: n, then n lines "m1 v1 m2 v2" (rest distance kept)
-// or "m1 v1 m2 v2 lo hi" (within [lo, hi] x rest distance), 0-based mesh and
-// vertex indices. Not collective; throws InputError naming file and line.
+// One line of a constraints file: its vertices (natural), its bounds as
+// multiples of the rest distance, and its line number.
+struct ConstraintLine {
+  int32_t a = 0, b = 0;
+  double lo = 1, hi = 1;
+  long line = 0;
+};
+
+// Parses a constraints file: n, then n lines "m1 v1 m2 v2" (rest distance
+// kept) or "m1 v1 m2 v2 lo hi" (within [lo, hi] x rest distance), 0-based mesh
+// and vertex indices, checked against the bodies' counts (no mesh read). Not
+// collective; throws InputError naming file and line.
+std::vector<ConstraintLine> ParseConstraints(const std::string &path, const Scene &scene);
+
+// The constraints of the parsed lines, given the vertices' rest positions (m).
+// Not collective; throws InputError naming the file and line of a constraint
+// whose two vertices coincide.
+std::vector<DistanceConstraint> RestDistances(const std::string &path,
+                                              const std::vector<ConstraintLine> &lines,
+                                              const std::function<Point(int32_t)> &rest);
+
+// ParseConstraints and RestDistances from the scene's whole meshes (held by
+// the caller). Not collective; throws InputError naming file and line.
 std::vector<DistanceConstraint> ReadConstraints(const std::string &path, const Scene &scene);
 
 class DistanceConstraints {
@@ -45,8 +67,11 @@ class DistanceConstraints {
     double violation;
   };
   // Collective (an unreadable file is an error on comm). The file's
-  // constraints, then the edge bounds of each free body's boundary edges.
-  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const ContactOptions &options);
+  // constraints (their vertices' rest positions fetched into *meshes), then
+  // the edge bounds of each free body's boundary edges (their rest positions
+  // fetched before, contact_meshes.hpp).
+  PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, ContactMeshes *meshes,
+                       const ContactOptions &options);
   bool empty() const { return constraints_.empty(); }
   size_t size() const { return constraints_.size(); }
   // The constrained vertices (natural, with repeats): what Resolve reads and writes.

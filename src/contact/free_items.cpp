@@ -1,7 +1,7 @@
 #include "contact/free_items.hpp"
 
 #include "common/held_bytes.hpp"
-#include "fem/mesh.hpp"
+#include "contact/contact_meshes.hpp"
 
 namespace softbody {
 
@@ -27,48 +27,44 @@ struct FreeItems::Record {
   int32_t key, id, corner[4], body;
 };
 
-void FreeItems::Setup(const Scene &scene, const std::function<bool(int32_t)> &is_free,
+void FreeItems::Setup(const Scene &scene, const ContactMeshes &meshes,
+                      const std::function<bool(int32_t)> &is_free,
                       const std::function<bool(int32_t)> &kept) {
   const uint64_t generation = generation_ + 1;  // grids of the lists before are stale
   *this = FreeItems();
   generation_ = generation;
-  int32_t tet_id = 0, triangle_id = 0;
-  auto add = [&](const auto &item, int32_t id, auto *own, auto *stat, bool all = false) {
-    const int32_t key = KeyOf(item, is_free);
-    if (key < 0)
-      stat->push_back({key, id, item});
-    else if (all || kept(key))
-      own->push_back({key, id, item});
-  };
-  auto tet = [&](const Body &body, int32_t t, int32_t body_id) {
-    const int32_t first = body.first_vertex;
-    return FreeTet{first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
-                   first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id};
-  };
   // The tets counted first, so that their lists are allocated once at their size.
   size_t own = 0, stat = 0;
-  for (size_t b = 0; b < scene.bodies.size(); ++b)
-    for (int32_t t = 0; !scene.bodies[b].fixed && t < scene.bodies[b].mesh.num_tets(); ++t) {
-      const int32_t key = KeyOf(tet(scene.bodies[b], t, 0), is_free);
-      own += key >= 0 && kept(key);
-      stat += key < 0;
-    }
+  for (const IndexedItem<FreeTet> &tet : meshes.free_tets()) {
+    const int32_t key = KeyOf(tet.item, is_free);
+    own += key >= 0 && kept(key);
+    stat += key < 0;
+  }
   own_tets_.reserve(own);
   static_tets_.reserve(stat);
+  for (const IndexedItem<FreeTet> &tet : meshes.free_tets()) {
+    const int32_t key = KeyOf(tet.item, is_free);
+    if (key < 0)
+      static_tets_.push_back({key, tet.id, tet.item});
+    else if (kept(key))
+      own_tets_.push_back({key, tet.id, tet.item});
+  }
+  int32_t triangle_id = 0;
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
     if (body.fixed) continue;
     const int32_t first = body.first_vertex, body_id = static_cast<int32_t>(b);
-    for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-      add(tet(body, t, body_id), tet_id++, &own_tets_, &static_tets_);
-    const auto boundary = BoundaryTriangles(body.mesh);
-    for (Eigen::Index f = 0; f < boundary.rows(); ++f)
-      add(FreeTriangle{first + boundary(f, 0), first + boundary(f, 1), first + boundary(f, 2),
-                       body_id},
-          triangle_id++, &triangles_, &static_triangles_, true);
+    const auto &boundary = meshes.boundary(b);
+    for (Eigen::Index f = 0; f < boundary.rows(); ++f) {
+      const FreeTriangle item{first + boundary(f, 0), first + boundary(f, 1),
+                              first + boundary(f, 2), body_id};
+      const int32_t key = KeyOf(item, is_free);
+      (key < 0 ? static_triangles_ : triangles_).push_back({key, triangle_id++, item});
+    }
   }
-  num_tets_ = tet_id;
+  num_tets_ = meshes.num_free_tets();
   std::sort(own_tets_.begin(), own_tets_.end());
+  std::sort(static_tets_.begin(), static_tets_.end());
   std::sort(triangles_.begin(), triangles_.end());
   Fit(&triangles_);
   Fit(&static_triangles_);

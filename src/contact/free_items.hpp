@@ -34,6 +34,8 @@
 
 namespace softbody {
 
+class ContactMeshes;
+
 // A free body's tet: 4 natural vertices, its body.
 using FreeTet = std::array<int32_t, 5>;
 // A free body's boundary triangle (outward by the right-hand rule): 3 natural
@@ -51,12 +53,13 @@ struct IndexedItem {
 
 class FreeItems {
  public:
-  // Not collective. From the scene's whole meshes (set-up only; again replaces
-  // all): the free bodies' tets listed under the vertices for which
-  // kept(natural) holds (this rank's own, the fixed and ring sets'), the static
-  // ones, and every boundary triangle; is_free(natural): the vertex has unknowns.
-  void Setup(const Scene &scene, const std::function<bool(int32_t)> &is_free,
-             const std::function<bool(int32_t)> &kept);
+  // Not collective. From what contact's set-up fetched of the meshes (set-up
+  // only; again replaces all): of meshes.free_tets(), those listed under the
+  // vertices for which kept(natural) holds (this rank's own, the fixed and ring
+  // sets') and the static ones; every free body's boundary triangle;
+  // is_free(natural): the vertex has unknowns.
+  void Setup(const Scene &scene, const ContactMeshes &meshes,
+             const std::function<bool(int32_t)> &is_free, const std::function<bool(int32_t)> &kept);
 
   // Collective (the free state's halo exchange). to_ranks / to_counts /
   // sent: the natural vertices this rank sent in the halo, grouped by rank as

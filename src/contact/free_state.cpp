@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "common/held_bytes.hpp"
+#include "contact/contact_meshes.hpp"
 #include "contact/halo.hpp"
 
 namespace softbody {
@@ -31,13 +32,14 @@ int32_t FreeState::Slot(int32_t natural) {
 }
 
 Point FreeState::RestPosition(int32_t natural) const {
-  const Body &body = scene_->bodies[body_of_[natural]];
-  return body.mesh.vertices.row(natural - body.first_vertex).transpose();
+  return meshes_->rest(natural);
 }
 
-void FreeState::SetupBodies(const Scene &scene, double reach_in_edges) {
+void FreeState::SetupBodies(const Scene &scene, const ContactMeshes &meshes,
+                            double reach_in_edges) {
   const int32_t V = scene.num_vertices();
   scene_ = &scene;
+  meshes_ = &meshes;
   num_bodies_ = scene.bodies.size();
   body_of_.resize(V);
   slot_.assign(V, -1);
@@ -45,21 +47,15 @@ void FreeState::SetupBodies(const Scene &scene, double reach_in_edges) {
   body_reach_.assign(num_bodies_, 0.0);
   for (size_t b = 0; b < num_bodies_; ++b) {
     const Body &body = scene.bodies[b];
-    const TetMesh &mesh = body.mesh;
-    for (int32_t v = 0; v < mesh.num_vertices(); ++v)
+    for (int32_t v = 0; v < body.num_vertices(); ++v)
       body_of_[body.first_vertex + v] = static_cast<int32_t>(b);
     double length = 0;
-    const auto edges = BoundaryEdges(mesh);
-    for (const auto &[a, c] : edges) length += (mesh.vertices.row(c) - mesh.vertices.row(a)).norm();
+    const int32_t first = body.first_vertex;
+    const auto edges = BoundaryEdges(meshes.boundary(b));
+    for (const auto &[a, c] : edges)
+      length += (meshes.rest_row(first + c) - meshes.rest_row(first + a)).norm();
     body_edge_[b] = edges.empty() ? 1.0 : length / edges.size();
-    double longest = 0;
-    for (int32_t t = 0; t < mesh.num_tets(); ++t)
-      for (int i = 0; i < 4; ++i)
-        for (int j = i + 1; j < 4; ++j)
-          longest = std::max(
-              longest,
-              (mesh.vertices.row(mesh.tets(t, i)) - mesh.vertices.row(mesh.tets(t, j))).norm());
-    body_reach_[b] = reach_in_edges * longest;
+    body_reach_[b] = reach_in_edges * meshes.longest_edge(b);
   }
 }
 
@@ -163,7 +159,7 @@ void FreeState::SetupItems() {
     kept.insert(kept.end(), set->naturals.begin(), set->naturals.end());
   std::sort(kept.begin(), kept.end());
   items_->Setup(
-      *scene_, [&](int32_t n) { return is_free(n); },
+      *scene_, *meshes_, [&](int32_t n) { return is_free(n); },
       [&](int32_t n) { return std::binary_search(kept.begin(), kept.end(), n); });
 }
 

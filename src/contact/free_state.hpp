@@ -24,7 +24,7 @@
 //
 // Positions, velocities and inverse masses are kept per slot: for this rank's
 // own vertices, those it received and those without unknowns (rest positions
-// from the whole meshes at set-up), O(local + halo + fixed); the map from
+// fetched at set-up, contact_meshes.hpp), O(local + halo + fixed); the map from
 // natural vertex to slot, the body and the free flag stay natural-indexed on
 // every rank (9 B per scene vertex, SceneBytes); the messages are O(halo).
 // The free bodies' tets and triangles that the obstacles' grids need travel
@@ -46,6 +46,7 @@
 namespace softbody {
 
 struct HaloPlan;
+class ContactMeshes;
 
 // What an Exchange brings besides this rank's own vertices.
 struct StateNeeds {
@@ -61,9 +62,13 @@ class FreeState {
   FreeState &operator=(const FreeState &) = delete;
   ~FreeState();
 
-  // Not collective. Bodies, rest positions, boundary edges and reaches
-  // (reach_in_edges: the halo's, in longest rest tet edges).
-  void SetupBodies(const Scene &scene, double reach_in_edges);
+  // Not collective. Bodies, boundary edges and reaches (reach_in_edges: the
+  // halo's, in longest rest tet edges). `meshes` (contact_meshes.hpp) is read
+  // until EndSetup: the rest positions of the owned vertices and of those
+  // without unknowns, and the free tets and triangles (AttachItems).
+  void SetupBodies(const Scene &scene, const ContactMeshes &meshes, double reach_in_edges);
+  // Not collective. The set-up is over: the meshes are no longer read.
+  void EndSetup() { meshes_ = nullptr; }
   // Collective. Owned vertices, their inverse masses, the body masses; the halo
   // exchange when `halo`, bringing other ranks' vertices of this rank's own
   // bodies too when `same_body` (sharp-edge points meet a body's own tets).
@@ -77,10 +82,9 @@ class FreeState {
   // boundary triangles at its own surface vertices, so that a vertex's normal
   // reads its whole ring on any rank count; their inverse masses fetched now.
   PetscErrorCode SetupRingSet(Vec lumped_mass, const std::vector<int32_t> &naturals);
-  // Not collective, after SetupMasses and SetupFixedSet, while the scene's
-  // meshes are held. Sets up *items (free_items.hpp: the items listed under
-  // this rank's own, the fixed set's and the ring set's vertices; SetupRingSet
-  // after it sets them up again) and has every halo exchange bring the items
+  // Not collective, after SetupMasses and SetupFixedSet, before EndSetup. Sets up *items
+  // (free_items.hpp: the items listed under this rank's own, the fixed set's and the ring set's
+  // vertices; SetupRingSet after it sets them up again) and has every halo exchange bring the items
   // of the vertices it brings.
   void AttachItems(FreeItems *items);
   // Collective. This rank's vertices at x + dt v (dt = 0: at x) and velocities
@@ -158,13 +162,14 @@ class FreeState {
     if (stamp_[s] != stamp_now_) current_free_.push_back(natural);
     stamp_[s] = stamp_now_;
   }
-  // The rest position of a vertex from the scene's meshes (set-up only).
+  // The rest position of a vertex (set-up only: from meshes_).
   Point RestPosition(int32_t natural) const;
 
   static constexpr double kNoPosition = std::numeric_limits<double>::quiet_NaN();
   MPI_Comm comm_ = MPI_COMM_NULL;
   const DofLayout *layout_ = nullptr;
-  const Scene *scene_ = nullptr;  // its meshes read during the set-up only
+  const Scene *scene_ = nullptr;
+  const ContactMeshes *meshes_ = nullptr;  // set-up only (SetupBodies to EndSetup)
   size_t num_bodies_ = 0;
   bool same_body_ = false;
   std::vector<int32_t> body_of_;        // natural vertex -> body

@@ -84,7 +84,11 @@ bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, cons
 }
 
 std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh) {
-  const auto triangles = BoundaryTriangles(mesh);
+  return BoundaryEdges(BoundaryTriangles(mesh));
+}
+
+std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(
+    const Eigen::Matrix<int32_t, Eigen::Dynamic, 3, Eigen::RowMajor> &triangles) {
   std::vector<std::pair<int32_t, int32_t>> edges;
   for (Eigen::Index t = 0; t < triangles.rows(); ++t)
     for (int k = 0; k < 3; ++k) {

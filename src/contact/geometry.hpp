@@ -59,6 +59,9 @@ bool SegmentCrossesTriangle(const Point &p, const Point &q, const Point &a, cons
 // Edges of the boundary triangles of a mesh, each once, as (smaller, larger)
 // local vertex index, sorted.
 std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(const TetMesh &mesh);
+// The same from the mesh's boundary triangles (#B x 3 vertex indices).
+std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(
+    const Eigen::Matrix<int32_t, Eigen::Dynamic, 3, Eigen::RowMajor> &triangles);
 
 // Uniform grid over the boxes of a set of items (tets or triangles): each item is
 // listed in every cell its box overlaps. Cell size h: the mean box edge, so an

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "contact/contact_meshes.hpp"
+
 namespace softbody {
 
 namespace {
@@ -16,8 +18,8 @@ const Point kRayDirection = Point(1.0, 0.3141592653589793, 0.2718281828459045).n
 
 }  // namespace
 
-void OverlapSeparation::Setup(MPI_Comm comm, const Scene &scene, const FreeState &state,
-                              Obstacles *obstacles) {
+void OverlapSeparation::Setup(MPI_Comm comm, const Scene &scene, const ContactMeshes &meshes,
+                              const FreeState &state, Obstacles *obstacles) {
   comm_ = comm;
   scene_ = &scene;
   state_ = &state;
@@ -29,9 +31,9 @@ void OverlapSeparation::Setup(MPI_Comm comm, const Scene &scene, const FreeState
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const Body &body = scene.bodies[b];
     if (body.fixed) continue;
-    for (const auto &[u, w] : BoundaryEdges(body.mesh))
+    const auto &boundary = meshes.boundary(b);
+    for (const auto &[u, w] : BoundaryEdges(boundary))
       edges_[b].push_back({body.first_vertex + u, body.first_vertex + w});
-    const auto boundary = BoundaryTriangles(body.mesh);
     for (Eigen::Index f = 0; f < boundary.rows(); ++f)
       triangles_[b].push_back({body.first_vertex + boundary(f, 0),
                                body.first_vertex + boundary(f, 1),

@@ -40,6 +40,8 @@
 
 namespace softbody {
 
+class ContactMeshes;
+
 // How far a separating pair moves apart per step, in mean boundary edges of
 // its finer body: an overlap of depth D takes about D / edge steps, and the
 // pair ends at most one edge further apart than needed (the crossing test runs
@@ -48,7 +50,10 @@ constexpr double kSeparationPerStep = 1.0;
 
 class OverlapSeparation {
  public:
-  void Setup(MPI_Comm comm, const Scene &scene, const FreeState &state, Obstacles *obstacles);
+  // Not collective. The free bodies' surfaces from meshes (contact_meshes.hpp,
+  // read here only); scene, state and obstacles must outlive this object.
+  void Setup(MPI_Comm comm, const Scene &scene, const ContactMeshes &meshes, const FreeState &state,
+             Obstacles *obstacles);
 
   // Collective, once. At positions x (PETSc order, this rank's vertices): the
   // pairs of free bodies whose surfaces cross become the separating pairs (the

@@ -175,7 +175,7 @@ PetscErrorCode FetchRootRows(MPI_Comm comm, PetscInt total, PetscInt first, Pets
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, bool replicate,
+PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, MeshHolding holding,
                                Scene *scene, MeshShare *share) {
   PetscFunctionBeginUser;
   PetscMPIInt rank, size;
@@ -183,18 +183,19 @@ PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, boo
   PetscCallMPI(MPI_Comm_size(comm, &size));
   const bool deferred = std::any_of(scene->bodies.begin(), scene->bodies.end(),
                                     [](const Body &body) { return body.mesh_deferred; });
-  if (replicate) {
+  if (holding == MeshHolding::kWhole) {
     if (deferred) PetscCall(LoadDeferredMeshesOnRankZero(comm, meshing, scene));
     PetscCall(BroadcastMeshes(comm, scene));
     *share = ShareScene(*scene, rank, size);
-  } else if (deferred) {
+  } else if (deferred && holding == MeshHolding::kSlabs) {
     PetscCall(ReadShareFromMeshFile(comm, *scene, share));
     scene->DropMeshes();
     scene->read_in_slabs = true;
   } else {
+    if (deferred) PetscCall(LoadDeferredMeshesOnRankZero(comm, meshing, scene));
     *share = MeshShare();
     PetscCall(SendSharesFromRankZero(comm, *scene, share));
-    scene->DropMeshes();
+    if (holding == MeshHolding::kSlabs) scene->DropMeshes();
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -46,15 +46,24 @@ struct MeshShare {
 // are left empty.
 MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size);
 
+// How DistributeScene leaves the meshes.
+enum class MeshHolding {
+  kSlabs,          // no rank holds a mesh whole
+  kSlabsAndFixed,  // the same, but rank 0 keeps its meshes for KeepFixedMeshes (contact)
+  kWhole,          // every rank holds every mesh (-scene_replicate)
+};
+
 // Collective, after LoadScene (rank 0 holds the meshes, but not the deferred .h5
-// ones). With `replicate`, rank 0 reads the deferred meshes (LoadDeferredMeshes),
-// every rank receives the meshes and initial velocities (BroadcastMeshes) and
-// takes its shares from them. Otherwise no rank keeps a mesh whole
-// (scene->meshes_held false everywhere): a deferred mesh (a scene of one .h5 body)
-// is read in slabs by every rank (ReadShareFromMeshFile), else rank 0 sends every
-// rank its shares (a PetscSF from rank 0's arrays to the slabs) and drops its
-// meshes.
-PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, bool replicate,
+// ones). kWhole: rank 0 reads the deferred meshes (LoadDeferredMeshes), every
+// rank receives the meshes and initial velocities (BroadcastMeshes) and takes
+// its shares from them. kSlabs: no rank keeps a mesh whole (scene->meshes_held
+// false everywhere): a deferred mesh (a scene of one .h5 body) is read in slabs
+// by every rank (ReadShareFromMeshFile), else rank 0 sends every rank its
+// shares (a PetscSF from rank 0's arrays to the slabs) and drops its meshes.
+// kSlabsAndFixed: rank 0 reads the deferred meshes and sends every rank its
+// shares, and keeps its meshes until KeepFixedMeshes (scene.hpp) keeps only the
+// fixed bodies', on every rank.
+PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, MeshHolding holding,
                                Scene *scene, MeshShare *share);
 
 // Collective. A star forest with one root per vertex of this rank's slab and one

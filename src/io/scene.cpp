@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "common/errors.hpp"
+#include "common/held_bytes.hpp"
 #include "common/number_format.hpp"
 #include "common/options.hpp"
 #include "common/text_reader.hpp"
@@ -25,6 +26,13 @@ int64_t Scene::num_tets() const {
   return total;
 }
 
+int64_t Scene::MeshBytes() const {
+  int64_t bytes = HeldBytes(initial_velocities);
+  for (const Body &body : bodies)
+    bytes += HeldBytes(body.mesh.vertices) + HeldBytes(body.mesh.tets);
+  return bytes;
+}
+
 void Scene::DropMeshes() {
   for (Body &body : bodies) {
     body.count_vertices = body.num_vertices();
@@ -33,6 +41,7 @@ void Scene::DropMeshes() {
   }
   initial_velocities.resize(0, 3);
   meshes_held = false;
+  fixed_meshes_held = false;
 }
 
 void PlaceMesh(const Eigen::Vector3d &position, const Eigen::Vector4d &quaternion_wxyz,
@@ -253,8 +262,9 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
   PetscCall(PetscOptionsString("-scene", "Scene file (num_meshes, mesh lines, optional velocities)",
                                nullptr, path, path, sizeof(path), nullptr));
   PetscCall(PetscOptionsBool("-scene_replicate",
-                             "Hold every mesh whole on every rank even when contact does not need "
-                             "them (by default they are distributed in slabs then)",
+                             "Hold every mesh whole on every rank (by default each rank holds its "
+                             "slabs, and with contact the fixed bodies' meshes whole until "
+                             "contact's set-up)",
                              nullptr, options->replicate, &options->replicate, nullptr));
   PetscOptionsEnd();
   options->path = path;
@@ -340,6 +350,29 @@ PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene) {
   PetscCall(
       BroadcastArray(comm, scene->initial_velocities.data(), scene->initial_velocities.size()));
   scene->meshes_held = true;
+  scene->fixed_meshes_held = true;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode KeepFixedMeshes(MPI_Comm comm, Scene *scene) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  for (Body &body : scene->bodies) {
+    body.count_vertices = body.num_vertices();
+    body.count_tets = body.num_tets();
+    if (!body.fixed) {
+      body.mesh = TetMesh();
+      continue;
+    }
+    body.mesh.vertices.resize(body.count_vertices, 3);
+    body.mesh.tets.resize(body.count_tets, 4);
+    PetscCall(BroadcastArray(comm, body.mesh.vertices.data(), body.mesh.vertices.size()));
+    PetscCall(BroadcastArray(comm, body.mesh.tets.data(), body.mesh.tets.size()));
+  }
+  scene->initial_velocities.resize(0, 3);
+  scene->meshes_held = false;
+  scene->fixed_meshes_held = true;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -64,9 +64,18 @@ struct Scene {
   // Whether this rank holds the bodies' meshes and the initial velocities
   // (DistributeScene); the counts are known either way.
   bool meshes_held = true;
+  // Whether this rank holds the fixed bodies' meshes (KeepFixedMeshes; all
+  // meshes when meshes_held), which contact's set-up reads whole.
+  bool fixed_meshes_held = false;
   // Whether the meshes were whole on every rank for contact's set-up and
   // released after it (ReleaseMeshes).
   bool meshes_released = false;
+  // Whether only the fixed bodies' meshes were whole on every rank for
+  // contact's set-up and released after it (ReleaseMeshes).
+  bool fixed_meshes_released = false;
+  // Bytes of the meshes and initial velocities this rank held when contact was
+  // set up (ReleaseMeshes; 0 before).
+  int64_t contact_setup_mesh_bytes = 0;
   // Whether every rank read its slabs of the mesh file (a deferred .h5 mesh)
   // instead of receiving them from rank 0.
   bool read_in_slabs = false;
@@ -75,10 +84,14 @@ struct Scene {
   int64_t num_tets() const;
   // Not collective. Frees the meshes and initial velocities, keeping the counts.
   void DropMeshes();
+  // Not collective. Bytes of the meshes and initial velocities this rank holds.
+  int64_t MeshBytes() const;
   // Not collective. DropMeshes once contact has built its structures from the
-  // whole meshes (meshes_released).
+  // meshes it holds (meshes_released, fixed_meshes_released, contact_setup_mesh_bytes).
   void ReleaseMeshes() {
     meshes_released = meshes_held;
+    fixed_meshes_released = fixed_meshes_held && !meshes_held;
+    contact_setup_mesh_bytes = MeshBytes();
     DropMeshes();
   }
 };
@@ -136,5 +149,11 @@ PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, bool defer_
 
 // Collective. Rank 0's meshes and initial velocities on every rank (after LoadScene).
 PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene);
+
+// Collective, while rank 0 holds the meshes (DistributeScene with
+// MeshHolding::kSlabsAndFixed), once the fixed flags are final (MarkBodiesAtRest):
+// the fixed bodies' meshes on every rank (fixed_meshes_held); rank 0 drops the
+// free bodies' meshes and the initial velocities.
+PetscErrorCode KeepFixedMeshes(MPI_Comm comm, Scene *scene);
 
 }  // namespace softbody

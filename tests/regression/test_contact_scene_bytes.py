@@ -1,16 +1,23 @@
 """What a rank holds of the whole scene with contact, as the run summary counts it.
 
 Two free boxes (tools/box_mesh.py, 4 x 0.5 x 0.5 m of 32 x 4 x 4 cells each)
-stacked above the ground, under gravity, 2 steps, on 1 and 4 ranks. The meshes
-are released once contact is set up; the free bodies' tets and triangles a rank
-holds are those listed under its own vertices and its halo's
-(src/contact/free_items.hpp); the free state keeps natural-indexed slot, body and
-flag arrays (src/contact/free_state.hpp).
+stacked above the ground, under gravity, 2 steps, on 1 and 4 ranks. Contact is
+set up from the ranks' shares of the meshes (src/contact/contact_meshes.hpp): no
+free body's mesh is ever whole on a rank, only the fixed bodies' are, until
+contact is set up; the free bodies' tets and triangles a rank holds are those
+listed under its own vertices and its halo's (src/contact/free_items.hpp); the
+free state keeps natural-indexed slot, body and flag arrays
+(src/contact/free_state.hpp).
 
 Expected, from the mesh file alone (V vertices and T tets per box, F boundary
 triangles per box counted here as the faces that one tet only names):
-(a) the "scene" line says the meshes were released after contact's set-up (4 ranks),
-    and the "whole scene" line counts 0 MB of meshes on every rank (1 and 4 ranks);
+(a) the "scene" line says the meshes were held in slabs, the fixed bodies' also
+    whole until contact's set-up (4 ranks); the "whole scene" line counts 0 MB of
+    meshes on every rank at the end, and 0 MB during contact's set-up (1 and 4
+    ranks: there is no fixed body); with -scene_replicate (4 ranks) every mesh is
+    whole during the set-up, 48 V + 16 T (positions and initial velocities 24 B
+    per vertex each, tets 16 B); with a third box, fixed, under the two (4 ranks),
+    the largest rank holds that box's mesh only, 24 V / 2 + 16 T / 2;
 (b) the obstacles' lists on 1 rank: every tet (its 4 vertices and body, its key
     vertex and its index: 28 B) and boundary triangle (3 vertices and body, key and
     index, and its place by index: 28 B), once: 28 T + 28 F over the scene, within
@@ -42,7 +49,9 @@ BOX = ((4.0, 0.5, 0.5), (32, 4, 4))
 RANKS = (1, 4)
 HELD_FRACTION = 0.75  # the largest rank's tets on 4 ranks over the scene's, at most
 TOLERANCE = 0.01  # relative: the summary prints 3 significant digits
-RELEASED = "meshes whole on every rank until contact's set-up, then released"
+IN_SLABS = ("meshes read on rank 0, then held in slabs (the fixed bodies' also whole on every rank "
+            "until contact's set-up)")
+SETUP = r"meshes during contact's set-up (?P<setup>[0-9.e+-]+) MB"
 PART = r"{} (?P<{}>[0-9.e+-]+) MB"
 
 
@@ -66,6 +75,9 @@ def scene_bytes(text):
         match = re.search(PART.format(label, key), text)
         if match:
             parts[key] = float(match.group(key)) * 1e6
+    match = re.search(SETUP, text)
+    if match:
+        parts["setup"] = float(match.group("setup")) * 1e6
     return parts
 
 
@@ -85,17 +97,20 @@ def main():
         for y in (0.3, 0.85):
             f.write(f"box.mesh 1000 1e5 0.3 0 0 {y} 0 1 0 0 0\n")
     expected = 28 * T + 28 * F
+    run = ["-steps", "2", "-dt", "0.01", "-ground", "0", "-gravity", "0,-9.81,0"]
     for ranks in RANKS:
-        stdout = harness.run(args, ranks, ["-scene", scene, "-steps", "2", "-dt", "0.01", "-ground", "0",
-                                           "-gravity", "0,-9.81,0"]).stdout
+        stdout = harness.run(args, ranks, ["-scene", scene] + run).stdout
         whole = line(stdout, "whole scene")
         parts = scene_bytes(whole)
-        checks.check(len(parts) == 4, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
-        if len(parts) != 4:
+        checks.check(len(parts) == 5, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
+        if len(parts) != 5:
             continue
         if ranks > 1:
-            checks.check(RELEASED in line(stdout, "scene "), f"{ranks} ranks: {line(stdout, 'scene ')!r}")
+            checks.check(IN_SLABS in line(stdout, "scene "), f"{ranks} ranks: {line(stdout, 'scene ')!r}")
         checks.check(parts["meshes"] == 0, f"{ranks} ranks: no rank keeps the meshes ({parts['meshes']:.0f} B)")
+        checks.check(parts["setup"] == 0,
+                     f"{ranks} ranks: no rank holds a free body's mesh whole during contact's set-up "
+                     f"({parts['setup']:.0f} B)")
         if ranks == 1:
             checks.check(close(parts["obstacles"], expected),
                          f"{ranks} rank: obstacles {parts['obstacles']:.0f} B, expected 28 T + 28 F = "
@@ -110,7 +125,26 @@ def main():
                      f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 9 V = {9 * V} B")
         checks.check(parts["separation"] == 0,
                      f"{ranks} ranks: overlap separation {parts['separation']:.0f} B, expected 0 (released)")
+    check_setup_meshes(args, checks, scene, run, V, T)
     checks.exit()
+
+
+def check_setup_meshes(args, checks, scene, run, V, T):
+    """(a): the meshes held during contact's set-up, whole (-scene_replicate) or the fixed body's."""
+    whole = scene_bytes(line(harness.run(args, 4, ["-scene", scene, "-scene_replicate"] + run).stdout,
+                             "whole scene")).get("setup", -1)
+    checks.check(close(whole, 48 * V + 16 * T),
+                 f"4 ranks, -scene_replicate: meshes during contact's set-up {whole:.0f} B, expected "
+                 f"48 V + 16 T = {48 * V + 16 * T} B")
+    with_fixed = os.path.join(args.work, "two-boxes-on-a-fixed-one.txt")
+    with open(scene) as f, open(with_fixed, "w") as g:
+        lines = f.read().splitlines()
+        g.write("3\n" + "\n".join(lines[1:]) + "\nbox.mesh 1000 1e5 0.3 1 0 -0.3 0 1 0 0 0\n")
+    fixed = scene_bytes(line(harness.run(args, 4, ["-scene", with_fixed] + run).stdout,
+                             "whole scene")).get("setup", -1)
+    checks.check(close(fixed, 24 * V // 2 + 16 * T // 2),
+                 f"4 ranks, a fixed box under the two: meshes during contact's set-up {fixed:.0f} B, "
+                 f"expected the fixed box's 24 V / 2 + 16 T / 2 = {24 * V // 2 + 16 * T // 2} B")
 
 
 if __name__ == "__main__":
