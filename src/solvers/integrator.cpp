@@ -1052,12 +1052,14 @@ PetscErrorCode ImplicitEuler::IterateBeforeContact(const StepMotion &motion, Vec
 
 PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
+  const PetscInt contact_solves_before = stats_.contact_solves;
   if (!options_.adaptive) {
     PetscCall(TakeStep(x, v, contact));
     if (contact_acted_) PetscCall(RestartHistoryAfterContact(x, v));
-    PetscFunctionReturn(PETSC_SUCCESS);
+  } else {
+    PetscCall(AdaptiveStep(x, v, contact && contact->active() ? contact : nullptr));
   }
-  PetscCall(AdaptiveStep(x, v, contact && contact->active() ? contact : nullptr));
+  step_had_contact_ = contact_acted_ || stats_.contact_solves > contact_solves_before;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

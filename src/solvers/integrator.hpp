@@ -234,6 +234,9 @@ class ImplicitEuler {
   PetscReal time_step() const { return interval_; }
   TimeScheme scheme() const { return options_.scheme; }
   const SolverStatistics &statistics() const { return stats_; }
+  // After Step: contact acted in it (a solve under contact constraints, or the
+  // end-of-step response or guard changed x or v; any substep with -dt_adapt).
+  bool last_step_had_contact() const { return step_had_contact_; }
 
  private:
   // Setup's steps: f_ext = M g; the assembler, A (and K in linear mode); the
@@ -358,6 +361,7 @@ class ImplicitEuler {
   bool first_substep_ = true;
   // The last step's contact constrained a vertex or changed x or v after the solve.
   bool contact_acted_ = false;
+  bool step_had_contact_ = false;  // last_step_had_contact()
   Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
       saved_previous_v_ = nullptr, saved_acceleration_ = nullptr;
   // The next (during Step: this) step's coefficients; A's step sizes (h_f, h_x).
