@@ -376,6 +376,14 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
       identity[9 * v] = identity[9 * v + 4] = identity[9 * v + 8] = 1.0;
     PetscCall(PCWarpSetRotations(pc, layout.local_count(), identity.data()));
   }
+  // Linear mode with a factorisation of A (KSPPREONLY): the constrained solves'
+  // preconditioner gets the constraint correction, whose columns of A^-1 then
+  // serve the whole run (A changes only with the time step).
+  KSPType type;
+  PetscCall(KSPGetType(ksp_, &type));
+  PetscBool preonly;
+  PetscCall(PetscStrcmp(type, KSPPREONLY, &preonly));
+  projected_.set_constraint_correction(options_.mode == MODE_LINEAR && preonly);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
