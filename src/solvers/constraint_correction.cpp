@@ -85,27 +85,39 @@ PetscErrorCode ConstraintCorrection::ComputeColumns(Vec like, bool *within_budge
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// S_ij = c_i^T M^-1 c_j: row i's direction against column j's values at row
-// i's vertex, on the rank that owns that vertex; summed over the ranks.
+// S_ij = c_i^T M^-1 c_j = c_i^T U_j at row i's vertex, on the rank that owns
+// it; summed over the ranks. Per column j, U_j is first formed at this rank's
+// constrained vertices only (3 numbers each), then dotted with the rows.
 PetscErrorCode ConstraintCorrection::FactoriseSchurComplement(bool *positive) {
   PetscFunctionBeginUser;
   const Eigen::Index m = static_cast<Eigen::Index>(rows_.size());
+  std::vector<size_t> owned;  // slots of vertices_ this rank owns
+  std::vector<Eigen::Index> slot_of_row(m);
+  for (size_t slot = 0, j = 0; slot < vertices_.size(); ++slot) {
+    if (vertices_[slot] >= begin_ && vertices_[slot] < end_) owned.push_back(slot);
+    for (; j < static_cast<size_t>(m) && rows_[j].vertex == vertices_[slot]; ++j)
+      slot_of_row[j] = static_cast<Eigen::Index>(slot);
+  }
   Eigen::MatrixXd S = Eigen::MatrixXd::Zero(m, m);
+  Eigen::Matrix3Xd at_vertices(3, vertices_.size());  // U_j at the owned constrained vertices
   for (Eigen::Index j = 0; j < m; ++j) {
     const std::array<Vec, 3> &columns = columns_.at(rows_[j].vertex);
     const PetscScalar *values[3];
     for (int k = 0; k < 3; ++k) PetscCall(VecGetArrayRead(columns[k], &values[k]));
+    for (const size_t slot : owned) {
+      const PetscInt at = 3 * (vertices_[slot] - begin_);
+      for (int c = 0; c < 3; ++c)
+        at_vertices(c, slot) = rows_[j].direction[0] * values[0][at + c] +
+                               rows_[j].direction[1] * values[1][at + c] +
+                               rows_[j].direction[2] * values[2][at + c];
+    }
+    for (int k = 0; k < 3; ++k) PetscCall(VecRestoreArrayRead(columns[k], &values[k]));
     for (Eigen::Index i = 0; i < m; ++i) {
       const Row &row = rows_[i];
       if (row.vertex < begin_ || row.vertex >= end_) continue;
-      const PetscInt at = 3 * (row.vertex - begin_);
-      double sum = 0;
-      for (int k = 0; k < 3; ++k)    // U_j = sum_k d_jk column_k
-        for (int c = 0; c < 3; ++c)  // c_i^T U_j
-          sum += row.direction[c] * rows_[j].direction[k] * values[k][at + c];
-      S(i, j) = sum;
+      const auto u = at_vertices.col(slot_of_row[i]);
+      S(i, j) = row.direction[0] * u[0] + row.direction[1] * u[1] + row.direction[2] * u[2];
     }
-    for (int k = 0; k < 3; ++k) PetscCall(VecRestoreArrayRead(columns[k], &values[k]));
   }
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, S.data(), static_cast<PetscMPIInt>(S.size()), MPIU_REAL,
                               MPI_SUM, PetscObjectComm((PetscObject)A_)));
