@@ -147,6 +147,11 @@ PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, Integrator
                        "definite, NaN) by a distributed direct factorisation, SuperLU_dist LU "
                        "(its options take the prefix -fallback_)",
                        nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
+  PetscCall(PetscOptionsBool(
+      "-constraint_correction",
+      "Linear mode with a factorisation: contact solves precondition with the constraints' "
+      "Schur complement (one CG iteration; 3 back-solves per newly constrained vertex)",
+      nullptr, o->constraint_correction, &o->constraint_correction, nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -168,7 +173,8 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                                      {OptionSyntax::kReal, "-newton_rtol"},
                                      {OptionSyntax::kInteger, "-newton_max_it"},
                                      {OptionSyntax::kBool, "-newton_always"},
-                                     {OptionSyntax::kBool, "-fallback_direct"}}));
+                                     {OptionSyntax::kBool, "-fallback_direct"},
+                                     {OptionSyntax::kBool, "-constraint_correction"}}));
   char schedule[PETSC_MAX_PATH_LEN] = "";
   PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
   PetscInt gravity_count = 3;
@@ -383,7 +389,8 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
   PetscCall(KSPGetType(ksp_, &type));
   PetscBool preonly;
   PetscCall(PetscStrcmp(type, KSPPREONLY, &preonly));
-  projected_.set_constraint_correction(options_.mode == MODE_LINEAR && preonly);
+  projected_.set_constraint_correction(options_.mode == MODE_LINEAR && preonly &&
+                                       options_.constraint_correction);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -118,6 +118,9 @@ struct IntegratorOptions {
   // definite, NaN) is repeated by a distributed direct factorisation
   // (SuperLU_dist LU, column order by ParMETIS; integrator.cpp).
   PetscBool fallback_direct = PETSC_TRUE;
+  // Linear mode with a factorisation: the contact solves' preconditioner with
+  // the constraint correction (solvers/constraint_correction.hpp).
+  PetscBool constraint_correction = PETSC_TRUE;
 };
 
 // The time step at time t (s): -dt until the first -dt_schedule entry applies.

@@ -12,8 +12,8 @@ onto a fixed wedge; it falls free for 0.2 s, then lands; -dt 0.01, 60 steps).
 (c) Linear mode with the direct solver: the constrained solves' preconditioner
     sees the constraints (solvers/constraint_correction.hpp), so each contact
     solve ends in at most 2 CG iterations (the plain preconditioner needs about
-    one per constraint: 10 to 40 here); corotational mode (the warp
-    preconditioner) keeps the plain one.
+    one per constraint: 10 to 40 here, as with -constraint_correction 0);
+    corotational mode (the warp preconditioner) keeps the plain one.
 """
 import os
 import re
@@ -87,6 +87,13 @@ if kinds:
     (contact_steps, contact_solves, contact_iterations), _ = kinds
     checks.check(contact_iterations <= 2 * contact_solves,
                  f"(c) linear: {contact_iterations:g} CG iterations per contact step in {contact_solves:g} solves")
+_, out_plain = simulate("linear-plain", 1, ["-mode", "linear", "-constraint_correction", "0"])
+plain = step_kinds(out_plain)
+if plain:
+    (steps, solves_per_step, iterations), _ = plain
+    checks.check(iterations > 2 * solves_per_step,
+                 f"(c) linear, -constraint_correction 0 (plain preconditioner): {iterations:g} iterations "
+                 f"per contact step in {solves_per_step:g} solves")
 _, out_corotational = simulate("corotational-check", 1, ["-mode", "corotational"])
 corotational = step_kinds(out_corotational)
 if corotational:
