@@ -1,6 +1,7 @@
 #include "app/report.hpp"
 
 #include <algorithm>
+#include <ctime>
 #include <string>
 
 #include "app/run_control.hpp"
@@ -129,10 +130,11 @@ PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g, PetscInt64 by
       " frozen); %" PetscInt_FMT " pairs tested (self-contact candidates listed %" PetscInt_FMT
       " times, all ranks); %" PetscInt_FMT
       " pairs closer than the separation at a step's start (%" PetscInt_FMT
-      " at the scene's start), not guarded; %.3f s",
+      " at the scene's start), not guarded; %" PetscInt_FMT " probes, %" PetscInt_FMT
+      " of them repeating a clean one's positions (no detection); %.3f s",
       g->passes_guarded, g->collisions, g->rounds, g->max_rounds, g->zone_vertices,
       g->frozen_vertices, g->candidates, g->rebuilds, g->close_pairs, g->initial_close_pairs,
-      (double)g->seconds));
+      g->probes, g->repeated, (double)g->seconds));
   if (bytes > 0)
     PetscCall(PetscPrintf(comm, "; halo and pairs: %.3g kB sent by the busiest rank in all",
                           bytes / 1e3));
@@ -333,6 +335,38 @@ PetscErrorCode PrintSolver(MPI_Comm comm, KSP ksp, const IntegratorOptions &o,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+}  // namespace
+
+PetscLogDouble ProcessCpuSeconds() {
+  timespec now{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &now);
+  return now.tv_sec + 1e-9 * now.tv_nsec;
+}
+
+namespace {
+
+// "  steps ...": the time loop's steps with and without contact, their mean
+// wall and CPU time (rank 0's), solves and iterations, and the ratio of the
+// means (issue 14: a contact step at most 3 times a free one).
+PetscErrorCode PrintStepKinds(MPI_Comm comm, const RunReport &r) {
+  PetscFunctionBeginUser;
+  auto describe = [](const StepKindCost &k) {
+    const double n = k.steps > 0 ? double(k.steps) : 1.0;
+    return std::to_string(k.steps) + " (" + FormatNumber(1e3 * k.wall / n, 3) + " ms/step, CPU " +
+           FormatNumber(1e3 * k.cpu / n, 3) + " ms; " + FormatNumber(k.solves / n, 3) +
+           " solves and " + FormatNumber(k.iterations / n, 3) + " iterations per step)";
+  };
+  PetscCall(PetscPrintf(comm, "  steps        with contact %s, without %s",
+                        describe(r.contact_steps).c_str(), describe(r.free_steps).c_str()));
+  const StepKindCost &c = r.contact_steps, &f = r.free_steps;
+  if (c.steps > 0 && f.steps > 0 && f.wall > 0 && f.cpu > 0)
+    PetscCall(PetscPrintf(comm, "; contact over free: %s wall, %s CPU",
+                          FormatNumber((c.wall / c.steps) / (f.wall / f.steps), 3).c_str(),
+                          FormatNumber((c.cpu / c.steps) / (f.cpu / f.steps), 3).c_str()));
+  PetscCall(PetscPrintf(comm, "\n"));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // "  time ...", "  energy ..." and "  output ..." lines.
 PetscErrorCode PrintTimesAndEnergy(MPI_Comm comm, const IntegratorOptions &o,
                                    const OutputOptions &output, const ContactSolver &contact,
@@ -345,6 +379,7 @@ PetscErrorCode PrintTimesAndEnergy(MPI_Comm comm, const IntegratorOptions &o,
   if (contact.active())
     PetscCall(PetscPrintf(comm, ", of which contact %.3f s", contact.statistics().seconds));
   PetscCall(PetscPrintf(comm, "), output %.3f s\n", r.times.output));
+  if (contact.active()) PetscCall(PrintStepKinds(comm, r));
   PetscCall(PetscPrintf(comm, "  energy       at t = %s s: kinetic %.6e J, elastic %.6e J",
                         FormatNumber(r.final_time).c_str(), (double)r.energy.kinetic,
                         (double)r.energy.elastic));

@@ -19,6 +19,21 @@ struct RunTimes {
   PetscLogDouble output = 0;  // s: gathering and writing frames
 };
 
+// The cost of one kind of time step: those in which contact acted (a solve
+// under contact constraints, or the step's end response or collision guard
+// changed x or v) or those in which it did not (issue 14 asks a contact step
+// to cost at most 3 times a free one).
+struct StepKindCost {
+  PetscInt steps = 0;
+  PetscLogDouble wall = 0;  // s, as the time loop's (this rank's clock)
+  PetscLogDouble cpu = 0;   // s, this process's CPU time (ProcessCpuSeconds)
+  PetscInt solves = 0, iterations = 0;
+};
+
+// This process's CPU time (s, CLOCK_PROCESS_CPUTIME_ID): unlike the wall
+// clock, it does not grow when other processes share the cores.
+PetscLogDouble ProcessCpuSeconds();
+
 struct RunReport {
   PetscInt first_step = 0;        // step the run started from (a restart's checkpoint)
   PetscInt steps = 0;             // steps taken since the original start
@@ -28,6 +43,7 @@ struct RunReport {
   EnergySample energy;  // at the end
   PetscInt frames = 0;
   RunTimes times;
+  StepKindCost contact_steps, free_steps;  // the time loop's steps by kind
 };
 
 // Collective (the solver description is queried collectively); prints on rank 0.

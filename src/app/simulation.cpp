@@ -320,9 +320,20 @@ PetscErrorCode Simulation::TimeLoop() {
   PetscCall(AgreeOnStop(comm_, &stop_signal_));
   for (PetscInt step = start_.step + 1; step <= integration.steps && !stop_signal_; ++step) {
     const PetscLogDouble loop_before = report_.times.loop;
+    const SolverStatistics solver_before = integrator_.statistics();
+    const PetscLogDouble cpu_before = ProcessCpuSeconds();
     PetscCall(Step());
     PetscCall(AgreeOnStop(comm_, &stop_signal_));
     PetscCall(RecordStep(step, loop_before));
+    const PetscLogDouble cpu_after = ProcessCpuSeconds();
+    StepKindCost &kind = has_unknowns() && integrator_.last_step_had_contact()
+                             ? report_.contact_steps
+                             : report_.free_steps;
+    ++kind.steps;
+    kind.wall += report_.times.loop - loop_before;
+    kind.cpu += cpu_after - cpu_before;
+    kind.solves += integrator_.statistics().solves - solver_before.solves;
+    kind.iterations += integrator_.statistics().total_iterations - solver_before.total_iterations;
   }
   progress_.Finish();
   if (has_unknowns()) PetscCall(benchmark_->Finish(comm_, scene_, &integrator_, state_.positions));

@@ -36,6 +36,7 @@ PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const Co
   PetscCallMPI(MPI_Comm_size(comm, &size));
   parallel_ = size > 1;
   reach_ = reach;
+  reuse_ = options.guard_reuse;
   surface_.Build(scene, meshes);
   const int32_t n = surface_.num_vertices();
   moving_.assign(n, 0);
@@ -139,12 +140,40 @@ PetscErrorCode CollisionGuard::Probe(Vec x0, Vec x, bool *moved) {
   PetscLogDouble begin, finish;
   PetscCall(PetscTime(&begin));
   PetscCall(WriteOwnedPositions(x0, x));
-  if (parallel_) PetscCall(ExchangeHalo());
-  PetscCall(Resolve(&moved_));
-  *moved = std::find(moved_.begin(), moved_.end(), 1) != moved_.end();
+  ++stats_.probes;
+  int repeats = RepeatsCleanProbe();
+  if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &repeats, 1, MPI_INT, MPI_MIN, comm_));
+  if (repeats) {  // moved_ is the last probe's: nothing
+    ++stats_.repeated;
+    *moved = false;
+  } else {
+    if (parallel_) PetscCall(ExchangeHalo());
+    PetscCall(Resolve(&moved_));
+    *moved = std::find(moved_.begin(), moved_.end(), 1) != moved_.end();
+    last_clean_ = !*moved;
+    if (last_clean_) RememberCleanProbe();
+  }
   PetscCall(PetscTime(&finish));
   stats_.seconds += finish - begin;
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+bool CollisionGuard::RepeatsCleanProbe() const {
+  if (!reuse_ || !last_clean_) return false;
+  for (size_t i = 0; i < owned_.size(); ++i) {
+    const int32_t v = owned_[i].first;
+    if (start_[v] != clean_start_[i] || end_[v] != clean_end_[i]) return false;
+  }
+  return true;
+}
+
+void CollisionGuard::RememberCleanProbe() {
+  clean_start_.resize(owned_.size());
+  clean_end_.resize(owned_.size());
+  for (size_t i = 0; i < owned_.size(); ++i) {
+    clean_start_[i] = start_[owned_[i].first];
+    clean_end_[i] = end_[owned_[i].first];
+  }
 }
 
 std::vector<std::pair<PetscInt, int32_t>> CollisionGuard::OwnedMoved() const {

@@ -56,6 +56,8 @@ struct GuardStatistics {
       0;                    // of them, at the scene's start (placed touching or overlapping)
   PetscInt candidates = 0;  // pairs tested by CCD
   PetscInt rebuilds = 0;    // self-contact candidate lists built, summed over ranks
+  PetscInt probes = 0;      // Probe calls
+  PetscInt repeated = 0;    // of them, on the positions of the last probe, which moved nothing
   PetscLogDouble seconds = 0;
 };
 
@@ -75,7 +77,11 @@ class CollisionGuard {
                        bool self_contact, double min_edge, const std::vector<double> &reach);
   // Collective. Detection and zones on the motion from x0 (the step's start
   // positions) to x (its end positions), PETSc order; nothing written.
-  // *moved: zones moved vertices (the same on every rank).
+  // *moved: zones moved vertices (the same on every rank). When the last probe
+  // moved nothing and every rank's surface vertices start and end where they
+  // did then, its answer stands without detection (the contact step probes the
+  // last solve's end positions, and the step's end probes them again unless
+  // the response changed them).
   PetscErrorCode Probe(Vec x0, Vec x, bool *moved);
   // Not collective. After Probe: this rank's vertices the zones moved, as
   // (local vertex, the zone's end position).
@@ -135,9 +141,17 @@ class CollisionGuard {
   // This rank's vertices the last Probe moved: (local vertex, surface vertex).
   std::vector<std::pair<PetscInt, int32_t>> OwnedMoved() const;
   PetscErrorCode WriteBack(Vec x, Vec v, PetscReal dt);
+  // Not collective. This rank's surface vertices start and end where they did
+  // at the last probe, which moved nothing.
+  bool RepeatsCleanProbe() const;
+  void RememberCleanProbe();
 
   MPI_Comm comm_ = MPI_COMM_NULL;
   bool parallel_ = false;  // more than one rank
+  // The last probe moved nothing; its start and end positions of owned_.
+  bool last_clean_ = false;
+  bool reuse_ = true;  // ContactOptions::guard_reuse
+  std::vector<Point> clean_start_, clean_end_;
   ContactSurface surface_;
   std::vector<std::pair<int32_t, PetscInt>> owned_;  // (surface vertex, local vertex), this rank's
   std::vector<char> owned_mask_, usable_;            // per surface vertex

@@ -39,6 +39,7 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                                      {OptionSyntax::kBool, "-sharp_edges"},
                                      {OptionSyntax::kBool, "-impulse_spreading"},
                                      {OptionSyntax::kBool, "-contact_guard"},
+                                     {OptionSyntax::kBool, "-contact_guard_reuse"},
                                      {OptionSyntax::kReal, "-contact_gap"},
                                      {OptionSyntax::kBool, "-self_contact"},
                                      {OptionSyntax::kReal, "-contact_halo_reach"},
@@ -80,6 +81,10 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                              "Continuous collision guard: no surface face, edge or vertex crosses "
                              "another's (or its own body's) during a step",
                              nullptr, o->guard, &o->guard, nullptr));
+  PetscCall(PetscOptionsBool("-contact_guard_reuse",
+                             "The guard keeps its answer for positions it has just found clean "
+                             "(0: detects again; the same result)",
+                             nullptr, o->guard_reuse, &o->guard_reuse, nullptr));
   PetscCall(PetscOptionsReal("-contact_gap",
                              "Contacts end this fraction of the body's mean boundary edge apart; "
                              "the guard keeps every surface pair at least a quarter of it apart",

@@ -23,6 +23,9 @@ struct ContactOptions {
   // closer than a quarter of it.
   PetscBool guard = PETSC_TRUE;
   PetscReal gap = 1e-4;
+  // A probe on the positions of the last one, which moved nothing, keeps its
+  // answer without detection (the same result, bit for bit; off: tests compare).
+  PetscBool guard_reuse = PETSC_TRUE;
   // A body's surface against its own (non-adjacent) faces and edges: on with any
   // other contact unless -self_contact 0; -self_contact 1 also guards a lone body.
   PetscBool self_contact = PETSC_TRUE;
@@ -35,7 +38,8 @@ struct ContactOptions {
 };
 
 // Collective. Reads -ground -restitution -friction -sharp_edges -impulse_spreading -constraints
-// -edge_bounds -contact_guard -contact_gap -self_contact -contact_halo_reach.
+// -edge_bounds -contact_guard -contact_guard_reuse -contact_gap -self_contact
+// -contact_halo_reach.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
 // Not collective. Whether contact may run (ContactSolver builds its structures,

@@ -147,6 +147,11 @@ PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, Integrator
                        "definite, NaN) by a distributed direct factorisation, SuperLU_dist LU "
                        "(its options take the prefix -fallback_)",
                        nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
+  PetscCall(PetscOptionsBool(
+      "-constraint_correction",
+      "Linear mode with a factorisation: contact solves precondition with the constraints' "
+      "Schur complement (one CG iteration; 3 back-solves per newly constrained vertex)",
+      nullptr, o->constraint_correction, &o->constraint_correction, nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -168,7 +173,8 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                                      {OptionSyntax::kReal, "-newton_rtol"},
                                      {OptionSyntax::kInteger, "-newton_max_it"},
                                      {OptionSyntax::kBool, "-newton_always"},
-                                     {OptionSyntax::kBool, "-fallback_direct"}}));
+                                     {OptionSyntax::kBool, "-fallback_direct"},
+                                     {OptionSyntax::kBool, "-constraint_correction"}}));
   char schedule[PETSC_MAX_PATH_LEN] = "";
   PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
   PetscInt gravity_count = 3;
@@ -376,6 +382,15 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
       identity[9 * v] = identity[9 * v + 4] = identity[9 * v + 8] = 1.0;
     PetscCall(PCWarpSetRotations(pc, layout.local_count(), identity.data()));
   }
+  // Linear mode with a factorisation of A (KSPPREONLY): the constrained solves'
+  // preconditioner gets the constraint correction, whose columns of A^-1 then
+  // serve the whole run (A changes only with the time step).
+  KSPType type;
+  PetscCall(KSPGetType(ksp_, &type));
+  PetscBool preonly;
+  PetscCall(PetscStrcmp(type, KSPPREONLY, &preonly));
+  projected_.set_constraint_correction(options_.mode == MODE_LINEAR && preonly &&
+                                       options_.constraint_correction);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -1052,12 +1067,14 @@ PetscErrorCode ImplicitEuler::IterateBeforeContact(const StepMotion &motion, Vec
 
 PetscErrorCode ImplicitEuler::Step(Vec x, Vec v, ContactSolver *contact) {
   PetscFunctionBeginUser;
+  const PetscInt contact_solves_before = stats_.contact_solves;
   if (!options_.adaptive) {
     PetscCall(TakeStep(x, v, contact));
     if (contact_acted_) PetscCall(RestartHistoryAfterContact(x, v));
-    PetscFunctionReturn(PETSC_SUCCESS);
+  } else {
+    PetscCall(AdaptiveStep(x, v, contact && contact->active() ? contact : nullptr));
   }
-  PetscCall(AdaptiveStep(x, v, contact && contact->active() ? contact : nullptr));
+  step_had_contact_ = contact_acted_ || stats_.contact_solves > contact_solves_before;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -118,6 +118,9 @@ struct IntegratorOptions {
   // definite, NaN) is repeated by a distributed direct factorisation
   // (SuperLU_dist LU, column order by ParMETIS; integrator.cpp).
   PetscBool fallback_direct = PETSC_TRUE;
+  // Linear mode with a factorisation: the contact solves' preconditioner with
+  // the constraint correction (solvers/constraint_correction.hpp).
+  PetscBool constraint_correction = PETSC_TRUE;
 };
 
 // The time step at time t (s): -dt until the first -dt_schedule entry applies.
@@ -234,6 +237,9 @@ class ImplicitEuler {
   PetscReal time_step() const { return interval_; }
   TimeScheme scheme() const { return options_.scheme; }
   const SolverStatistics &statistics() const { return stats_; }
+  // After Step: contact acted in it (a solve under contact constraints, or the
+  // end-of-step response or guard changed x or v; any substep with -dt_adapt).
+  bool last_step_had_contact() const { return step_had_contact_; }
 
  private:
   // Setup's steps: f_ext = M g; the assembler, A (and K in linear mode); the
@@ -358,6 +364,7 @@ class ImplicitEuler {
   bool first_substep_ = true;
   // The last step's contact constrained a vertex or changed x or v after the solve.
   bool contact_acted_ = false;
+  bool step_had_contact_ = false;  // last_step_had_contact()
   Vec saved_x_ = nullptr, saved_v_ = nullptr, saved_previous_x_ = nullptr,
       saved_previous_v_ = nullptr, saved_acceleration_ = nullptr;
   // The next (during Step: this) step's coefficients; A's step sizes (h_f, h_x).

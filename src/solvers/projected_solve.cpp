@@ -1,5 +1,7 @@
 #include "solvers/projected_solve.hpp"
 
+#include "solvers/constraint_correction.hpp"
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <map>
@@ -62,6 +64,21 @@ double Violation(const std::vector<VelocityConstraint> &constraints, int k,
 }
 
 }  // namespace
+
+PetscInt ProjectedSolver::correction_column_solves() const {
+  return correction_ ? correction_->column_solves() : 0;
+}
+
+PetscErrorCode ProjectedSolver::SetupCorrection() {
+  PetscFunctionBeginUser;
+  corrected_ = false;
+  if (!correct_) PetscFunctionReturn(PETSC_SUCCESS);
+  if (!correction_) correction_ = std::make_unique<ConstraintCorrection>();
+  PetscCall(correction_->Setup(unconstrained_pc_, A_, vertices_, &corrected_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+ProjectedSolver::ProjectedSolver() = default;
 
 ProjectedSolver::~ProjectedSolver() {
   KSPDestroy(&inner_);
@@ -170,13 +187,17 @@ PetscErrorCode ProjectedSolver::ApplyOperator(Mat shell, Vec w, Vec y) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// y = P M^-1 P w + (I - P) w
+// y = P M^-1 P w + (I - P) w, or with the constraint correction G in place of
+// M^-1 (constraint_correction.hpp)
 PetscErrorCode ProjectedSolver::ApplyPreconditioner(PC shell, Vec w, Vec y) {
   PetscFunctionBeginUser;
   ProjectedSolver *self;
   PetscCall(PCShellGetContext(shell, &self));
   PetscCall(self->ProjectVec(w, self->work_, true));
-  PetscCall(PCApply(self->unconstrained_pc_, self->work_, self->work2_));
+  if (self->corrected_)
+    PetscCall(self->correction_->Apply(self->work_, self->work2_));
+  else
+    PetscCall(PCApply(self->unconstrained_pc_, self->work_, self->work2_));
   PetscCall(self->ProjectVec(self->work2_, y, true));
   PetscCall(self->ProjectVec(w, self->work_, false));
   PetscCall(VecAXPY(y, 1.0, self->work_));
@@ -255,13 +276,16 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   PetscCallMPI(
       MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM, PetscObjectComm((PetscObject)b)));
   *iterations = 0;
-  if (counts[0] == 0)
+  if (counts[0] == 0) {
+    PetscCall(SetupCorrection());
     PetscCall(SolveProjected(b, constraints, v, reactions, iterations));
-  else if (path_ == TwoSidedPath::kProjected ||
-           (path_ == TwoSidedPath::kAuto && counts[1] >= kProjectedSolveCost * (counts[0] + 2)))
+  } else if (path_ == TwoSidedPath::kProjected ||
+             (path_ == TwoSidedPath::kAuto && counts[1] >= kProjectedSolveCost * (counts[0] + 2))) {
+    PetscCall(SetupCorrection());
     PetscCall(SolveTwoSidedProjected(solver, b, constraints, v, reactions, iterations));
-  else
+  } else {
     PetscCall(SolveTwoSided(solver, b, constraints, v, reactions, iterations));
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -41,9 +41,12 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <memory>
 #include <vector>
 
 namespace softbody {
+
+class ConstraintCorrection;
 
 struct VelocityConstraint {
   PetscInt vertex;         // local vertex index (owned)
@@ -97,7 +100,7 @@ enum class TwoSidedPath { kAuto, kDelassus, kProjected };
 
 class ProjectedSolver {
  public:
-  ProjectedSolver() = default;
+  ProjectedSolver();
   ProjectedSolver(const ProjectedSolver &) = delete;
   ProjectedSolver &operator=(const ProjectedSolver &) = delete;
   ~ProjectedSolver();
@@ -107,6 +110,13 @@ class ProjectedSolver {
   PetscErrorCode Solve(KSP solver, Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
                        std::vector<PetscReal> *reactions, PetscInt *iterations);
   void set_two_sided_path(TwoSidedPath path) { path_ = path; }
+  // The projected CG's preconditioner with the constraint correction
+  // (constraint_correction.hpp): worth it where the unconstrained
+  // preconditioner is A's factorisation and A keeps its values over many
+  // solves (linear mode), which its cached columns need.
+  void set_constraint_correction(bool on) { correct_ = on; }
+  // Not collective. Applications of M^-1 the correction spent on its columns.
+  PetscInt correction_column_solves() const;
 
  private:
   static PetscErrorCode ApplyOperator(Mat shell, Vec w, Vec y);
@@ -145,6 +155,11 @@ class ProjectedSolver {
   Vec work_ = nullptr, work2_ = nullptr, z_ = nullptr, rhs_ = nullptr, w_ = nullptr;
   Vec column_ = nullptr, column_rhs_ = nullptr;  // the projected Delassus path's
   TwoSidedPath path_ = TwoSidedPath::kAuto;
+  // The constraint correction: requested, and ready for this solve's vertices_.
+  bool correct_ = false, corrected_ = false;
+  std::unique_ptr<ConstraintCorrection> correction_;
+  // When correct_: sets corrected_ for vertices_ (collective).
+  PetscErrorCode SetupCorrection();
 };
 
 }  // namespace softbody

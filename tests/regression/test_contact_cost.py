@@ -1,0 +1,104 @@
+"""The cost of contact steps (issue 14) and what was done to cut it, checked on
+the wedge drop (scenes/contact/wedge-scene.txt: a soft cube dropped edge-first
+onto a fixed wedge; it falls free for 0.2 s, then lands; -dt 0.01, 60 steps).
+
+(a) The run summary's "steps" line splits the time loop's steps into those with
+    contact and those without: both kinds occur, they add up to the steps
+    taken, and their solves add up to the summary's.
+(b) The guard keeps its answer for positions it has just found clean
+    (-contact_guard_reuse, on by default): with it the frames are bit for bit
+    those of -contact_guard_reuse 0, and some probes repeat a clean one (none
+    without), linear and corotational, 2 ranks.
+(c) Linear mode with the direct solver: the constrained solves' preconditioner
+    sees the constraints (solvers/constraint_correction.hpp), so each contact
+    solve ends in at most 2 CG iterations (the plain preconditioner needs about
+    one per constraint: 10 to 40 here, as with -constraint_correction 0);
+    corotational mode (the warp preconditioner) keeps the plain one.
+"""
+import os
+import re
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import harness  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENE = os.path.join(ROOT, "scenes", "contact", "wedge-scene.txt")
+OPTIONS = ["-options_file", os.path.join(ROOT, "config", "practical3.opts"), "-dt", "0.01", "-steps", "60"]
+STEPS = 60
+
+args = harness.arguments()
+checks = harness.Checks()
+
+
+def simulate(label, ranks, extra=()):
+    out = harness.fresh_result(args.work, label)
+    result = harness.run(args, ranks, ["-scene", SCENE, "-output", out] + OPTIONS + list(extra))
+    return harness.read_frames(out), result.stdout
+
+
+def step_kinds(stdout):
+    """(steps, solves per step, iterations per step) with contact and without."""
+    line = re.search(r"steps +with contact (\d+) \(.*?; ([\d.e+-]+) solves and ([\d.e+-]+) iterations per step\), "
+                     r"without (\d+) \(.*?; ([\d.e+-]+) solves and ([\d.e+-]+) iterations per step\)", stdout)
+    if not line:
+        return None
+    g = line.groups()
+    return (int(g[0]), float(g[1]), float(g[2])), (int(g[3]), float(g[4]), float(g[5]))
+
+
+def probes(stdout):
+    found = re.search(r"(\d+) probes, (\d+) of them repeating a clean one's positions", stdout)
+    return (int(found.group(1)), int(found.group(2))) if found else None
+
+
+def same_frames(a, b):
+    """Every dataset equal, bit for bit."""
+    return a.keys() == b.keys() and all(np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
+
+
+print("(a) the summary's steps with and without contact")
+frames, stdout = simulate("linear", 2, ["-mode", "linear"])
+kinds = step_kinds(stdout)
+solves = re.search(r"(\d+) solves, iterations per step", stdout)
+checks.check(kinds is not None and solves is not None, "(a) the summary has a steps line and a solves count")
+if kinds and solves:
+    (contact_steps, contact_solves, _), (free_steps, free_solves, _) = kinds
+    total = contact_steps * contact_solves + free_steps * free_solves
+    checks.check(contact_steps > 0 and free_steps > 0 and contact_steps + free_steps == STEPS,
+                 f"(a) {contact_steps} steps with contact and {free_steps} without, of {STEPS}")
+    checks.check(abs(total - int(solves.group(1))) < 0.01 * int(solves.group(1)) + 1,
+                 f"(a) their solves add up: {total:.1f} against the summary's {solves.group(1)}")
+
+print("(b) the guard's reuse of a clean probe changes nothing")
+for mode in ("linear", "corotational"):
+    reused, out_reused = (frames, stdout) if mode == "linear" else simulate(f"{mode}", 2, ["-mode", mode])
+    again, out_again = simulate(f"{mode}-no-reuse", 2, ["-mode", mode, "-contact_guard_reuse", "0"])
+    counts, counts_again = probes(out_reused), probes(out_again)
+    checks.check(same_frames(reused, again), f"(b) {mode}: frames bit for bit with -contact_guard_reuse 0")
+    checks.check(counts is not None and counts[1] > 0 and counts_again is not None and counts_again[1] == 0
+                 and counts[0] == counts_again[0],
+                 f"(b) {mode}: probes (all, repeating a clean one) {counts} with reuse, {counts_again} without")
+
+print("(c) contact solves with the constraint correction (linear, direct solver)")
+if kinds:
+    (contact_steps, contact_solves, contact_iterations), _ = kinds
+    checks.check(contact_iterations <= 2 * contact_solves,
+                 f"(c) linear: {contact_iterations:g} CG iterations per contact step in {contact_solves:g} solves")
+_, out_plain = simulate("linear-plain", 1, ["-mode", "linear", "-constraint_correction", "0"])
+plain = step_kinds(out_plain)
+if plain:
+    (steps, solves_per_step, iterations), _ = plain
+    checks.check(iterations > 2 * solves_per_step,
+                 f"(c) linear, -constraint_correction 0 (plain preconditioner): {iterations:g} iterations "
+                 f"per contact step in {solves_per_step:g} solves")
+_, out_corotational = simulate("corotational-check", 1, ["-mode", "corotational"])
+corotational = step_kinds(out_corotational)
+if corotational:
+    (steps, solves_per_step, iterations), _ = corotational
+    checks.check(iterations > 2 * solves_per_step,
+                 f"(c) corotational (plain preconditioner): {iterations:g} iterations per contact step "
+                 f"in {solves_per_step:g} solves")
+checks.exit()
