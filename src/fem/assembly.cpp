@@ -1,6 +1,10 @@
 #include "fem/assembly.hpp"
 
+#include <petscsf.h>
+
 #include <algorithm>
+#include <unordered_map>
+#include <vector>
 
 namespace softbody {
 
@@ -107,6 +111,31 @@ PetscErrorCode CreateStiffnessMatrix(MPI_Comm comm, const DofLayout &layout,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+namespace {
+
+// owned[index] += sent[i] for every entry i sent to (rank, index): each owner
+// adds the senders' entries in the order of their ranks, a sum formed in one
+// order whatever the timing of the messages. (VecAssembly adds stashed values
+// as the messages arrive, so with three or more ranks a vertex's mass could
+// differ in its last bit from run to run.)
+PetscErrorCode AddSentMasses(MPI_Comm comm, std::vector<PetscSFNode> *destination,
+                             const std::vector<PetscScalar> &sent,
+                             std::vector<PetscScalar> *owned) {
+  PetscFunctionBeginUser;
+  PetscSF sf;
+  PetscCall(PetscSFCreate(comm, &sf));
+  PetscCall(PetscSFSetGraph(sf, static_cast<PetscInt>(owned->size()),
+                            static_cast<PetscInt>(sent.size()), nullptr, PETSC_COPY_VALUES,
+                            destination->data(), PETSC_COPY_VALUES));
+  PetscCall(PetscSFSetUp(sf));
+  PetscCall(PetscSFReduceBegin(sf, MPIU_SCALAR, sent.data(), owned->data(), MPI_SUM));
+  PetscCall(PetscSFReduceEnd(sf, MPIU_SCALAR, sent.data(), owned->data(), MPI_SUM));
+  PetscCall(PetscSFDestroy(&sf));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
 PetscErrorCode AssembleLumpedMass(MPI_Comm comm, const DofLayout &layout,
                                   const LocalElements &elements, Vec *lumped_mass) {
   PetscFunctionBeginUser;
@@ -114,16 +143,34 @@ PetscErrorCode AssembleLumpedMass(MPI_Comm comm, const DofLayout &layout,
   PetscCall(VecSetSizes(*lumped_mass, 3 * layout.local_count(), PETSC_DETERMINE));
   PetscCall(VecSetBlockSize(*lumped_mass, 3));
   PetscCall(VecSetType(*lumped_mass, VECMPI));
+  const std::vector<PetscInt> &starts =
+      layout.vertex_start;  // rank r's: [starts[r], starts[r + 1])
+  std::vector<PetscScalar> owned(layout.local_count(), 0.0), sent;
+  std::vector<PetscSFNode> destination;           // per entry of sent: owner rank, its vertex there
+  std::unordered_map<PetscInt, size_t> entry_of;  // another rank's vertex -> its entry
   for (size_t e = 0; e < elements.size(); ++e) {
     const double m = LumpedVertexMass(elements.densities[e], elements.volumes[e]);
-    for (int a = 0; a < 4; ++a) {
-      const PetscInt block = elements.vertices[e][a];
-      const PetscScalar values[3] = {m, m, m};
-      PetscCall(VecSetValuesBlocked(*lumped_mass, 1, &block, values, ADD_VALUES));
+    for (const PetscInt vertex : elements.vertices[e]) {
+      if (layout.OwnsPetscVertex(vertex)) {
+        owned[vertex - layout.local_begin()] += m;
+        continue;
+      }
+      const auto [entry, added] = entry_of.emplace(vertex, sent.size());
+      if (added) {
+        const PetscInt owner =
+            std::upper_bound(starts.begin(), starts.end(), vertex) - starts.begin() - 1;
+        destination.push_back({owner, vertex - starts[owner]});
+        sent.push_back(0.0);
+      }
+      sent[entry->second] += m;
     }
   }
-  PetscCall(VecAssemblyBegin(*lumped_mass));
-  PetscCall(VecAssemblyEnd(*lumped_mass));
+  PetscCall(AddSentMasses(comm, &destination, sent, &owned));
+  PetscScalar *values;
+  PetscCall(VecGetArrayWrite(*lumped_mass, &values));
+  for (size_t v = 0; v < owned.size(); ++v)
+    values[3 * v] = values[3 * v + 1] = values[3 * v + 2] = owned[v];
+  PetscCall(VecRestoreArrayWrite(*lumped_mass, &values));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
