@@ -171,18 +171,27 @@ def write_scene(path, bodies, velocities=None):
     return path
 
 
+# The datasets with one row per frame (the others hold the mesh).
+PER_FRAME = ("time", "positions", "velocities", "energy/")
 FRAME_DATASETS = ("time", "positions", "velocities", "energy/kinetic", "energy/elastic",
                   "energy/gravitational", "mesh/tets", "mesh/boundary_triangles", "mesh/vertex_body",
                   "mesh/rest_positions", "mesh/body_fixed")
 
 
-def read_frames(path):
+def read_frames(path, first_frames=None):
     """The datasets of a softbody HDF5 result (FRAME_DATASETS) as a dict of numpy
-    arrays, and its "complete" attribute (0 or 1) under "complete"."""
+    arrays, its "complete" attribute (0 or 1) under "complete" and the frames the
+    file holds (the datasets' extent) under "stored_frames". With first_frames = n
+    only the first n frames of the per-frame datasets are read: after a SIGKILL
+    the frame being written may have its chunk listed in the file but not
+    written (HDF5 evicts metadata between flushes), so reading it fails, while
+    the frames the .xdmf lists were flushed whole."""
     import h5py
     with h5py.File(path, "r") as f:
-        frames = {name: f[name][()] for name in FRAME_DATASETS}
+        frames = {name: f[name][()] if first_frames is None or not name.startswith(PER_FRAME)
+                  else f[name][:first_frames] for name in FRAME_DATASETS}
         frames["complete"] = int(f.attrs["complete"])
+        frames["stored_frames"] = int(f["time"].shape[0])
     return frames
 
 

@@ -63,19 +63,18 @@ def check_file(label, out, interrupted=None, unlisted=0):
     """The file opens, the frames its .xdmf lists are whole and the file's first
     frames; the file holds at most `unlisted` frames more. Returns the listed
     frames."""
-    r = harness.read_frames(out)
     times, positions, _ = harness.xdmf_frames(out[:-3] + ".xdmf")
-    n, extra = len(times), len(r["time"]) - len(times)
-    listed = {key: (value[:n] if key != "complete" else value) for key, value in r.items()}
+    listed = harness.read_frames(out, first_frames=len(times))
+    n, extra = len(times), listed["stored_frames"] - len(times)
     whole = (np.allclose(listed["time"], DT * np.arange(n), rtol=1e-12, atol=1e-12) and
              bool(np.isfinite(listed["positions"]).all()) and bool(np.isfinite(listed["velocities"]).all()) and
              bool((np.abs(listed["positions"]).max(axis=(1, 2)) > 0).all()))
     with h5py.File(out, "r") as f:
         attribute = int(f.attrs.get("interrupted", -1))
-    checks.check(r["complete"] == 0 and n > 0 and whole and 0 <= extra <= unlisted and
+    checks.check(listed["complete"] == 0 and n > 0 and whole and 0 <= extra <= unlisted and
                  np.array_equal(times, listed["time"]) and np.array_equal(positions, listed["positions"]) and
                  (interrupted is None or attribute in interrupted),
-                 f"{label}: the file opens, complete = {r['complete']}, interrupted = {attribute}; the .xdmf "
+                 f"{label}: the file opens, complete = {listed['complete']}, interrupted = {attribute}; the .xdmf "
                  f"lists {n} whole frames (frame f at f dt), the file's first; {extra} more in the file "
                  f"(at most {unlisted})")
     return listed
