@@ -87,18 +87,13 @@ if kinds:
     (contact_steps, contact_solves, contact_iterations), _ = kinds
     checks.check(contact_iterations <= 2 * contact_solves,
                  f"(c) linear: {contact_iterations:g} CG iterations per contact step in {contact_solves:g} solves")
-_, out_plain = simulate("linear-plain", 1, ["-mode", "linear", "-constraint_correction", "0"])
-plain = step_kinds(out_plain)
-if plain:
-    (steps, solves_per_step, iterations), _ = plain
-    checks.check(iterations > 2 * solves_per_step,
-                 f"(c) linear, -constraint_correction 0 (plain preconditioner): {iterations:g} iterations "
-                 f"per contact step in {solves_per_step:g} solves")
-_, out_corotational = simulate("corotational-check", 1, ["-mode", "corotational"])
-corotational = step_kinds(out_corotational)
-if corotational:
-    (steps, solves_per_step, iterations), _ = corotational
-    checks.check(iterations > 2 * solves_per_step,
-                 f"(c) corotational (plain preconditioner): {iterations:g} iterations per contact step "
-                 f"in {solves_per_step:g} solves")
+for name, label, options in (
+        ("linear-plain", "linear, -constraint_correction 0 (plain preconditioner)",
+         ["-mode", "linear", "-constraint_correction", "0"]),
+        ("corotational-check", "corotational (plain preconditioner)", ["-mode", "corotational"])):
+    plain = step_kinds(simulate(name, 1, options)[1])
+    if plain:
+        (steps, solves_per_step, iterations), _ = plain
+        checks.check(iterations > 2 * solves_per_step,
+                     f"(c) {label}: {iterations:g} iterations per contact step in {solves_per_step:g} solves")
 checks.exit()
