@@ -143,8 +143,8 @@ PetscErrorCode AssembleLumpedMass(MPI_Comm comm, const DofLayout &layout,
   PetscCall(VecSetSizes(*lumped_mass, 3 * layout.local_count(), PETSC_DETERMINE));
   PetscCall(VecSetBlockSize(*lumped_mass, 3));
   PetscCall(VecSetType(*lumped_mass, VECMPI));
-  const std::vector<PetscInt> &starts =
-      layout.vertex_start;  // rank r's: [starts[r], starts[r + 1])
+  // Rank r owns the PETSc vertices [starts[r], starts[r + 1]).
+  const std::vector<PetscInt> &starts = layout.vertex_start;
   std::vector<PetscScalar> owned(layout.local_count(), 0.0), sent;
   std::vector<PetscSFNode> destination;           // per entry of sent: owner rank, its vertex there
   std::unordered_map<PetscInt, size_t> entry_of;  // another rank's vertex -> its entry
