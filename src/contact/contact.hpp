@@ -149,7 +149,10 @@ class ContactSolver {
   //    mass; mass: lumped, per DOF), the same for all of them, so their motion
   //    relative to each other stays as the solve left it. Without it a
   //    frictionless resting stack, held by the guard at its blocks' rims in
-  //    most steps, drifted sideways (2.6 N along x = z).
+  //    most steps, drifted sideways (2.6 N along x = z). Delta P's component
+  //    along directions in which an immobile obstacle holds one of those
+  //    bodies (the span of their immobile constraints' normals) is left to
+  //    that obstacle.
   PetscErrorCode CancelHeldImpulse(const std::vector<PetscReal> &reactions, Vec mass, Vec u);
   // 3. After the step's x1, v1 with the constraints' reactions: velocity
   //    response, impulse spreading, resting contacts for the next step,
@@ -226,6 +229,21 @@ class ContactSolver {
   void ReaimVertexContact(PetscInt local, const Contact &contact, const Point &position,
                           const Point &velocity, PetscReal dt);
   PetscErrorCode ReaimRestingContacts(Vec x0, Vec v0, PetscReal dt);
+  // CancelHeldImpulse's parts. Collective: Delta P of the held vertices of
+  // zones touching nothing immobile, the bodies they belong to, and sum n n^T
+  // over those bodies' immobile constraints.
+  struct HeldImpulse {
+    Point delta_p;               // kg m/s
+    std::vector<char> involved;  // per body
+    Eigen::Matrix3d supports;    // sum n n^T
+  };
+  PetscErrorCode SumHeldImpulse(const std::vector<PetscReal> &reactions,
+                                HeldImpulse *impulse) const;
+  // delta_p less its components along the eigenvectors of supports that
+  // carry support (kSupportedShare in contact.cpp).
+  static Point UnsupportedPart(const Point &delta_p, const Eigen::Matrix3d &supports);
+  // The body of an owned vertex (local number).
+  size_t BodyOf(PetscInt local) const;
   // AddPenetrations' vertex checks; returns how many this rank added.
   PetscErrorCode AddVertexPenetrations(Vec x0, Vec v, PetscReal dt, PetscInt *found);
   // EndStep's parts.

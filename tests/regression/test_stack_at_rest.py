@@ -24,7 +24,9 @@ given), dt = 0.01 s, STEPS steps, 2 ranks, linear and corotational mode:
     zones between free bodies used to push the whole stack sideways (their held
     vertices' reactions: 2.6 N along x = z), a drift of 5 mm/s at 10 s, 1.7e-6;
     with the impulse they create from nothing taken back (contact.hpp,
-    CancelHeldImpulse), 1.7e-7.
+    CancelHeldImpulse, outside the directions in which the ground holds the
+    stack), 1.8e-10; also checked below 1e-8 (1.7e-7 when the part the ground
+    answers was taken back too).
 Skipped when softbody-crossings was not built (no CGAL): (c) and (d)'s crossings.
 """
 import os
@@ -43,6 +45,9 @@ OPTIONS = ["-options_file", os.path.join(ROOT, "config", "practical3.opts"), "-d
 KINETIC_BOUND = 1e-4   # of the initial gravitational energy
 DROP_TOLERANCE = 0.05  # relative to the column's drop
 REST_GOAL = 1e-6       # issue 14: "kinetic energy below 1e-6 of the stack's potential energy"
+# Measured 1.8e-10; 1.7e-7 when the held vertices' whole impulse was taken back,
+# the part the ground answers included (contact.cpp, CancelHeldImpulse).
+REST_MEASURED_BOUND = 1e-8
 
 args = harness.arguments()
 checks = harness.Checks()
@@ -102,6 +107,8 @@ given = harness.read_frames(out)
 rest = given["energy/kinetic"][-1] / given["energy/gravitational"][0]
 checks.check(rest < REST_GOAL, f"(d) as given, linear, 10 s: kinetic over initial gravitational energy "
              f"{rest:.2e} < {REST_GOAL:g}")
+checks.check(rest < REST_MEASURED_BOUND, f"(d) as given: {rest:.2e} < {REST_MEASURED_BOUND:g} (the ground "
+             f"answers the held vertices' impulse along its normal)")
 report = harness.run_crossings(args, checks, out)
 if report:
     worst = max(sum(frame[k] for k in ("free_free", "free_fixed", "self", "below_ground"))
