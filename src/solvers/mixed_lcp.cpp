@@ -12,9 +12,22 @@ namespace {
 // which contacts of a resting stack push (measured: tens), few enough to be
 // cheap next to the m back-solves that built D.
 constexpr int kWarmSweeps = 200;
-// Active-set solves (one row in or out each) before falling back to
-// Gauss-Seidel alone.
+// Active-set solves before falling back to Gauss-Seidel alone.
 constexpr int kMaxPivots = 100;
+// Block principal pivoting (Judice & Pires 1994): every infeasible row
+// changes side at once while the count of infeasible rows keeps falling;
+// after this many solves in a row without a new lowest count, one row at a
+// time (the most pulling leaves, else the most violated joins), which cannot
+// cycle. A resting box on another (600 rows, hundreds changing side) took 100
+// one-row solves and still fell back to Gauss-Seidel.
+constexpr int kBlockTries = 3;
+// The active rows' D_aa + delta I, delta this fraction of its largest
+// diagonal entry, is factorised by Cholesky: it has the least-norm solution's
+// limit as delta -> 0 (rows may be redundant, D_aa singular), and moves the
+// residual by delta |lambda|, far below the tolerance. 1e-12: above the
+// round-off of D's back-solves relative to its diagonal (about 1e-15), so the
+// factorisation does not break down on a singular D_aa.
+constexpr double kRegularisation = 1e-12;
 // An active row's lambda below -kPullRoundOff times the largest |lambda| pulls;
 // smaller negatives are the least-norm solve's round-off.
 constexpr double kPullRoundOff = 1e-12;
@@ -63,9 +76,40 @@ Eigen::VectorXd SolveActive(const Eigen::MatrixXd &D, const Eigen::VectorXd &g,
   }
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(g.size());
   if (k == 0) return lambda;
-  const Eigen::VectorXd la = Daa.completeOrthogonalDecomposition().solve(-ga);
+  const double delta = kRegularisation * Daa.diagonal().cwiseAbs().maxCoeff();
+  Daa.diagonal().array() += delta;
+  Eigen::LLT<Eigen::MatrixXd> factor(Daa);
+  const Eigen::VectorXd la =
+      factor.info() == Eigen::Success
+          ? Eigen::VectorXd(factor.solve(-ga))
+          : Eigen::VectorXd(Daa.completeOrthogonalDecomposition().solve(-ga));
   for (Eigen::Index a = 0; a < k; ++a) lambda[rows[a]] = la[a];
   return lambda;
+}
+
+// The unilateral rows on the wrong side at the active set's solution: active
+// ones that pull (lambda below round-off of zero), inactive ones violated.
+std::vector<Eigen::Index> Infeasible(const Eigen::VectorXd &lambda, const Eigen::VectorXd &r,
+                                     const std::vector<char> &unilateral,
+                                     const std::vector<char> &active, double tolerance) {
+  const double pull = -kPullRoundOff * lambda.cwiseAbs().maxCoeff();
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index i = 0; i < r.size(); ++i)
+    if (unilateral[i] && ((active[i] && lambda[i] < pull) || (!active[i] && r[i] < -tolerance)))
+      rows.push_back(i);
+  return rows;
+}
+
+// Of the infeasible rows: the most pulling active one, else the most violated.
+Eigen::Index SinglePivot(const Eigen::VectorXd &lambda, const Eigen::VectorXd &r,
+                         const std::vector<char> &active,
+                         const std::vector<Eigen::Index> &infeasible) {
+  Eigen::Index leaves = -1, joins = -1;
+  for (const Eigen::Index i : infeasible) {
+    if (active[i] && (leaves < 0 || lambda[i] < lambda[leaves])) leaves = i;
+    if (!active[i] && (joins < 0 || r[i] < r[joins])) joins = i;
+  }
+  return leaves >= 0 ? leaves : joins;
 }
 
 }  // namespace
@@ -80,23 +124,16 @@ MixedLcpResult SolveMixedLcp(const Eigen::MatrixXd &D, const Eigen::VectorXd &g,
   for (; result.sweeps < kWarmSweeps; ++result.sweeps) Sweep(D, g, unilateral, &result.lambda);
   std::vector<char> active(m);
   for (Eigen::Index i = 0; i < m; ++i) active[i] = !unilateral[i] || result.lambda[i] > 0;
-  // One change per solve: the most pulling active row leaves, else the most
-  // violated inactive one joins.
+  // Block pivots while they make progress, then one row at a time (kBlockTries).
+  size_t fewest = static_cast<size_t>(m) + 1;
+  int tries = kBlockTries;
   for (; result.pivots < kMaxPivots; ++result.pivots) {
     const Eigen::VectorXd lambda = SolveActive(D, g, active);
     const Eigen::VectorXd r = D * lambda + g;
-    const double pull = -kPullRoundOff * lambda.cwiseAbs().maxCoeff();
-    Eigen::Index leaves = -1, joins = -1;
-    for (Eigen::Index i = 0; i < m; ++i) {
-      if (!unilateral[i]) continue;
-      if (active[i] && lambda[i] < pull && (leaves < 0 || lambda[i] < lambda[leaves])) leaves = i;
-      if (!active[i] && r[i] < -tolerance && (joins < 0 || r[i] < r[joins])) joins = i;
-    }
-    if (leaves >= 0) {
-      active[leaves] = 0;
-    } else if (joins >= 0) {
-      active[joins] = 1;
-    } else if (Violation(lambda, r, unilateral) <= tolerance) {
+    const std::vector<Eigen::Index> infeasible =
+        Infeasible(lambda, r, unilateral, active, tolerance);
+    if (infeasible.empty()) {
+      if (Violation(lambda, r, unilateral) > tolerance) break;  // inconsistent bilateral rows
       result.lambda = lambda;
       for (Eigen::Index i = 0; i < m; ++i)
         if (unilateral[i]) result.lambda[i] = std::max(result.lambda[i], 0.0);
@@ -104,8 +141,13 @@ MixedLcpResult SolveMixedLcp(const Eigen::MatrixXd &D, const Eigen::VectorXd &g,
       result.exact = true;
       ++result.pivots;
       return result;
+    }
+    if (infeasible.size() < fewest) fewest = infeasible.size(), tries = kBlockTries;
+    if (tries-- > 0) {
+      for (const Eigen::Index i : infeasible) active[i] = !active[i];
     } else {
-      break;  // the active rows cannot all hold (inconsistent bilateral rows)
+      const Eigen::Index i = SinglePivot(lambda, r, active, infeasible);
+      active[i] = !active[i];
     }
   }
   for (; result.sweeps < kMaxSweeps; ++result.sweeps) {
