@@ -13,29 +13,29 @@
 //
 // C^T G = 0 and G P = G, and the preconditioner is P G P + I - P. When M = A
 // (a factorisation of A), it is the exact inverse of the projected operator:
-// CG ends in one iteration. S needs A^-1 only among the constrained DOFs: it
-// comes from the block of A^-1 the projected solver keeps while A keeps its
-// state (inverse_block.hpp; 3 applications of M^-1 per vertex, once, shared
-// with the two-sided solve), so a vertex that stays in contact costs its 3
-// applications once, and the memory grows with the constrained vertices
-// squared, not with them times the unknowns. U itself is never formed: an
-// application is M^-1 (w - C S^-1 C^T M^-1 w), two applications of M^-1. S
-// (m^2 numbers) is factorised (dense Cholesky, m^3 / 3) per solve with new
-// rows; each CG iteration adds one reduction of m numbers.
+// CG ends in one iteration. The columns U come from M^-1 applied to the unit
+// vectors of the constrained vertices' three DOFs (3 per vertex, whatever its
+// directions): they are kept, per vertex, while A and the preconditioner keep
+// their state (linear mode: the whole run), so a vertex that stays in contact
+// costs its 3 applications of M^-1 once. S is formed from them (m^2 numbers
+// summed over the ranks) and factorised (dense Cholesky, m^3 / 3) per solve;
+// each CG iteration adds one reduction of m numbers and 3 axpys per
+// constrained vertex.
 //
 // The correction stands aside (the plain preconditioner is used) when the
 // constrained directions exceed kMaxCorrectedRows on all ranks together, or
-// the block would exceed its budget, or S is not numerically positive
-// definite.
+// the columns would exceed kColumnBudgetBytes on some rank, or S is not
+// numerically positive definite.
 #pragma once
 
 #include <petscksp.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <array>
+#include <map>
 #include <vector>
 
-#include "solvers/inverse_block.hpp"
 #include "solvers/projected_solve.hpp"
 
 namespace softbody {
@@ -48,16 +48,14 @@ class ConstraintCorrection {
   ~ConstraintCorrection();
 
   // Collective. For the constrained vertices of every rank (this rank's:
-  // `vertices`, local numbers): their block of A^-1 (held or added to
-  // `inverse`) and S's factor. solver: the set-up unconstrained KSP of A with
-  // KSPPREONLY, pc its preconditioner (M^-1 = A^-1). *active: the correction
-  // is ready (false: use the plain preconditioner).
-  PetscErrorCode Setup(KSP solver, PC pc, Mat A, InverseBlock *inverse,
-                       const std::vector<ConstrainedVertex> &vertices, bool *active);
+  // `vertices`, local numbers): the columns (cached or new) and S's factor.
+  // pc: the set-up unconstrained preconditioner (M^-1) of A. *active: the
+  // correction is ready (false: use the plain preconditioner).
+  PetscErrorCode Setup(PC pc, Mat A, const std::vector<ConstrainedVertex> &vertices, bool *active);
   // Collective. y = (M^-1 - U S^-1 U^T) w (not yet projected), by two
   // applications of M^-1; after an active Setup.
   PetscErrorCode Apply(Vec w, Vec y);
-  // Not collective. Applications of M^-1 spent on the block so far.
+  // Not collective. Applications of M^-1 spent on columns so far.
   PetscInt column_solves() const { return column_solves_; }
 
  private:
@@ -67,11 +65,15 @@ class ConstraintCorrection {
     double direction[3];
   };
   PetscErrorCode GatherRows(Vec like, const std::vector<ConstrainedVertex> &vertices);
-  PetscErrorCode FactoriseSchurComplement(const InverseBlock &inverse, bool *positive);
+  PetscErrorCode ComputeColumns(Vec like, bool *within_budget);
+  PetscErrorCode FactoriseSchurComplement(bool *positive);
+  void Clear();
 
   PC pc_ = nullptr;  // not owned
   Mat A_ = nullptr;  // not owned
   PetscObjectState a_state_ = -1;
+  // Per PETSc vertex: M^-1 e_{3 vertex + k}, k = 0..2.
+  std::map<PetscInt, std::array<Vec, 3>> columns_;
   std::vector<Row> rows_;
   std::vector<Row> factorised_rows_;  // the rows of schur_ (a solve with the same rows reuses it)
   std::vector<PetscInt> vertices_;    // the rows' distinct vertices, ascending

@@ -69,12 +69,12 @@ PetscInt ProjectedSolver::correction_column_solves() const {
   return correction_ ? correction_->column_solves() : 0;
 }
 
-PetscErrorCode ProjectedSolver::SetupCorrection(KSP solver) {
+PetscErrorCode ProjectedSolver::SetupCorrection() {
   PetscFunctionBeginUser;
   corrected_ = false;
   if (!correct_) PetscFunctionReturn(PETSC_SUCCESS);
   if (!correction_) correction_ = std::make_unique<ConstraintCorrection>();
-  PetscCall(correction_->Setup(solver, unconstrained_pc_, A_, &inverse_, vertices_, &corrected_));
+  PetscCall(correction_->Setup(unconstrained_pc_, A_, vertices_, &corrected_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -277,11 +277,11 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
       MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM, PetscObjectComm((PetscObject)b)));
   *iterations = 0;
   if (counts[0] == 0) {
-    PetscCall(SetupCorrection(solver));
+    PetscCall(SetupCorrection());
     PetscCall(SolveProjected(b, constraints, v, reactions, iterations));
   } else if (path_ == TwoSidedPath::kProjected ||
              (path_ == TwoSidedPath::kAuto && counts[1] >= kProjectedSolveCost * (counts[0] + 2))) {
-    PetscCall(SetupCorrection(solver));
+    PetscCall(SetupCorrection());
     PetscCall(SolveTwoSidedProjected(solver, b, constraints, v, reactions, iterations));
   } else {
     PetscCall(SolveTwoSided(solver, b, constraints, v, reactions, iterations));

@@ -160,9 +160,8 @@ class ProjectedSolver {
   // The constraint correction: requested, and ready for this solve's vertices_.
   bool correct_ = false, corrected_ = false;
   std::unique_ptr<ConstraintCorrection> correction_;
-  // When correct_: sets corrected_ for vertices_ (collective); solver: the
-  // unconstrained KSP.
-  PetscErrorCode SetupCorrection(KSP solver);
+  // When correct_: sets corrected_ for vertices_ (collective).
+  PetscErrorCode SetupCorrection();
   // The Delassus path's block of A^-1 (inverse_block.hpp), when correct_ (A
   // keeps its values): collective; vertices: this solve's rows' (ascending).
   PetscErrorCode HoldRecurringVertices(KSP solver, Vec like, const std::vector<PetscInt> &vertices,
