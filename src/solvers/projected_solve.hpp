@@ -44,8 +44,6 @@
 #include <memory>
 #include <vector>
 
-#include "solvers/inverse_block.hpp"
-
 namespace softbody {
 
 class ConstraintCorrection;
@@ -162,12 +160,6 @@ class ProjectedSolver {
   std::unique_ptr<ConstraintCorrection> correction_;
   // When correct_: sets corrected_ for vertices_ (collective).
   PetscErrorCode SetupCorrection();
-  // The Delassus path's block of A^-1 (inverse_block.hpp), when correct_ (A
-  // keeps its values): collective; vertices: this solve's rows' (ascending).
-  PetscErrorCode HoldRecurringVertices(KSP solver, Vec like, const std::vector<PetscInt> &vertices,
-                                       PetscInt *iterations);
-  InverseBlock inverse_;
-  std::vector<PetscInt> previous_row_vertices_;
 };
 
 }  // namespace softbody

@@ -200,83 +200,7 @@ PetscErrorCode SolveRows(PetscObject object, const std::vector<Row> &rows,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The rows' distinct vertices (those with a weight), ascending.
-std::vector<PetscInt> RowVertices(const std::vector<Row> &rows) {
-  std::vector<PetscInt> vertices;
-  for (const Row &row : rows)
-    for (int a = 0; a < 4; ++a)
-      if (row.vertex[a] >= 0 && row.weight[a] != 0) vertices.push_back(row.vertex[a]);
-  std::sort(vertices.begin(), vertices.end());
-  vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
-  return vertices;
-}
-
-// D's entries between rows whose vertices the block holds, r_i^T B r_j (the
-// same numbers on every rank; after the reduction), and D_ji = D_ij for a held
-// row j and a row i with its own back-solve. partial: SolveRows' layout.
-void HeldEntries(const std::vector<Row> &rows, const std::vector<char> &held,
-                 const InverseBlock &inverse, std::vector<double> *partial) {
-  const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
-  std::vector<Eigen::Index> held_rows;
-  for (Eigen::Index i = 0; i < m; ++i)
-    if (held[i]) held_rows.push_back(i);
-  // Each held row as (slot in B, weight) pairs.
-  std::vector<std::vector<std::pair<Eigen::Index, double>>> sparse(held_rows.size());
-  for (size_t a = 0; a < held_rows.size(); ++a) {
-    const Row &row = rows[held_rows[a]];
-    for (int v = 0; v < 4; ++v)
-      if (row.vertex[v] >= 0 && row.weight[v] != 0)
-        for (int k = 0; k < 3; ++k)
-          sparse[a].push_back({inverse.slot(row.vertex[v]) + k, row.weight[v] * row.direction[k]});
-  }
-  const Eigen::MatrixXd &B = inverse.block();
-  Eigen::MatrixXd T = Eigen::MatrixXd::Zero(B.rows(), static_cast<Eigen::Index>(held_rows.size()));
-  for (size_t b = 0; b < held_rows.size(); ++b)
-    for (const auto &[slot, weight] : sparse[b]) T.col(b) += weight * B.col(slot);
-  for (size_t b = 0; b < held_rows.size(); ++b)
-    for (size_t a = 0; a < held_rows.size(); ++a) {
-      double entry = 0;
-      for (const auto &[slot, weight] : sparse[a]) entry += weight * T(slot, b);
-      (*partial)[held_rows[b] * m + held_rows[a]] = entry;
-    }
-  for (const Eigen::Index j : held_rows)
-    for (Eigen::Index i = 0; i < m; ++i)
-      if (!held[i]) (*partial)[j * m + i] = (*partial)[i * m + j];
-}
-
-// Per row: the block holds all its vertices.
-std::vector<char> HeldRows(const std::vector<Row> &rows, const InverseBlock &inverse) {
-  std::vector<char> held(rows.size());
-  for (size_t j = 0; j < rows.size(); ++j) {
-    bool all = true;
-    for (int a = 0; a < 4 && all; ++a)
-      all = rows[j].vertex[a] < 0 || rows[j].weight[a] == 0 || inverse.holds(rows[j].vertex[a]);
-    held[j] = all;
-  }
-  return held;
-}
-
 }  // namespace
-
-// A vertex joins the block when the previous Delassus solve had it too (a
-// contact that lasts): 3 back-solves once against one per row and solve; a
-// contact of one solve is cheaper with its row's own back-solve.
-PetscErrorCode ProjectedSolver::HoldRecurringVertices(KSP solver, Vec like,
-                                                      const std::vector<PetscInt> &vertices,
-                                                      PetscInt *iterations) {
-  PetscFunctionBeginUser;
-  if (!correct_) PetscFunctionReturn(PETSC_SUCCESS);
-  PetscCall(inverse_.Refresh(solver));
-  std::vector<PetscInt> recurring;
-  for (const PetscInt vertex : vertices)
-    if (!inverse_.holds(vertex) &&
-        std::binary_search(previous_row_vertices_.begin(), previous_row_vertices_.end(), vertex))
-      recurring.push_back(vertex);
-  previous_row_vertices_ = vertices;
-  bool added;
-  PetscCall(inverse_.Add(like, recurring, vertices, &added, iterations));
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
 
 PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
                                               const std::vector<VelocityConstraint> &constraints,
@@ -294,13 +218,9 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
   std::vector<Row> rows;
   PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
   const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
-  PetscCall(HoldRecurringVertices(solver, b, RowVertices(rows), iterations));
-  const std::vector<char> held = HeldRows(rows, inverse_);
-  // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned
-  // entries; a back-solve per row that the block does not hold.
+  // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned entries.
   std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
   for (Eigen::Index j = 0; j <= m; ++j) {
-    if (j < m && held[j]) continue;
     if (j < m) {
       PetscCall(VecZeroEntries(work2_));
       PetscScalar *y;
@@ -313,7 +233,6 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
   }
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, partial.data(),
                               static_cast<PetscMPIInt>(partial.size()), MPIU_REAL, MPI_SUM, comm));
-  HeldEntries(rows, held, inverse_, &partial);
   Eigen::VectorXd lambda;
   PetscCall(SolveRows((PetscObject)solver, rows, KeptRows(rows), partial, &lambda));
   // v = A^-1 (b + J^T lambda); the one-sided reactions from A v - (b + J_two^T lambda).
