@@ -149,8 +149,9 @@ PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, Integrator
                        nullptr, o->fallback_direct, &o->fallback_direct, nullptr));
   PetscCall(PetscOptionsBool(
       "-constraint_correction",
-      "Linear mode with a factorisation: contact solves precondition with the constraints' "
-      "Schur complement (one CG iteration; 3 back-solves per newly constrained vertex)",
+      "Linear mode with a factorisation: contact solves keep columns of A^-1 (3 back-solves per "
+      "newly constrained vertex): the projected CG's preconditioner gets the constraints' Schur "
+      "complement (one CG iteration), the two-sided solve needs no back-solve per row",
       nullptr, o->constraint_correction, &o->constraint_correction, nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }

@@ -90,6 +90,7 @@ ProjectedSolver::~ProjectedSolver() {
   VecDestroy(&w_);
   VecDestroy(&column_);
   VecDestroy(&column_rhs_);
+  DropDelassusColumns({});
 }
 
 void ProjectedSolver::GroupByVertex(const std::vector<VelocityConstraint> &constraints) {

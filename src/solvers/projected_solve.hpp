@@ -22,8 +22,9 @@
 // two-sided one: its vertex and face), and the step solves the mixed
 // complementarity problem on the Delassus operator D = J A^-1 J^T (mixed_lcp.hpp):
 // D is built from one solve with the unconstrained solver per row (back-solves
-// with the direct preset), reduced over the ranks and solved identically on
-// each; then A v = b + J^T lambda. The rows are few (a stack of blocks: a few
+// with the direct preset; in linear mode with a factorisation, from the kept
+// columns A^-1 e of the rows' vertices instead: two_sided_solve.cpp), reduced
+// over the ranks and solved identically on each; then A v = b + J^T lambda. The rows are few (a stack of blocks: a few
 // hundred); scenes without two-sided constraints never take this path.
 // When the one-sided rows far outnumber the two-sided ones (m1 >= 16 (m2 + 2),
 // kProjectedSolveCost in projected_solve.cpp; e.g. two bodies pressed into each other and the
@@ -41,6 +42,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <map>
 #include <memory>
 #include <vector>
 
@@ -160,6 +162,17 @@ class ProjectedSolver {
   std::unique_ptr<ConstraintCorrection> correction_;
   // When correct_: sets corrected_ for vertices_ (collective).
   PetscErrorCode SetupCorrection();
+  // The Delassus path's columns A^-1 e of its rows' vertices' DOFs, when
+  // correct_ (two_sided_solve.cpp): collective; vertices: this solve's rows'
+  // (ascending, the same on every rank); *ready: all of them are kept.
+  PetscErrorCode KeepDelassusColumns(KSP solver, const std::vector<PetscInt> &vertices, bool *ready,
+                                     PetscInt *iterations);
+  // Destroys the kept columns of the vertices not in `keep` (ascending).
+  void DropDelassusColumns(const std::vector<PetscInt> &keep);
+  std::map<PetscInt, std::array<Vec, 3>> delassus_columns_;
+  Mat delassus_A_ = nullptr;       // not owned
+  KSP delassus_solver_ = nullptr;  // not owned
+  PetscObjectState delassus_state_ = -1;
 };
 
 }  // namespace softbody

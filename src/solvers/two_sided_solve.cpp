@@ -4,6 +4,8 @@
 #include <cmath>
 #include <map>
 
+#include <petsc/private/petscimpl.h>  // PetscObjectStateGet: A's values changed
+
 #include "common/exchange.hpp"
 #include "solvers/mixed_lcp.hpp"
 #include "solvers/projected_solve.hpp"
@@ -16,6 +18,10 @@ namespace {
 // velocity it involves (m/s): far below the contact gap over a step, at the
 // round-off of the back-solves that built D.
 constexpr double kLcpRelativeTolerance = 1e-10;
+// The Delassus path's kept columns on one rank: 3 vectors of its local size
+// per vertex of the solve's rows (the constraint correction's budget). Beyond
+// it, a back-solve per row.
+constexpr double kDelassusColumnBudgetBytes = 256.0 * 1024 * 1024;
 
 // One row of J: up to four vertices (PETSc numbers, -1: none) with weights,
 // a direction, the right-hand side, and whether it is an inequality; ordered
@@ -200,7 +206,92 @@ PetscErrorCode SolveRows(PetscObject object, const std::vector<Row> &rows,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// The rows' distinct vertices (those with a weight), ascending.
+std::vector<PetscInt> RowVertices(const std::vector<Row> &rows) {
+  std::vector<PetscInt> vertices;
+  for (const Row &row : rows)
+    for (int a = 0; a < 4; ++a)
+      if (row.vertex[a] >= 0 && row.weight[a] != 0) vertices.push_back(row.vertex[a]);
+  std::sort(vertices.begin(), vertices.end());
+  vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
+  return vertices;
+}
+
+// x = A^-1 J_row^T from the kept columns of the row's vertices.
+PetscErrorCode CombineColumns(const Row &row, const std::map<PetscInt, std::array<Vec, 3>> &columns,
+                              Vec x) {
+  PetscFunctionBeginUser;
+  std::vector<PetscScalar> weights;
+  std::vector<Vec> vectors;
+  for (int a = 0; a < 4; ++a) {
+    if (row.vertex[a] < 0 || row.weight[a] == 0) continue;
+    for (int k = 0; k < 3; ++k) {
+      weights.push_back(row.weight[a] * row.direction[k]);
+      vectors.push_back(columns.at(row.vertex[a])[k]);
+    }
+  }
+  PetscCall(VecZeroEntries(x));
+  PetscCall(VecMAXPY(x, static_cast<PetscInt>(vectors.size()), weights.data(), vectors.data()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 }  // namespace
+
+void ProjectedSolver::DropDelassusColumns(const std::vector<PetscInt> &keep) {
+  for (auto it = delassus_columns_.begin(); it != delassus_columns_.end();) {
+    if (std::binary_search(keep.begin(), keep.end(), it->first)) {
+      ++it;
+      continue;
+    }
+    for (Vec &column : it->second) VecDestroy(&column);
+    it = delassus_columns_.erase(it);
+  }
+}
+
+// A kept column is the same vector a fresh back-solve gives, and which
+// columns are kept depends only on this solve's rows (the others are
+// dropped), so D does not depend on the run's history: a restart continues
+// bit for bit. A vertex that stays in contact costs its 3 back-solves once
+// (while A keeps its values: linear mode), against one back-solve per row and
+// solve without them.
+PetscErrorCode ProjectedSolver::KeepDelassusColumns(KSP solver,
+                                                    const std::vector<PetscInt> &vertices,
+                                                    bool *ready, PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  *ready = false;
+  if (!correct_) PetscFunctionReturn(PETSC_SUCCESS);
+  Mat A;
+  PetscCall(KSPGetOperators(solver, &A, nullptr));
+  PetscObjectState state;
+  PetscCall(PetscObjectStateGet((PetscObject)A, &state));
+  if (solver != delassus_solver_ || A != delassus_A_ || state != delassus_state_)
+    DropDelassusColumns({});
+  delassus_solver_ = solver, delassus_A_ = A, delassus_state_ = state;
+  DropDelassusColumns(vertices);
+  PetscInt local;
+  PetscCall(VecGetLocalSize(work_, &local));
+  double bytes = 3.0 * static_cast<double>(vertices.size()) * local * sizeof(PetscScalar);
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &bytes, 1, MPI_DOUBLE, MPI_MAX,
+                              PetscObjectComm((PetscObject)work_)));
+  if (bytes > kDelassusColumnBudgetBytes) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscInt begin, end;
+  PetscCall(VecGetOwnershipRange(work_, &begin, &end));
+  for (const PetscInt vertex : vertices) {
+    if (delassus_columns_.count(vertex)) continue;
+    std::array<Vec, 3> &columns = delassus_columns_[vertex];
+    for (int k = 0; k < 3; ++k) {
+      PetscCall(VecZeroEntries(work2_));
+      if (3 * vertex >= begin && 3 * vertex < end)
+        PetscCall(VecSetValue(work2_, 3 * vertex + k, 1.0, INSERT_VALUES));
+      PetscCall(VecAssemblyBegin(work2_));
+      PetscCall(VecAssemblyEnd(work2_));
+      PetscCall(VecDuplicate(work_, &columns[k]));
+      PetscCall(SolveUnconstrained(solver, work2_, columns[k], iterations));
+    }
+  }
+  *ready = true;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
 PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
                                               const std::vector<VelocityConstraint> &constraints,
@@ -218,17 +309,24 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
   std::vector<Row> rows;
   PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
   const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
-  // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned entries.
+  bool kept;
+  PetscCall(KeepDelassusColumns(solver, RowVertices(rows), &kept, iterations));
+  // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned
+  // entries: A^-1 J_j^T from the kept columns, else by a back-solve.
   std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
   for (Eigen::Index j = 0; j <= m; ++j) {
-    if (j < m) {
+    if (j < m && kept) {
+      PetscCall(CombineColumns(rows[j], delassus_columns_, work_));
+    } else if (j < m) {
       PetscCall(VecZeroEntries(work2_));
       PetscScalar *y;
       PetscCall(VecGetArray(work2_, &y));
       AddRowTranspose(rows[j], 1.0, begin, end, y);
       PetscCall(VecRestoreArray(work2_, &y));
+      PetscCall(SolveUnconstrained(solver, work2_, work_, iterations));
+    } else {
+      PetscCall(SolveUnconstrained(solver, b, work_, iterations));
     }
-    PetscCall(SolveUnconstrained(solver, j < m ? work2_ : b, work_, iterations));
     PetscCall(RowDots(rows, begin, end, work_, partial.data() + j * m));
   }
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, partial.data(),

@@ -15,7 +15,11 @@ then -restart from that file with -steps N, and compares the frames:
     contacts): bit for bit, in both modes; two cubes thrown at each other
     (free bodies as obstacles): bit for bit; a cube landing on a fixed cube
     with a third of it over the edge (the checkpoint holds resting contacts
-    of the edge's points): bit for bit.
+    of the edge's points): bit for bit; the stack of three blocks
+    (scenes/contact/stack-scene.txt: two-sided contacts throughout, whose
+    solve keeps columns of A^-1 across steps, two_sided_solve.cpp): bit for
+    bit (a kept block of A^-1 whose entries depended on which vertices
+    entered it together failed this).
 (d) 2 ranks -> 1 rank: to round-off (linear, direct: 1e-12 of the largest
     displacement) or the solver tolerance (corotational, CG rtol 1e-10: 1e-7).
 (e) restart twice in a row (checkpoints alternate between two slots).
@@ -114,6 +118,11 @@ ledge = harness.write_scene(os.path.join(work, "ledge.txt"),
                             [("cube.mesh", 1000.0, 1e6, 0.3, 1, (0, 0, 0), (1, 0, 0, 0)),
                              ("cube.mesh", 1000.0, 1e6, 0.3, 0, (0.15, 0.51, 0), (1, 0, 0, 0))])
 checkpoint = restart_case("ledge", "(c) cube on a fixed cube's edge", ledge, world, 60, in_place=False)
+root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
+restart_case("stack", "(c) stack of three blocks (two-sided contacts)",
+             os.path.join(root, "scenes", "contact", "stack-scene.txt"),
+             ["-options_file", os.path.join(root, "config", "practical3.opts"), "-dt", "0.01"], 60,
+             in_place=False)
 resting = checkpoint["checkpoint/0/resting_contacts"]
 checks.check(bool(np.any(resting[:, 1] <= -2)),
              f"(c) the ledge checkpoint holds {int(np.sum(resting[:, 1] <= -2))} resting sharp-edge contacts "
