@@ -24,18 +24,19 @@
 // D is built from one solve with the unconstrained solver per row (back-solves
 // with the direct preset; in linear mode with a factorisation, from the kept
 // columns A^-1 e of the rows' vertices instead: two_sided_solve.cpp), reduced
-// over the ranks and solved identically on each; then A v = b + J^T lambda. The rows are few (a stack of blocks: a few
-// hundred); scenes without two-sided constraints never take this path.
+// over the ranks and solved identically on each; then A v = b + J^T lambda.
+// The rows are few (a stack of blocks: a few hundred); scenes without
+// two-sided constraints never take this path.
 // When the one-sided rows far outnumber the two-sided ones (m1 >= 16 (m2 + 2),
-// kProjectedSolveCost in projected_solve.cpp; e.g. two bodies pressed into each other and the
-// ground, held by the collision guard's zones), the projected Delassus path
-// keeps the one-sided constraints in the projection: with S(f) the projected
-// solve of A v = f, affine, S(f) = z + G (f - A z), G = P (P A P + I - P)^-1 P,
-// it solves the problem of the m2 two-sided rows J_2 on D_2 = J_2 G J_2^T
-// (m2 homogeneous projected solves) and g = J_2 S(b) - c, then
-// v = S(b + J_2^T lambda): m2 + 2 projected solves instead of m1 + m2 + 1
-// back-solves and a dense problem of size m1 + m2. The same solution, to the
-// inner CG's tolerance.
+// kProjectedSolveCost in projected_solve.cpp; e.g. two bodies pressed into
+// each other and the ground, held by the collision guard's zones), the
+// projected Delassus path keeps the one-sided constraints in the projection:
+// with S(f) the projected solve of A v = f, affine, S(f) = z + G (f - A z),
+// G = P (P A P + I - P)^-1 P, it solves the problem of the m2 two-sided rows
+// J_2 on D_2 = J_2 G J_2^T (m2 homogeneous projected solves) and
+// g = J_2 S(b) - c, then v = S(b + J_2^T lambda): m2 + 2 projected solves
+// instead of m1 + m2 + 1 back-solves and a dense problem of size m1 + m2. The
+// same solution, to the inner CG's tolerance.
 #pragma once
 
 #include <petscksp.h>
