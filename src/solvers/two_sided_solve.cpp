@@ -273,7 +273,10 @@ PetscErrorCode ProjectedSolver::KeepDelassusColumns(KSP solver,
   double bytes = 3.0 * static_cast<double>(vertices.size()) * local * sizeof(PetscScalar);
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &bytes, 1, MPI_DOUBLE, MPI_MAX,
                               PetscObjectComm((PetscObject)work_)));
-  if (bytes > kDelassusColumnBudgetBytes) PetscFunctionReturn(PETSC_SUCCESS);
+  if (bytes > kDelassusColumnBudgetBytes) {  // a back-solve per row: keep nothing
+    DropDelassusColumns({});
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
   PetscInt begin, end;
   PetscCall(VecGetOwnershipRange(work_, &begin, &end));
   for (const PetscInt vertex : vertices) {
