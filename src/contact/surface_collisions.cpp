@@ -100,15 +100,14 @@ void Test(const CollisionQuery &q, bool same_body, const std::array<int32_t, 4> 
 // grid) that meet; `upper_only` when a and b are one list: i < j.
 template <typename Visit>
 void ForEachCandidate(const std::vector<Box> &a, const UniformGrid &grid, const std::vector<Box> &b,
-                      bool upper_only, Visit visit) {
-  std::vector<int32_t> seen(b.size(), -1);
-  for (size_t i = 0; i < a.size(); ++i)
+                      bool upper_only, VisitMarks *marks, Visit visit) {
+  for (size_t i = 0; i < a.size(); ++i) {
+    marks->Begin(b.size());
     grid.ForEachInBox(a[i], [&](int32_t j) {
-      if (seen[j] == static_cast<int32_t>(i) || (upper_only && j <= static_cast<int32_t>(i)))
-        return;
-      seen[j] = static_cast<int32_t>(i);
+      if ((upper_only && j <= static_cast<int32_t>(i)) || !marks->First(j)) return;
       if (a[i].Overlaps(b[j])) visit(static_cast<int32_t>(i), j);
     });
+  }
 }
 
 UniformGrid GridOf(const std::vector<Box> &boxes) {
@@ -127,10 +126,10 @@ struct Side {
 enum class Kind { kVertexTriangle, kTriangleVertex, kEdgeEdge };
 
 void Pairs(const CollisionQuery &q, Kind kind, const Side &a, const Side &b,
-           const UniformGrid &grid, bool same_body, bool upper_only,
+           const UniformGrid &grid, bool same_body, bool upper_only, VisitMarks *marks,
            std::vector<SurfaceCollision> *out, CollisionCount *count) {
   const ContactSurface &s = *q.surface;
-  ForEachCandidate(a.boxes, grid, b.boxes, upper_only, [&](int32_t i, int32_t j) {
+  ForEachCandidate(a.boxes, grid, b.boxes, upper_only, marks, [&](int32_t i, int32_t j) {
     const int32_t x = a.ids[i], y = b.ids[j];
     if (kind == Kind::kVertexTriangle) {
       const auto &t = s.triangles[y];
@@ -205,7 +204,7 @@ Side Near(const ContactSurface &s, const std::vector<Box> &body_boxes,
 void BetweenBodies(const CollisionQuery &q, const std::vector<int32_t> &vertices,
                    const std::vector<int32_t> &triangles, const std::vector<int32_t> &edges,
                    Boxes *boxes, const std::vector<std::array<int32_t, 1>> &singles,
-                   std::vector<SurfaceCollision> *out, CollisionCount *count) {
+                   VisitMarks *marks, std::vector<SurfaceCollision> *out, CollisionCount *count) {
   const ContactSurface &s = *q.surface;
   std::vector<Box> body_boxes(s.num_bodies());
   for (size_t i = 0; i < vertices.size(); ++i)
@@ -225,8 +224,8 @@ void BetweenBodies(const CollisionQuery &q, const std::vector<int32_t> &vertices
       Near(s, body_boxes, triangles, moving.triangles, s.triangles, &t_ids, &near.triangles);
   const Side e = Near(s, body_boxes, edges, moving.edges, s.edges, &e_ids, &near.edges);
   if (v.ids.empty() && e.ids.empty()) return;
-  Pairs(q, Kind::kVertexTriangle, v, t, GridOf(near.triangles), false, false, out, count);
-  Pairs(q, Kind::kEdgeEdge, e, e, GridOf(near.edges), false, true, out, count);
+  Pairs(q, Kind::kVertexTriangle, v, t, GridOf(near.triangles), false, false, marks, out, count);
+  Pairs(q, Kind::kEdgeEdge, e, e, GridOf(near.edges), false, true, marks, out, count);
 }
 
 std::vector<int32_t> Range(int32_t begin, int32_t end) {
@@ -295,14 +294,15 @@ std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery 
   // The moving primitives against the static ones, in the world frame.
   if (against_static) {
     Pairs(q, Kind::kVertexTriangle, {vertices, moving.vertices},
-          {static_.triangles, static_.triangle_boxes}, static_.triangle_grid, false, false, &out,
-          count);
+          {static_.triangles, static_.triangle_boxes}, static_.triangle_grid, false, false, &marks_,
+          &out, count);
     Pairs(q, Kind::kTriangleVertex, {triangles, moving.triangles},
-          {static_.vertices, static_.vertex_boxes}, static_.vertex_grid, false, false, &out, count);
+          {static_.vertices, static_.vertex_boxes}, static_.vertex_grid, false, false, &marks_,
+          &out, count);
     Pairs(q, Kind::kEdgeEdge, {edges, moving.edges}, {static_.edges, static_.edge_boxes},
-          static_.edge_grid, false, false, &out, count);
+          static_.edge_grid, false, false, &marks_, &out, count);
   }
-  if (between) BetweenBodies(q, vertices, triangles, edges, &moving, singles, &out, count);
+  if (between) BetweenBodies(q, vertices, triangles, edges, &moving, singles, &marks_, &out, count);
   // Each moving body against itself, in the frame of its (usable vertices') mean displacement.
   if (q.self_contact)
     for (const size_t b : moving_bodies_) {
@@ -451,17 +451,18 @@ void SurfaceCollisionFinder::BuildSelfCandidates(const CollisionQuery &q, size_t
   const Boxes boxes = BoxesOf(grown, vertices, triangles, edges, shift);
   c.vertex_triangle.clear();
   c.edge_edge.clear();
-  ForEachCandidate(boxes.vertices, GridOf(boxes.triangles), boxes.triangles, false,
+  ForEachCandidate(boxes.vertices, GridOf(boxes.triangles), boxes.triangles, false, &marks_,
                    [&](int32_t i, int32_t j) {
                      const int32_t v = vertices[i], t = triangles[j];
                      const auto &w = s.triangles[t];
                      if (v != w[0] && v != w[1] && v != w[2]) c.vertex_triangle.push_back({v, t});
                    });
-  ForEachCandidate(boxes.edges, GridOf(boxes.edges), boxes.edges, true, [&](int32_t i, int32_t j) {
-    const int32_t e = edges[i], f = edges[j];
-    if (!Shares({s.edges[e][0], s.edges[e][1], s.edges[f][0], s.edges[f][1]}))
-      c.edge_edge.push_back({e, f});
-  });
+  ForEachCandidate(boxes.edges, GridOf(boxes.edges), boxes.edges, true, &marks_,
+                   [&](int32_t i, int32_t j) {
+                     const int32_t e = edges[i], f = edges[j];
+                     if (!Shares({s.edges[e][0], s.edges[e][1], s.edges[f][0], s.edges[f][1]}))
+                       c.edge_edge.push_back({e, f});
+                   });
   MeasureSelfCandidates(q, b);
 }
 

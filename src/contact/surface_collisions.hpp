@@ -10,6 +10,7 @@
 // Not collective.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <utility>
@@ -48,6 +49,33 @@ struct CollisionCount {
   int64_t candidates = 0;  // pairs tested by CCD
   int64_t close = 0;       // pairs already closer than the separation at the start (not guarded)
   int64_t rebuilds = 0;    // self-contact candidate lists built
+};
+
+// Which items a query has visited, for item lists seen through a grid that
+// lists an item in every cell it overlaps. The marks are kept between queries
+// and told apart by a stamp, so a pass of a few moving boxes against a large
+// static grid does not clear an array of the grid's size per query list (on
+// the stairway scene, 5e8 marks in 800 steps: about a tenth of the guard's time).
+class VisitMarks {
+ public:
+  // Starts a query over items [0, count).
+  void Begin(size_t count) {
+    if (marks_.size() < count) marks_.resize(count, 0);
+    if (++stamp_ == 0) {  // wrapped: forget every mark
+      std::fill(marks_.begin(), marks_.end(), 0);
+      stamp_ = 1;
+    }
+  }
+  // True the first time item j is seen in this query.
+  bool First(int32_t j) {
+    if (marks_[j] == stamp_) return false;
+    marks_[j] = stamp_;
+    return true;
+  }
+
+ private:
+  std::vector<uint32_t> marks_;
+  uint32_t stamp_ = 0;
 };
 
 // Finds the colliding pairs. The primitives that never move (fixed bodies,
@@ -112,6 +140,7 @@ class SurfaceCollisionFinder {
   // A self-contact pass's boxes over the step: per surface vertex, and per
   // triangle and edge of the body.
   mutable std::vector<Box> vertex_box_, triangle_box_, edge_box_;
+  mutable VisitMarks marks_;
 };
 
 }  // namespace softbody
