@@ -128,13 +128,13 @@ PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g, PetscInt64 by
       " pairs, %" PetscInt_FMT " rounds, at most %" PetscInt_FMT
       " in a step); zones moved %" PetscInt_FMT " vertices (%" PetscInt_FMT
       " frozen); %" PetscInt_FMT " pairs tested (self-contact candidates listed %" PetscInt_FMT
-      " times, all ranks); %" PetscInt_FMT
+      " times, against fixed and resting bodies %" PetscInt_FMT " times, all ranks); %" PetscInt_FMT
       " pairs closer than the separation at a step's start (%" PetscInt_FMT
       " at the scene's start), not guarded; %" PetscInt_FMT " probes, %" PetscInt_FMT
       " of them repeating a clean one's positions (no detection); %.3f s",
       g->passes_guarded, g->collisions, g->rounds, g->max_rounds, g->zone_vertices,
-      g->frozen_vertices, g->candidates, g->rebuilds, g->close_pairs, g->initial_close_pairs,
-      g->probes, g->repeated, (double)g->seconds));
+      g->frozen_vertices, g->candidates, g->rebuilds, g->static_rebuilds, g->close_pairs,
+      g->initial_close_pairs, g->probes, g->repeated, (double)g->seconds));
   if (bytes > 0)
     PetscCall(PetscPrintf(comm, "; halo and pairs: %.3g kB sent by the busiest rank in all",
                           bytes / 1e3));

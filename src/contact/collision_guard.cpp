@@ -263,8 +263,8 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
   query_.changed = nullptr;
   query_.usable = parallel_ ? &usable_ : nullptr;
   query_.owned = parallel_ ? &owned_mask_ : nullptr;
-  // Pairs tested, pairs close at the start, self-contact candidate lists built.
-  PetscInt rounds = 0, counts[3] = {0, 0, 0};
+  // Pairs tested, pairs close at the start, self-contact and static candidate lists built.
+  PetscInt rounds = 0, counts[4] = {0, 0, 0, 0};
   bool stopped_all = false;  // every free vertex stays where it started (no zone settled)
   for (;; ++rounds) {
     CollisionCount count;
@@ -272,6 +272,7 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
     counts[0] += count.candidates;
     if (rounds == 0) counts[1] += count.close;
     counts[2] += count.rebuilds;
+    counts[3] += count.static_rebuilds;
     PetscCall(ShareCollisions(&collisions));
     if (collisions.empty()) break;
     stats_.collisions += static_cast<PetscInt>(collisions.size());
@@ -286,10 +287,11 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
     query_.changed = &changed;
   }
   query_.changed = nullptr;
-  if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 3, MPIU_INT, MPI_SUM, comm_));
+  if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 4, MPIU_INT, MPI_SUM, comm_));
   stats_.candidates += counts[0];
   stats_.close_pairs += counts[1];
   stats_.rebuilds += counts[2];
+  stats_.static_rebuilds += counts[3];
   if (rounds > 0) ++stats_.passes_guarded;
   stats_.rounds += rounds;
   stats_.max_rounds = std::max(stats_.max_rounds, rounds);

@@ -53,11 +53,12 @@ struct GuardStatistics {
   PetscInt frozen_vertices = 0;         // of them, in immobile zones
   PetscInt close_pairs = 0;             // pairs closer than the separation at a step's start
   PetscInt initial_close_pairs =
-      0;                    // of them, at the scene's start (placed touching or overlapping)
-  PetscInt candidates = 0;  // pairs tested by CCD
-  PetscInt rebuilds = 0;    // self-contact candidate lists built, summed over ranks
-  PetscInt probes = 0;      // Probe calls
-  PetscInt repeated = 0;    // of them, on the positions of the last probe, which moved nothing
+      0;                         // of them, at the scene's start (placed touching or overlapping)
+  PetscInt candidates = 0;       // pairs tested by CCD
+  PetscInt rebuilds = 0;         // self-contact candidate lists built, summed over ranks
+  PetscInt static_rebuilds = 0;  // candidate lists against fixed or resting bodies, summed
+  PetscInt probes = 0;           // Probe calls
+  PetscInt repeated = 0;         // of them, on the positions of the last probe, which moved nothing
   PetscLogDouble seconds = 0;
 };
 

@@ -37,9 +37,7 @@ Box SweptBox(const CollisionQuery &q, const std::array<int32_t, N> &vertices, co
 }
 
 // The boxes of the listed primitives.
-struct Boxes {
-  std::vector<Box> vertices, triangles, edges;
-};
+using Boxes = PrimitiveBoxes;
 Boxes BoxesOf(const CollisionQuery &q, const std::vector<int32_t> &vertices,
               const std::vector<int32_t> &triangles, const std::vector<int32_t> &edges,
               const Point &shift) {
@@ -291,17 +289,7 @@ std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery 
   Boxes moving = against_static ? BoxesOf(q, vertices, triangles, edges, Point::Zero())
                  : between      ? BoxesOf(q, vertices, none, none, Point::Zero())
                                 : Boxes();
-  // The moving primitives against the static ones, in the world frame.
-  if (against_static) {
-    Pairs(q, Kind::kVertexTriangle, {vertices, moving.vertices},
-          {static_.triangles, static_.triangle_boxes}, static_.triangle_grid, false, false, &marks_,
-          &out, count);
-    Pairs(q, Kind::kTriangleVertex, {triangles, moving.triangles},
-          {static_.vertices, static_.vertex_boxes}, static_.vertex_grid, false, false, &marks_,
-          &out, count);
-    Pairs(q, Kind::kEdgeEdge, {edges, moving.edges}, {static_.edges, static_.edge_boxes},
-          static_.edge_grid, false, false, &marks_, &out, count);
-  }
+  if (against_static) StaticPass(q, vertices, triangles, edges, moving, &out, count);
   if (between) BetweenBodies(q, vertices, triangles, edges, &moving, singles, &marks_, &out, count);
   // Each moving body against itself, in the frame of its (usable vertices') mean displacement.
   if (q.self_contact)
@@ -311,6 +299,118 @@ std::vector<SurfaceCollision> SurfaceCollisionFinder::Find(const CollisionQuery 
       if (!body_vertices.empty()) SelfPass(q, b, body_vertices, &out, count);
     }
   return out;
+}
+
+// The moving primitives against the static ones, in the world frame: the
+// listed candidates whose boxes meet, as the static grids would give them.
+void SurfaceCollisionFinder::StaticPass(const CollisionQuery &q,
+                                        const std::vector<int32_t> &vertices,
+                                        const std::vector<int32_t> &triangles,
+                                        const std::vector<int32_t> &edges, const Boxes &moving,
+                                        std::vector<SurfaceCollision> *out,
+                                        CollisionCount *count) const {
+  if (!StaticCandidatesHold(q, vertices, triangles, edges)) {
+    BuildStaticCandidates(q, vertices, triangles, edges);
+    ++count->static_rebuilds;
+  }
+  const ContactSurface &s = *q.surface;
+  const StaticCandidates &c = static_candidates_;
+  for (const auto &[i, t] : c.vertex_triangle)
+    if (moving.vertices[i].Overlaps(static_.triangle_boxes[t])) {
+      const auto &w = s.triangles[static_.triangles[t]];
+      Test(q, false, {vertices[i], w[0], w[1], w[2]}, true, out, count);
+    }
+  for (const auto &[i, v] : c.triangle_vertex)
+    if (moving.triangles[i].Overlaps(static_.vertex_boxes[v])) {
+      const auto &w = s.triangles[triangles[i]];
+      Test(q, false, {static_.vertices[v], w[0], w[1], w[2]}, true, out, count);
+    }
+  for (const auto &[i, f] : c.edge_edge)
+    if (moving.edges[i].Overlaps(static_.edge_boxes[f])) {
+      const auto &x = s.edges[edges[i]], &y = s.edges[static_.edges[f]];
+      Test(q, false, {x[0], x[1], y[0], y[1]}, false, out, count);
+    }
+}
+
+// Whether the static candidates were built from these moving primitives and
+// none of their vertices has left its box at the build by more than half its
+// body's skin.
+bool SurfaceCollisionFinder::StaticCandidatesHold(const CollisionQuery &q,
+                                                  const std::vector<int32_t> &vertices,
+                                                  const std::vector<int32_t> &triangles,
+                                                  const std::vector<int32_t> &edges) const {
+  const StaticCandidates &c = static_candidates_;
+  if (!c.valid || c.vertices != vertices || c.triangles != triangles || c.edges != edges)
+    return false;
+  for (size_t i = 0; i < vertices.size(); ++i) {
+    const int32_t v = vertices[i];
+    const Point &start = (*q.start)[v], &end = (*q.end)[v];
+    // Round-off of the comparison (a few ulps of the coordinates).
+    const double reach =
+        half_skin_[q.surface->body[v]] -
+        1e-12 * (1 + std::max(start.cwiseAbs().maxCoeff(), end.cwiseAbs().maxCoeff()));
+    if (!c.vertex_boxes[i].Contains(start, reach) || !c.vertex_boxes[i].Contains(end, reach))
+      return false;
+  }
+  return true;
+}
+
+// The static candidates from this step's positions: the pairs whose boxes meet
+// when each moving vertex's box is grown by half its body's skin.
+void SurfaceCollisionFinder::BuildStaticCandidates(const CollisionQuery &q,
+                                                   const std::vector<int32_t> &vertices,
+                                                   const std::vector<int32_t> &triangles,
+                                                   const std::vector<int32_t> &edges) const {
+  const ContactSurface &s = *q.surface;
+  StaticCandidates &c = static_candidates_;
+  c.valid = true;
+  c.vertices = vertices;
+  c.triangles = triangles;
+  c.edges = edges;
+  c.vertex_boxes.assign(vertices.size(), Box());
+  const double grow = q.tolerance.separation + q.tolerance.band;
+  std::vector<Box> grown(s.num_vertices());  // per surface vertex: its box, grown
+  for (size_t i = 0; i < vertices.size(); ++i) {
+    const int32_t v = vertices[i];
+    c.vertex_boxes[i].Extend((*q.start)[v]);
+    c.vertex_boxes[i].Extend((*q.end)[v]);
+    grown[v] = c.vertex_boxes[i];
+    const double by = grow + half_skin_[s.body[v]];
+    grown[v].lower.array() -= by;
+    grown[v].upper.array() += by;
+  }
+  // A static vertex of a moving primitive: its own box, grown as SweptBox's.
+  auto box_of = [&](int32_t v) {
+    if ((*q.moving)[v]) return grown[v];
+    Box box;
+    box.Extend((*q.start)[v]);
+    box.Extend((*q.end)[v]);
+    box.lower.array() -= grow;
+    box.upper.array() += grow;
+    return box;
+  };
+  Boxes boxes;
+  for (const int32_t v : vertices) boxes.vertices.push_back(grown[v]);
+  for (const int32_t t : triangles) {
+    Box box;
+    for (const int32_t v : s.triangles[t]) box.Extend(box_of(v));
+    boxes.triangles.push_back(box);
+  }
+  for (const int32_t e : edges) {
+    Box box;
+    for (const int32_t v : s.edges[e]) box.Extend(box_of(v));
+    boxes.edges.push_back(box);
+  }
+  auto list = [&](const std::vector<Box> &a, const UniformGrid &grid, const std::vector<Box> &b,
+                  std::vector<std::array<int32_t, 2>> *pairs) {
+    pairs->clear();
+    ForEachCandidate(a, grid, b, false, &marks_, [&](int32_t i, int32_t j) {
+      pairs->push_back({i, j});
+    });
+  };
+  list(boxes.vertices, static_.triangle_grid, static_.triangle_boxes, &c.vertex_triangle);
+  list(boxes.triangles, static_.vertex_grid, static_.vertex_boxes, &c.triangle_vertex);
+  list(boxes.edges, static_.edge_grid, static_.edge_boxes, &c.edge_edge);
 }
 
 // One body against itself, in the frame of its mean displacement `shift`: the

@@ -49,6 +49,12 @@ struct CollisionCount {
   int64_t candidates = 0;  // pairs tested by CCD
   int64_t close = 0;       // pairs already closer than the separation at the start (not guarded)
   int64_t rebuilds = 0;    // self-contact candidate lists built
+  int64_t static_rebuilds = 0;  // candidate lists against the static primitives built
+};
+
+// Boxes of listed surface vertices, triangles and edges.
+struct PrimitiveBoxes {
+  std::vector<Box> vertices, triangles, edges;
 };
 
 // Which items a query has visited, for item lists seen through a grid that
@@ -88,7 +94,9 @@ class VisitMarks {
 // vertex leaves its box at the build (relative to the body's mean start
 // position) by more than half the skin, or the usable vertices change. Every
 // pair whose boxes meet in a step is in the list, and the same box test as a
-// fresh grid's picks the pairs CCD tests: the result is the same.
+// fresh grid's picks the pairs CCD tests: the result is the same. The moving
+// primitives against the static ones keep such a list too, in the world frame
+// (a body resting on a fixed one keeps it; a falling one rebuilds it).
 class SurfaceCollisionFinder {
  public:
   // query.start must hold the static vertices' positions.
@@ -118,6 +126,25 @@ class SurfaceCollisionFinder {
     std::vector<double> vertex_triangle_distance, edge_edge_distance;
     std::vector<Point> built;
   };
+  // The moving primitives' candidates among the static ones: pairs (index in
+  // the build's list of moving vertices, triangles or edges, static surface
+  // primitive).
+  struct StaticCandidates {
+    bool valid = false;
+    std::vector<int32_t> vertices, triangles, edges;  // the usable moving ones at the build
+    std::vector<Box> vertex_boxes;  // per vertex of `vertices`: its start and end at the build
+    std::vector<std::array<int32_t, 2>> vertex_triangle, triangle_vertex, edge_edge;
+  };
+  void StaticPass(const CollisionQuery &query, const std::vector<int32_t> &vertices,
+                  const std::vector<int32_t> &triangles, const std::vector<int32_t> &edges,
+                  const PrimitiveBoxes &moving, std::vector<SurfaceCollision> *out,
+                  CollisionCount *count) const;
+  bool StaticCandidatesHold(const CollisionQuery &query, const std::vector<int32_t> &vertices,
+                            const std::vector<int32_t> &triangles,
+                            const std::vector<int32_t> &edges) const;
+  void BuildStaticCandidates(const CollisionQuery &query, const std::vector<int32_t> &vertices,
+                             const std::vector<int32_t> &triangles,
+                             const std::vector<int32_t> &edges) const;
   void SelfPass(const CollisionQuery &query, size_t body, const std::vector<int32_t> &vertices,
                 std::vector<SurfaceCollision> *out, CollisionCount *count) const;
   bool StaysApart(const CollisionQuery &query, const SelfCandidates &c, int32_t first_vertex,
@@ -137,6 +164,7 @@ class SurfaceCollisionFinder {
   Binned static_;
   std::vector<double> half_skin_;             // per body (m)
   mutable std::vector<SelfCandidates> self_;  // per body
+  mutable StaticCandidates static_candidates_;
   // A self-contact pass's boxes over the step: per surface vertex, and per
   // triangle and edge of the body.
   mutable std::vector<Box> vertex_box_, triangle_box_, edge_box_;

@@ -1,10 +1,11 @@
 // The collision guard's detection (contact/surface_collisions.hpp) against a
 // brute force: over a sequence of steps in which a sheet folds onto itself
-// (self-contact), a second sheet falls through it (two bodies) and both
-// jitter, SurfaceCollisionFinder::Find must report exactly the pairs that CCD
-// reports when every vertex-triangle and edge-edge pair is tested, and count
-// the same pairs close at the start. The steps alternate between small
-// motions (the self-contact candidates are reused) and large ones (they are
+// (self-contact), a second sheet falls through it (two bodies) and through a
+// third one that never moves (static), and the moving ones jitter,
+// SurfaceCollisionFinder::Find must report exactly the pairs that CCD reports
+// when every vertex-triangle and edge-edge pair is tested, and count the same
+// pairs close at the start. The steps alternate between small motions (the
+// self-contact and static candidates are reused) and large ones (they are
 // rebuilt), and the test checks that both happen. Cached pairs skip CCD when a
 // distance bound keeps them apart: a wrong bound misses pairs here.
 #include <gtest/gtest.h>
@@ -49,7 +50,8 @@ void AddSheet(ContactSurface *s, int32_t body) {
 
 // Step k's positions: sheet 0 folds about the line x = 0.45 (its far half
 // turns by up to 190 degrees, through its near half), sheet 1 falls through
-// it; every vertex jitters, by 1e-3 m on even steps and 0.03 m on odd ones.
+// it and through sheet 2, which stays at z = -0.25; every vertex of sheets 0
+// and 1 jitters, by 1e-3 m on even steps and 0.03 m on odd ones.
 std::vector<Point> Positions(const ContactSurface &s, int k, std::mt19937 &rng) {
   const double amplitude = k % 2 ? 0.03 : 1e-3;
   std::uniform_real_distribution<double> jitter(-amplitude, amplitude);
@@ -61,8 +63,11 @@ std::vector<Point> Positions(const ContactSurface &s, int k, std::mt19937 &rng) 
     if (s.body[v] == 0) {
       const double r = u - 0.45;
       x[v] = r <= 0 ? Point(u, w, 0) : Point(0.45 + r * std::cos(angle), w, r * std::sin(angle));
-    } else {
+    } else if (s.body[v] == 1) {
       x[v] = Point(0.2 + 0.5 * u, 0.1 + 0.5 * w, 0.5 - 1.0 * k / kSteps);
+    } else {
+      x[v] = Point(0.1 + 0.7 * u, 0.05 + 0.7 * w, -0.25);
+      continue;
     }
     x[v] += Point(jitter(rng), jitter(rng), jitter(rng));
   }
@@ -96,13 +101,19 @@ PairSet BruteForce(const ContactSurface &s, const std::vector<Point> &start,
   return found;
 }
 
-TEST(SurfaceCollisionFinder, FindsWhatTestingEveryPairFinds) {
+struct Totals {
+  int64_t rebuilds = 0, static_rebuilds = 0, reported = 0, reported_static = 0;
+};
+
+// Runs the finder over kSteps steps of positions(k) (sheets 0 and 1 moving,
+// sheet 2 static) and checks each step against the brute force.
+template <typename Positions>
+Totals CheckSteps(Positions positions) {
   ContactSurface s;
-  AddSheet(&s, 0);
-  AddSheet(&s, 1);
-  std::mt19937 rng(11);
-  std::vector<Point> start = Positions(s, 0, rng), end = start;
+  for (int32_t body = 0; body < 3; ++body) AddSheet(&s, body);
+  std::vector<Point> start = positions(s, 0), end = start;
   std::vector<char> moving(s.num_vertices(), 1);
+  for (int32_t v = s.vertex_start[2]; v < s.num_vertices(); ++v) moving[v] = 0;
   CollisionQuery q;
   q.surface = &s;
   q.start = &start;
@@ -113,9 +124,9 @@ TEST(SurfaceCollisionFinder, FindsWhatTestingEveryPairFinds) {
   q.self_contact = true;
   SurfaceCollisionFinder finder;
   finder.Setup(q);
-  int64_t rebuilds = 0, reported = 0;
+  Totals totals;
   for (int k = 1; k <= kSteps; ++k) {
-    end = Positions(s, k, rng);
+    end = positions(s, k);
     CollisionCount count;
     PairSet found;
     for (const SurfaceCollision &c : finder.Find(q, &count)) found.insert(c.vertices);
@@ -123,15 +134,43 @@ TEST(SurfaceCollisionFinder, FindsWhatTestingEveryPairFinds) {
     const PairSet expected = BruteForce(s, start, end, q.tolerance, &close);
     EXPECT_EQ(found, expected) << "step " << k;
     EXPECT_EQ(count.close, close) << "step " << k;
-    rebuilds += count.rebuilds;
-    reported += static_cast<int64_t>(expected.size());
+    totals.rebuilds += count.rebuilds;
+    totals.static_rebuilds += count.static_rebuilds;
+    totals.reported += static_cast<int64_t>(expected.size());
+    for (const auto &pair : expected)
+      totals.reported_static +=
+          std::any_of(pair.begin(), pair.end(), [&](int32_t v) { return !moving[v]; });
     start = end;
   }
-  // Both bodies fold or fall, so pairs collide; candidates are reused after the
-  // small motions and rebuilt after the large ones.
-  EXPECT_GT(reported, 20);
-  EXPECT_GT(rebuilds, kSteps / 2);
-  EXPECT_LT(rebuilds, 2 * kSteps);
+  return totals;
+}
+
+TEST(SurfaceCollisionFinder, FindsWhatTestingEveryPairFinds) {
+  std::mt19937 rng(11);
+  const Totals totals =
+      CheckSteps([&](const ContactSurface &s, int k) { return Positions(s, k, rng); });
+  // Both bodies fold or fall, so pairs collide, also with the static sheet;
+  // candidates are reused after the small motions and rebuilt after the large ones.
+  EXPECT_GT(totals.reported, 20);
+  EXPECT_GT(totals.reported_static, 5);
+  EXPECT_GT(totals.rebuilds, kSteps / 2);
+  EXPECT_LT(totals.rebuilds, 2 * kSteps);
+  EXPECT_GT(totals.static_rebuilds, kSteps / 4);
+}
+
+// Sheet 1 sinks slowly through the static sheet 2 (sheet 0 stays away): the
+// static candidates are kept over the small steps and still give every pair.
+TEST(SurfaceCollisionFinder, KeepsStaticCandidatesOverSmallSteps) {
+  std::mt19937 rng(12);
+  const Totals totals = CheckSteps([&](const ContactSurface &s, int k) {
+    std::vector<Point> x = Positions(s, 0, rng);
+    for (int32_t v = s.vertex_start[1]; v < s.vertex_start[2]; ++v)
+      x[v][2] += -0.7 - 0.1 * k / kSteps;  // from z = -0.2 to -0.3, through z = -0.25
+    return x;
+  });
+  EXPECT_GT(totals.reported_static, 5);
+  EXPECT_GT(totals.static_rebuilds, 0);
+  EXPECT_LT(totals.static_rebuilds, kSteps / 2);
 }
 
 }  // namespace
