@@ -369,7 +369,8 @@ void SurfaceCollisionFinder::BuildStaticCandidates(const CollisionQuery &q,
   c.edges = edges;
   c.vertex_boxes.assign(vertices.size(), Box());
   const double grow = q.tolerance.separation + q.tolerance.band;
-  std::vector<Box> grown(s.num_vertices());  // per surface vertex: its box, grown
+  // Per surface vertex: its box, grown (the self pass's boxes as scratch: it comes later).
+  std::vector<Box> &grown = vertex_box_;
   for (size_t i = 0; i < vertices.size(); ++i) {
     const int32_t v = vertices[i];
     c.vertex_boxes[i].Extend((*q.start)[v]);

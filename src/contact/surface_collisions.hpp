@@ -166,7 +166,7 @@ class SurfaceCollisionFinder {
   mutable std::vector<SelfCandidates> self_;  // per body
   mutable StaticCandidates static_candidates_;
   // A self-contact pass's boxes over the step: per surface vertex, and per
-  // triangle and edge of the body.
+  // triangle and edge of the body (vertex_box_ also the static lists' scratch).
   mutable std::vector<Box> vertex_box_, triangle_box_, edge_box_;
   mutable VisitMarks marks_;
 };
