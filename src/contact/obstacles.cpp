@@ -83,7 +83,7 @@ void Obstacles::AddFixedBody(size_t b) {
 void Obstacles::MoveFreeBodies() {
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (!scene_->bodies[b].fixed) body_box_[b] = state_->body_box(b);
-  free_grids_current_ = false;
+  ++pass_;
 }
 
 void Obstacles::BuildFixedBodyBoxes() {
@@ -134,18 +134,31 @@ void Obstacles::BinCurrent(const std::vector<IndexedItem<Item>> &static_items,
   BinItems(items.size(), bin);
 }
 
-void Obstacles::EnsureFreeGrids() const {
-  if (free_grids_current_ && binned_generation_ == free_items_.generation()) return;
+bool Obstacles::FreeGridCurrent(const FreeGridStamp &stamp) const {
+  return stamp.valid && stamp.pass == pass_ && stamp.generation == free_items_.generation();
+}
+
+void Obstacles::StampFreeGrid(FreeGridStamp *stamp) const {
+  *stamp = {true, pass_, free_items_.generation()};
+  if (!FreeGridCurrent(counted_stamp_)) ++free_grid_builds_;
+  counted_stamp_ = *stamp;
+}
+
+void Obstacles::EnsureFreeTets() const {
+  if (FreeGridCurrent(tets_stamp_)) return;
   BinCurrent(
       free_items_.static_tets(), [&](int32_t n, auto visit) { free_items_.ForEachTetOf(n, visit); },
       &free_tets_bin_);
+  StampFreeGrid(&tets_stamp_);
+}
+
+void Obstacles::EnsureFreeTriangles() const {
+  if (FreeGridCurrent(triangles_stamp_)) return;
   BinCurrent(
       free_items_.static_triangles(),
       [&](int32_t n, auto visit) { free_items_.ForEachTriangleOf(n, visit); },
       &free_triangles_bin_);
-  free_grids_current_ = true;
-  binned_generation_ = free_items_.generation();
-  ++free_grid_builds_;
+  StampFreeGrid(&triangles_stamp_);
 }
 
 void Obstacles::SetHit(const Point &point, const Point &normal, const Eigen::Vector3d &w,
@@ -168,7 +181,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
     return true;
   }
   const bool fixed_part = scene_->bodies[obstacle].fixed;
-  if (!fixed_part) EnsureFreeGrids();
+  if (!fixed_part) EnsureFreeTriangles();
   const Binned<FreeTriangle> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const UniformGrid &grid = bin.grid;
   if (grid.empty()) return false;
@@ -199,7 +212,7 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
 
 bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
-  if (!fixed_part) EnsureFreeGrids();
+  if (!fixed_part) EnsureFreeTets();
   bool inside = false;
   (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
       .ForEachNear(p, 0.0, [&](int32_t, const FreeTet &tet, const Box &box) {
@@ -213,7 +226,7 @@ bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
 
 bool Obstacles::LocateInFreeBody(const Point &p, int32_t body, double margin,
                                  Point *velocity) const {
-  EnsureFreeGrids();
+  EnsureFreeTets();
   bool found = false;
   free_tets_bin_.ForEachNear(p, 0.0, [&](int32_t, const FreeTet &tet, const Box &box) {
     if (found || tet[4] != body || !box.Contains(p, kBoxMargin)) return;
@@ -230,7 +243,7 @@ bool Obstacles::LocateInFreeBody(const Point &p, int32_t body, double margin,
 bool Obstacles::EntryOnBody(const Point &start, const Point &end, int32_t obstacle,
                             SurfaceHit *hit) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
-  if (!fixed_part) EnsureFreeGrids();
+  if (!fixed_part) EnsureFreeTriangles();
   const Binned<FreeTriangle> &bin = fixed_part ? fixed_triangles_bin_ : free_triangles_bin_;
   const Point direction = end - start;
   double first = kNoCrossing;
@@ -264,7 +277,7 @@ bool Obstacles::FindPenetration(const Point &p, int32_t body, const VertexObstac
     if (static_cast<int32_t>(b) != body && body_box_[b].Contains(p))
       (scene_->bodies[b].fixed ? near_fixed : near_free) = true;
   if (!near_fixed && !near_free) return natural >= 0 && NearFreeBody(p, natural, skip, hit);
-  if (near_free) EnsureFreeGrids();
+  if (near_free) EnsureFreeTets();
   for (const bool fixed_part : {true, false}) {
     if (!(fixed_part ? near_fixed : near_free)) continue;
     const int32_t inside = BodyContaining(p, fixed_part, body, skip);
@@ -304,7 +317,7 @@ template <class Keep>
 Point Obstacles::AngleWeightedNormal(int32_t natural, Keep keep) const {
   Point sum = Point::Zero();
   if (!state_->current(natural)) return sum;
-  EnsureFreeGrids();
+  EnsureFreeTriangles();
   std::vector<int32_t> ring;
   free_triangles_bin_.ForEachNear(
       WorldPoint(natural), 0, [&](int32_t t, const FreeTriangle &tri, const Box &) {

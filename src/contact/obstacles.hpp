@@ -137,7 +137,19 @@ class Obstacles {
   // indexed in the scene's list of fixed items.
   void AddFixedBody(size_t b);
   void BuildFixedBodyBoxes();
-  void EnsureFreeGrids() const;
+  // The free bodies' tet and triangle grids at the current positions and
+  // items, each built only when a query needs it (a pass that locates sharp
+  // edges in a free body needs only the tets).
+  void EnsureFreeTets() const;
+  void EnsureFreeTriangles() const;
+  // When a free grid was built: MoveFreeBodies' pass and free_items_'s generation.
+  struct FreeGridStamp {
+    bool valid = false;
+    uint64_t pass = 0, generation = 0;
+  };
+  bool FreeGridCurrent(const FreeGridStamp &stamp) const;
+  // Stamps a grid just built; counts the passes in which a free grid was built.
+  void StampFreeGrid(FreeGridStamp *stamp) const;
   // Items (tets or triangles: vertices and the body) binned in a uniform grid
   // over their boxes: the grid holds slots, at(slot) the item (from `base`,
   // slot = index, or `items`: free grids hold only the current items, O(local +
@@ -198,8 +210,8 @@ class Obstacles {
   FreeItems free_items_;
   mutable Binned<FreeTet> free_tets_bin_;
   mutable Binned<FreeTriangle> free_triangles_bin_;
-  mutable bool free_grids_current_ = false;
-  mutable uint64_t binned_generation_ = 0;  // free_items_'s, when the free grids were built
+  uint64_t pass_ = 0;  // MoveFreeBodies calls
+  mutable FreeGridStamp tets_stamp_, triangles_stamp_, counted_stamp_;
   mutable PetscInt free_grid_builds_ = 0;
   std::vector<std::pair<size_t, size_t>> separating_;  // (a < b), SetSeparating
   std::vector<Box> body_box_;  // broad phase: each obstacle body's bounding box
