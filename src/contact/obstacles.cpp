@@ -110,6 +110,11 @@ void Obstacles::BinItems(size_t count, Binned<Item> *bin) const {
 template <class Item, class ForEachOf>
 void Obstacles::BinCurrent(const std::vector<IndexedItem<Item>> &static_items,
                            ForEachOf for_each_of, Binned<Item> *bin) const {
+  if (bin->listed && bin->listed_generation == free_items_.generation() &&
+      bin->listed_current == state_->current_free()) {
+    BinItems(bin->items.size(), bin);
+    return;
+  }
   auto all_current = [&](const IndexedItem<Item> &i) {
     return std::all_of(i.item.begin(), i.item.end() - 1,
                        [&](int32_t m) { return state_->current(m); });
@@ -131,6 +136,9 @@ void Obstacles::BinCurrent(const std::vector<IndexedItem<Item>> &static_items,
   items.erase(
       std::unique(items.begin(), items.end(), [](auto a, auto b) { return a->id == b->id; }),
       items.end());
+  bin->listed = true;
+  bin->listed_generation = free_items_.generation();
+  bin->listed_current = state_->current_free();
   BinItems(items.size(), bin);
 }
 

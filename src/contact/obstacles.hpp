@@ -160,6 +160,12 @@ class Obstacles {
     std::vector<const IndexedItem<Item> *> items;  // id increasing
     std::vector<Box> boxes;
     UniformGrid grid;
+    // What `items` was listed from (free grids): free_items_'s generation and
+    // the free state's current vertices; while both stay, only boxes and grid
+    // change with the positions.
+    bool listed = false;
+    uint64_t listed_generation = 0;
+    std::vector<int32_t> listed_current;
     const IndexedItem<Item> &at(size_t slot) const { return base ? base[slot] : *items[slot]; }
     // visit(id, item, box) for the items whose cells meet the box around p of half-width radius.
     template <typename Visit>
