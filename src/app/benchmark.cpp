@@ -21,9 +21,12 @@ namespace {
 // Timed passes of the triad; the best one counts (the others warm caches and
 // pages, or are disturbed by the system).
 constexpr int kTriadPasses = 5;
-// Bytes a product with A or K reads per nonzero: an 8-byte value and a 4-byte
-// column index.
+// Bytes a product with A reads per nonzero: an 8-byte value and a 4-byte
+// column index (MATAIJ).
 constexpr double kProductBytesPerNonzero = 12.0;
+// The same for the linear step's product with K, stored as 3 x 3 blocks
+// (MATBAIJ): the value and a ninth of a block's column index.
+constexpr double kBlockProductBytesPerNonzero = 8.0 + 4.0 / 9.0;
 // Sweeps over the factor L per solve with it: a forward and a backward one.
 constexpr double kFactorSweepsPerSolve = 2.0;
 // Bytes a refill of A writes per nonzero (corotational mode): its 8-byte value.
@@ -175,11 +178,14 @@ PetscErrorCode MeasureSystem(ImplicitEuler *integrator, SystemSizes *sizes) {
 // solver iterations per solve and `solves_per_step` solves per step.
 double StepTrafficBytes(const SystemSizes &sizes, bool corotational, double iterations,
                         double solves_per_step) {
+  // A direct solve: the linear step's one product is with K; else CG's with A.
   const double products = sizes.preonly ? (corotational ? 0.0 : 1.0) : iterations * solves_per_step;
+  const double product_bytes =
+      sizes.preonly ? kBlockProductBytesPerNonzero : kProductBytesPerNonzero;
   const double factor_solves =
       sizes.preonly ? solves_per_step
                     : (sizes.factor_nonzeros > 0 ? iterations * solves_per_step : 0.0);
-  return kProductBytesPerNonzero * sizes.matrix_nonzeros * products +
+  return product_bytes * sizes.matrix_nonzeros * products +
          kFactorSweepsPerSolve * sizes.factor_bytes * sizes.factor_nonzeros * factor_solves +
          kVectorsPerOperation * sizeof(double) * sizes.rows * (products + factor_solves) +
          (corotational ? kRefillBytesPerNonzero * sizes.matrix_nonzeros : 0.0);

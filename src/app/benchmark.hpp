@@ -17,14 +17,15 @@
 //                   -bench_triad_mb MB per rank, 3 x 8 bytes per element, best
 //                   of 5 passes, summed over ranks (GB/s)
 //   bound_s         lower bound of a step's memory traffic over bandwidth_gbs:
-//                   12 bytes per nonzero of A or K per product with it (value
-//                   and column index: one product per step in linear mode, per
-//                   CG iteration otherwise), 2 x 8 bytes per nonzero of L per
-//                   solve with it (a forward and a backward sweep; 2 x 4 for a
-//                   single-precision factor), 8 bytes per nonzero of A per
-//                   refill (corotational), and per product or solve its input
-//                   and output vector (2 x 8 bytes per DOF); the rest of the
-//                   step's vector work not counted
+//                   per product, 12 bytes per nonzero of A (value and column
+//                   index; one product per CG iteration) or 8 + 4/9 per
+//                   nonzero of K (3 x 3 blocks, one index per block; the one
+//                   product of a linear direct step); 2 x 8 bytes per nonzero
+//                   of L per solve with it (a forward and a backward sweep;
+//                   2 x 4 for a single-precision factor); 8 bytes per nonzero
+//                   of A per refill (corotational); and per product or solve
+//                   its input and output vector (2 x 8 bytes per DOF); the
+//                   rest of the step's vector work not counted
 //   bound_fraction  bound_s / step_s
 // Rank 0 prints them as one line, "softbody bench: name=value ...", and they go
 // into the result file as root attributes.
