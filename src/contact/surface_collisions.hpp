@@ -127,8 +127,8 @@ class SurfaceCollisionFinder {
     std::vector<Point> built;
   };
   // The moving primitives' candidates among the static ones: pairs (index in
-  // the build's list of moving vertices, triangles or edges, static surface
-  // primitive).
+  // the build's list of moving vertices, triangles or edges; index in static_'s
+  // list of triangles, vertices or edges).
   struct StaticCandidates {
     bool valid = false;
     std::vector<int32_t> vertices, triangles, edges;  // the usable moving ones at the build
