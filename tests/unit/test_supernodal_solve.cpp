@@ -1,6 +1,6 @@
 // The supernodal factor's solves against a dense Cholesky solve (LAPACK dposv)
 // of the same matrix: softbody's tiled copy of CHOLMOD's factor
-// (TiledFactor, double precision) on matrices whose supernodes have whole
+// (TiledFactor, in double and in single precision) on matrices whose supernodes have whole
 // panels of four columns and plain columns left over, solving out of place
 // and in place, and its sweeps stopped at a column inside a supernode (as the
 // split factor's interior); and the PC "supernodal" in double and in single
@@ -14,6 +14,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <type_traits>
 #include <vector>
 
 #include "petsc_environment.hpp"
@@ -115,9 +116,21 @@ cholmod_factor *CholmodFactor(const std::vector<double> &a, int n, cholmod_commo
   return L;
 }
 
+// The tiled factor in each precision, with the accuracy its solves must reach.
+template <typename Real>
+class TiledFactorTest : public ::testing::Test {
+ protected:
+  using Factor = TiledFactor<Real>;
+  static constexpr double kTolerance =
+      std::is_same_v<Real, double> ? kDoubleTolerance : kSingleTolerance;
+};
+using Precisions = ::testing::Types<double, float>;
+TYPED_TEST_SUITE(TiledFactorTest, Precisions);
+
 }  // namespace
 
-TEST(TiledFactor, SolvesLikeDenseCholesky) {
+TYPED_TEST(TiledFactorTest, SolvesLikeDenseCholesky) {
+  using Factor = typename TestFixture::Factor;
   struct Case {
     int grid, dofs;
   };
@@ -133,19 +146,19 @@ TEST(TiledFactor, SolvesLikeDenseCholesky) {
     const int *super = static_cast<const int *>(L->super);
     int panels = 0, plain = 0;
     for (size_t k = 0; k < L->nsuper; ++k) {
-      panels += (super[k + 1] - super[k]) / TiledFactor::kPanel;
-      plain += (super[k + 1] - super[k]) % TiledFactor::kPanel;
+      panels += (super[k + 1] - super[k]) / Factor::kPanel;
+      plain += (super[k + 1] - super[k]) % Factor::kPanel;
     }
     EXPECT_GT(panels, 0);
     EXPECT_GT(plain, 0);
-    TiledFactor tiled;
+    Factor tiled;
     tiled.From(L);
     EXPECT_EQ(tiled.size(), n);
     const std::vector<double> b = RandomVector(n, 11u);
     const std::vector<double> reference = DenseSolve(a, b);
     std::vector<double> x(n, 0.0);
     tiled.Solve(b.data(), x.data());
-    EXPECT_LT(RelativeDifference(x, reference), kDoubleTolerance) << c.grid << " " << c.dofs;
+    EXPECT_LT(RelativeDifference(x, reference), TestFixture::kTolerance) << c.grid << " " << c.dofs;
     std::vector<double> in_place = b;
     tiled.Solve(in_place.data(), in_place.data());
     EXPECT_EQ(in_place, x);
@@ -154,7 +167,8 @@ TEST(TiledFactor, SolvesLikeDenseCholesky) {
   }
 }
 
-TEST(TiledFactor, SweepsStoppedInsideASupernode) {
+TYPED_TEST(TiledFactorTest, SweepsStoppedInsideASupernode) {
+  using Factor = typename TestFixture::Factor;
   const int grid = 6, dofs = 3, n = grid * grid * grid * dofs;
   const std::vector<double> a = GridDense(grid, dofs, 17u);
   cholmod_common common;
@@ -166,9 +180,9 @@ TEST(TiledFactor, SweepsStoppedInsideASupernode) {
   size_t widest = 0;
   for (size_t k = 0; k < L->nsuper; ++k)
     if (super[k + 1] - super[k] > super[widest + 1] - super[widest]) widest = k;
-  ASSERT_GE(super[widest + 1] - super[widest], 2 * TiledFactor::kPanel);
-  const int limit = super[widest] + TiledFactor::kPanel + 2;
-  TiledFactor whole, cut;
+  ASSERT_GE(super[widest + 1] - super[widest], 2 * Factor::kPanel);
+  const int limit = super[widest] + Factor::kPanel + 2;
+  Factor whole, cut;
   whole.From(L);
   cut.From(L, limit);
   EXPECT_EQ(cut.EntriesBefore(n), whole.EntriesBefore(n));
@@ -177,22 +191,22 @@ TEST(TiledFactor, SweepsStoppedInsideASupernode) {
   whole.Solve(b.data(), x.data());
   // Forward over the columns before the limit, then the rows from the limit on
   // set to the solution's: the backward sweep must give the solution's others.
-  double *y = cut.y();
+  auto *y = cut.y();
   const int *permutation = cut.permutation();
-  for (int i = 0; i < n; ++i) y[i] = b[permutation[i]];
+  for (int i = 0; i < n; ++i) y[i] = static_cast<TypeParam>(b[permutation[i]]);
   cut.Forward(limit);
-  for (int i = limit; i < n; ++i) y[i] = x[permutation[i]];
+  for (int i = limit; i < n; ++i) y[i] = static_cast<TypeParam>(x[permutation[i]]);
   cut.Backward(limit);
   std::vector<double> interior(limit), reference(limit);
   for (int i = 0; i < limit; ++i) {
     interior[i] = y[i];
     reference[i] = x[permutation[i]];
   }
-  EXPECT_LT(RelativeDifference(interior, reference), kDoubleTolerance);
+  EXPECT_LT(RelativeDifference(interior, reference), TestFixture::kTolerance);
   // The whole solve through both pieces of the cut supernode.
   std::vector<double> through_cut(n);
   cut.Solve(b.data(), through_cut.data());
-  EXPECT_LT(RelativeDifference(through_cut, x), kDoubleTolerance);
+  EXPECT_LT(RelativeDifference(through_cut, x), TestFixture::kTolerance);
   cholmod_free_factor(&L, &common);
   cholmod_finish(&common);
 }

@@ -54,219 +54,6 @@ constexpr double kCopyPeakOverFactor = 1.05;
 constexpr double kBudgetShareOfMemory = 0.75;
 constexpr double kBytesPerMB = 1024.0 * 1024.0;
 
-// CHOLMOD's supernodal factor copied into softbody's own storage (huge pages,
-// large_array.hpp) in the precision Real, and the two triangular sweeps with
-// it on y (in the factor's permuted order), optionally only over the columns
-// before `limit` (the interior of a split factor, see Split).
-//
-// Supernode k holds columns [first, first + columns) of L, `height` rows each
-// in CHOLMOD (the triangle on top, then the rows listed in `rows`); here column
-// j of a supernode keeps only its rows j..height-1, so the zeros above the
-// diagonal blocks' diagonals are neither stored nor streamed. Plain loops
-// (vectorised; the sums by omp simd) stream the factor at the memory's speed
-// (docs/design/fem-solvers.md).
-template <typename Real>
-struct PackedFactor {
-  int n = 0, supernodes = 0;
-  std::vector<int> permutation, first_column, row_start, rows;  // CHOLMOD's Perm, super, pi, s
-  std::vector<size_t> value_start;  // per supernode: its first value (packed columns)
-  LargeArray<Real> values;
-  std::vector<Real> inverse_diagonal;  // per column: 1 / L_jj
-  std::vector<Real> y, work;
-
-  // Copies L's values, consuming them: the whole pages of L->x are returned to
-  // the system behind the copy (release_pages.hpp); the caller drops them after.
-  void MoveFrom(cholmod_factor *L) {
-    CopyStructure(L);
-    CopyValues(L);
-    y.resize(n);
-    size_t largest = 0;
-    for (int k = 0; k < supernodes; ++k)
-      largest = std::max<size_t>(largest, row_start[k + 1] - row_start[k]);
-    work.resize(largest);
-  }
-
-  // Permutation, supernodes, row lists and the packed columns' offsets.
-  void CopyStructure(const cholmod_factor *L) {
-    n = static_cast<int>(L->n);
-    supernodes = static_cast<int>(L->nsuper);
-    const int *perm = static_cast<const int *>(L->Perm),
-              *super = static_cast<const int *>(L->super), *pi = static_cast<const int *>(L->pi),
-              *s = static_cast<const int *>(L->s);
-    permutation.assign(perm, perm + n);
-    first_column.assign(super, super + supernodes + 1);
-    row_start.assign(pi, pi + supernodes + 1);
-    value_start.resize(supernodes + 1);
-    rows.assign(s, s + pi[supernodes]);
-    size_t packed = 0;
-    for (int k = 0; k < supernodes; ++k) {
-      const size_t columns = super[k + 1] - super[k], height = pi[k + 1] - pi[k];
-      value_start[k] = packed;
-      packed += columns * height - columns * (columns - 1) / 2;
-    }
-    value_start[supernodes] = packed;
-  }
-
-  // The values of every column from its diagonal down, and 1 / L_jj.
-  void CopyValues(const cholmod_factor *L) {
-    const int *px = static_cast<const int *>(L->px);
-    const double *x = static_cast<const double *>(L->x);
-    values.resize(value_start[supernodes]);
-    inverse_diagonal.resize(n);
-    ReleaseBehind behind(x, true);
-    for (int k = 0; k < supernodes; ++k) {
-      behind.Consumed(x + px[k]);
-      const int columns = first_column[k + 1] - first_column[k],
-                height = row_start[k + 1] - row_start[k];
-      Real *out = values.data() + value_start[k];
-      for (int j = 0; j < columns; ++j) {
-        inverse_diagonal[first_column[k] + j] =
-            static_cast<Real>(1.0 / x[px[k] + static_cast<size_t>(j) * height + j]);
-        for (int i = j; i < height; ++i)
-          *out++ = static_cast<Real>(x[px[k] + static_cast<size_t>(j) * height + i]);
-      }
-    }
-  }
-
-  // Entries of the columns before `limit` (what a pair of sweeps streams).
-  double EntriesBefore(int limit) const {
-    double entries = 0;
-    for (int k = 0; k < supernodes; ++k) {
-      const int columns = std::min(first_column[k + 1], limit) - first_column[k];
-      const int height = row_start[k + 1] - row_start[k];
-      for (int j = 0; j < columns; ++j) entries += height - j;
-    }
-    return entries;
-  }
-
-  // Column j of supernode k from its diagonal entry down (height - j entries).
-  const Real *Column(int k, int j, int height) const {
-    return values.data() + value_start[k] + static_cast<size_t>(j) * height -
-           static_cast<size_t>(j) * (j - 1) / 2;
-  }
-
-  // out[i] -= sum_q c_q[i] v_q over i < count, four columns q at once.
-  static void Update4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, Real v0,
-                      Real v1, Real v2, Real v3, Real *out, int count) {
-#pragma omp simd
-    for (int i = 0; i < count; ++i) out[i] -= c0[i] * v0 + c1[i] * v1 + c2[i] * v2 + c3[i] * v3;
-  }
-  // s_q = sum_i c_q[i] x[i] over i < count, four columns q at once.
-  static void Dot4(const Real *c0, const Real *c1, const Real *c2, const Real *c3, const Real *x,
-                   int count, Real *s) {
-    Real s0 = 0, s1 = 0, s2 = 0, s3 = 0;
-#pragma omp simd reduction(+ : s0, s1, s2, s3)
-    for (int i = 0; i < count; ++i) {
-      s0 += c0[i] * x[i];
-      s1 += c1[i] * x[i];
-      s2 += c2[i] * x[i];
-      s3 += c3[i] * x[i];
-    }
-    s[0] = s0;
-    s[1] = s1;
-    s[2] = s2;
-    s[3] = s3;
-  }
-
-  // y <- L^-1 y over the columns j < limit (their updates reach every row).
-  // Columns four at a time: their 4 x 4 triangle first, then one pass over the
-  // rows below it, in the triangle and in the rows below the supernode.
-  void Forward(int limit) {
-    for (int k = 0; k < supernodes && first_column[k] < limit; ++k) {
-      const int first = first_column[k], columns = first_column[k + 1] - first;
-      const int used = std::min(columns, limit - first);
-      const int height = row_start[k + 1] - row_start[k], below = height - columns;
-      Real *yk = y.data() + first, *w = work.data();
-      const Real *inverse = inverse_diagonal.data() + first;
-      if (below > 0)
-        for (int i = 0; i < below; ++i) w[i] = 0;
-      int j = 0;
-      for (; j + 4 <= used; j += 4) {
-        const Real *c[4];  // c[q][i]: row i of column j + q
-        for (int q = 0; q < 4; ++q) c[q] = Column(k, j + q, height) - (j + q);
-        for (int q = 0; q < 4; ++q) {
-          yk[j + q] *= inverse[j + q];
-          for (int i = j + q + 1; i < j + 4; ++i) yk[i] -= c[q][i] * yk[j + q];
-        }
-        Update4(c[0] + j + 4, c[1] + j + 4, c[2] + j + 4, c[3] + j + 4, yk[j], yk[j + 1], yk[j + 2],
-                yk[j + 3], yk + j + 4, columns - j - 4);
-        if (below > 0)
-          Update4(c[0] + columns, c[1] + columns, c[2] + columns, c[3] + columns, -yk[j],
-                  -yk[j + 1], -yk[j + 2], -yk[j + 3], w, below);
-      }
-      for (; j < used; ++j) {
-        const Real *column = Column(k, j, height) - j;  // column[i]: row i
-        const Real v = yk[j] * inverse[j];
-        yk[j] = v;
-#pragma omp simd
-        for (int i = j + 1; i < columns; ++i) yk[i] -= column[i] * v;
-        if (below > 0) {
-#pragma omp simd
-          for (int i = 0; i < below; ++i) w[i] += column[columns + i] * v;
-        }
-      }
-      if (below > 0) {
-        const int *r = rows.data() + row_start[k] + columns;
-        for (int i = 0; i < below; ++i) y[r[i]] -= w[i];
-      }
-    }
-  }
-
-  // y <- L^-T y over the columns j < limit, the others' y taken as known.
-  // Columns four at a time from the last: their dot products with the rows
-  // below their 4 x 4 triangle in one pass, then the triangle.
-  void Backward(int limit) {
-    for (int k = supernodes - 1; k >= 0; --k) {
-      const int first = first_column[k], columns = first_column[k + 1] - first;
-      if (first >= limit) continue;
-      const int used = std::min(columns, limit - first);
-      const int height = row_start[k + 1] - row_start[k], below = height - columns;
-      Real *yk = y.data() + first, *w = work.data();
-      const Real *inverse = inverse_diagonal.data() + first;
-      if (below > 0) {
-        const int *r = rows.data() + row_start[k] + columns;
-        for (int i = 0; i < below; ++i) w[i] = y[r[i]];
-      }
-      int j = used;
-      for (; j >= 4; j -= 4) {
-        const int j0 = j - 4;
-        const Real *c[4];
-        for (int q = 0; q < 4; ++q) c[q] = Column(k, j0 + q, height) - (j0 + q);
-        Real s[4] = {0, 0, 0, 0}, t[4];
-        Dot4(c[0] + j, c[1] + j, c[2] + j, c[3] + j, yk + j, columns - j, s);
-        if (below > 0) {
-          Dot4(c[0] + columns, c[1] + columns, c[2] + columns, c[3] + columns, w, below, t);
-          for (int q = 0; q < 4; ++q) s[q] += t[q];
-        }
-        for (int q = 3; q >= 0; --q) {
-          Real sum = s[q];
-          for (int i = j0 + q + 1; i < j; ++i) sum += c[q][i] * yk[i];
-          yk[j0 + q] = (yk[j0 + q] - sum) * inverse[j0 + q];
-        }
-      }
-      for (--j; j >= 0; --j) {
-        const Real *column = Column(k, j, height) - j;
-        Real sum = 0;
-#pragma omp simd reduction(+ : sum)
-        for (int i = j + 1; i < columns; ++i) sum += column[i] * yk[i];
-        if (below > 0) {
-#pragma omp simd reduction(+ : sum)
-          for (int i = 0; i < below; ++i) sum += column[columns + i] * w[i];
-        }
-        yk[j] = (yk[j] - sum) * inverse[j];
-      }
-    }
-  }
-
-  // x = A^-1 b with A = P^T L L^T P.
-  void Solve(const double *b, double *x) {
-    for (int i = 0; i < n; ++i) y[i] = static_cast<Real>(b[permutation[i]]);
-    Forward(n);
-    Backward(n);
-    for (int i = 0; i < n; ++i) x[permutation[i]] = y[i];
-  }
-};
-
 // A dense Cholesky factor (lower, column-major) and its two sweeps.
 template <typename Real>
 struct DenseFactor {
@@ -315,9 +102,9 @@ struct Split {
   std::vector<PetscInt> separator_local;  // per separator index k: local index in M_r
   Mat *local = nullptr;                   // M_r
   cholmod_factor *factor = nullptr;       // symbolic (values dropped after the copy)
-  PackedFactor<float> single;
-  TiledFactor full;                 // split at the interior's end
-  DenseFactor<float> dense_single;  // rank 0
+  TiledFactor<float> single;              // split at the interior's end
+  TiledFactor<double> full;               // the same in double
+  DenseFactor<float> dense_single;        // rank 0
   DenseFactor<double> dense_full;
   std::vector<double> separator_values;  // n_S: right-hand side, then solution
   std::vector<double> local_b;           // per local index
@@ -331,9 +118,9 @@ struct Supernodal {
   SupernodalOrdering ordering = kOrderingBest;
   SupernodalPrecision precision = kDouble;
   SupernodalLimits limits;
-  PackedFactor<float> single;  // one rank, single precision
-  TiledFactor full;            // one rank, double precision
-  Split split;                 // more than one rank
+  TiledFactor<float> single;  // one rank, single precision
+  TiledFactor<double> full;   // one rank, double precision
+  Split split;                // more than one rank
   double stored = 0, nonzeros = 0, flops = 0;
   // The last set-up met a matrix that is not (numerically) positive definite:
   // decided on all ranks together; the PC then reports PC_FACTOR_NUMERIC_ZEROPIVOT
@@ -741,7 +528,7 @@ std::vector<double> TrailingBlock(const cholmod_factor *L, int interior, int sep
   return trailing;
 }
 
-// This rank's part after a factorisation of M_r: the packed copy of its factor
+// This rank's part after a factorisation of M_r: the tiled copy of its factor
 // (whose values CHOLMOD then drops), C_r = L_SS L_SS^T into schur (lower), and
 // the entries and flops it contributes.
 PetscErrorCode KeepLocalFactor(Supernodal *s, std::vector<double> *schur, double *entries,
@@ -751,7 +538,7 @@ PetscErrorCode KeepLocalFactor(Supernodal *s, std::vector<double> *schur, double
   const int interior = static_cast<int>(p.interior), separator = static_cast<int>(p.separator);
   const std::vector<double> trailing = TrailingBlock(p.factor, interior, separator);
   if (s->precision == kSingle) {
-    p.single.MoveFrom(p.factor);
+    p.single.MoveFrom(p.factor, interior);
     *entries = p.single.EntriesBefore(interior);
   } else {
     p.full.MoveFrom(p.factor, interior);
@@ -868,32 +655,16 @@ PetscErrorCode SetUpSplit(Supernodal *s, Mat A, bool new_pattern) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The permuted vector of a factor's sweeps, and its permutation.
 template <typename Real>
-Real *SweepVector(PackedFactor<Real> &factor) {
-  return factor.y.data();
-}
-double *SweepVector(TiledFactor &factor) {
-  return factor.y();
-}
-template <typename Real>
-const int *Permutation(const PackedFactor<Real> &factor) {
-  return factor.permutation.data();
-}
-const int *Permutation(const TiledFactor &factor) {
-  return factor.permutation();
-}
-
-template <typename Factor, typename Real>
-PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, Factor &factor, const DenseFactor<Real> &dense,
-                          const PetscScalar *b, PetscScalar *x) {
+PetscErrorCode ApplySplit(MPI_Comm comm, Split &p, TiledFactor<Real> &factor,
+                          const DenseFactor<Real> &dense, const PetscScalar *b, PetscScalar *x) {
   PetscFunctionBeginUser;
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   const PetscInt n = static_cast<PetscInt>(p.local_dofs.size());
   const int interior = static_cast<int>(p.interior);
-  Real *y = SweepVector(factor);
-  const int *permutation = Permutation(factor);
+  Real *y = factor.y();
+  const int *permutation = factor.permutation();
   for (PetscInt l = 0; l < n; ++l) p.local_b[l] = 0.0;
   for (PetscInt l = 0; l < n; ++l)
     if (p.owned_position[l] >= 0) p.local_b[l] = b[p.owned_position[l]];

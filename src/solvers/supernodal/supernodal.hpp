@@ -8,8 +8,8 @@
 // it runs at the speed of memory.
 //
 // One rank: CHOLMOD's factor copied into softbody's streaming layout with its
-// own sweeps (tiled_factor.hpp; double precision), or a single-precision packed
-// copy (half the bytes); CHOLMOD's values are released behind the copy as it
+// own sweeps (tiled_factor.hpp), in double precision or single (half the
+// bytes); CHOLMOD's values are released behind the copy as it
 // is made and dropped after it, so a set-up peaks at about one factor in double
 // (release_pages.hpp). The split factor's pieces on several ranks are copied alike.
 // Several ranks: the factor is split at a separator (the DOFs coupled to a

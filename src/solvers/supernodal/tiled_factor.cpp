@@ -9,26 +9,41 @@ namespace softbody {
 
 namespace {
 
-constexpr int kPanel = TiledFactor::kPanel;
+constexpr int kPanel = TiledFactor<double>::kPanel;
+static_assert(TiledFactor<float>::kPanel == kPanel);
 constexpr int kTile = kPanel * kPanel;  // entries of a tile
 
-// Four doubles in one vector register (GCC/Clang vector extension: AVX, or two
-// SSE registers on a plain x86-64 build); loaded and stored by memcpy, which
-// compiles to one vector move. The helpers are internal and inlined, so GCC's
-// note that such arguments change the ABI without AVX does not concern them.
+// Four Reals in one vector register (GCC/Clang vector extension: AVX for
+// double, SSE for float); loaded and stored by memcpy, which compiles to one
+// vector move. The helpers are internal and inlined, so GCC's note that such
+// arguments change the ABI without AVX does not concern them.
 #pragma GCC diagnostic ignored "-Wpsabi"
-typedef double Vector4 __attribute__((vector_size(4 * sizeof(double))));
+template <typename Real>
+struct Lanes;
+template <>
+struct Lanes<double> {
+  typedef double Vector __attribute__((vector_size(kPanel * sizeof(double))));
+};
+template <>
+struct Lanes<float> {
+  typedef float Vector __attribute__((vector_size(kPanel * sizeof(float))));
+};
+template <typename Real>
+using Vector4 = typename Lanes<Real>::Vector;
 
-inline Vector4 Load(const double *p) {
-  Vector4 v;
+template <typename Real>
+inline Vector4<Real> Load(const Real *p) {
+  Vector4<Real> v;
   std::memcpy(&v, p, sizeof(v));
   return v;
 }
-inline void Store(double *p, const Vector4 &v) {
+template <typename Real>
+inline void Store(Real *p, const Vector4<Real> &v) {
   std::memcpy(p, &v, sizeof(v));
 }
-inline Vector4 Broadcast(double a) {
-  return Vector4{a, a, a, a};
+template <typename Real>
+inline Vector4<Real> Broadcast(Real a) {
+  return Vector4<Real>{a, a, a, a};
 }
 
 // Tiles of a panel whose diagonal is `rows_below` rows above the supernode's end.
@@ -39,16 +54,17 @@ inline int Tiles(int rows_below) {
 // z[0..3] are the panel's rows on its diagonal tile c (c[q * 4 + r]: row r,
 // column q); z[4..) the rows below, `tiles` - 1 more tiles. Solves the panel's
 // four values and subtracts their contributions from the rows below.
-void ForwardPanel(const double *c, int tiles, const double *inverse, double *z) {
+template <typename Real>
+void ForwardPanel(const Real *c, int tiles, const Real *inverse, Real *z) {
   for (int q = 0; q < kPanel; ++q) {
     z[q] *= inverse[q];
     for (int r = q + 1; r < kPanel; ++r) z[r] -= c[q * kPanel + r] * z[q];
   }
-  const Vector4 v0 = Broadcast(z[0]), v1 = Broadcast(z[1]), v2 = Broadcast(z[2]),
-                v3 = Broadcast(z[3]);
+  const Vector4<Real> v0 = Broadcast(z[0]), v1 = Broadcast(z[1]), v2 = Broadcast(z[2]),
+                      v3 = Broadcast(z[3]);
   for (int t = 1; t < tiles; ++t) {
-    const double *tile = c + t * kTile;
-    double *out = z + t * kPanel;
+    const Real *tile = c + t * kTile;
+    Real *out = z + t * kPanel;
     Store(out, Load(out) - (Load(tile) * v0 + Load(tile + 4) * v1 + Load(tile + 8) * v2 +
                             Load(tile + 12) * v3));
   }
@@ -56,28 +72,30 @@ void ForwardPanel(const double *c, int tiles, const double *inverse, double *z) 
 
 // The same panel backward: the dot products of its columns with the solved
 // rows below (tiles bottom to top), then its four values from the triangle.
-void BackwardPanel(const double *c, int tiles, const double *inverse, double *z) {
-  Vector4 s0 = Broadcast(0.0), s1 = s0, s2 = s0, s3 = s0;
+template <typename Real>
+void BackwardPanel(const Real *c, int tiles, const Real *inverse, Real *z) {
+  Vector4<Real> s0 = Broadcast(Real(0)), s1 = s0, s2 = s0, s3 = s0;
   for (int t = tiles - 1; t >= 1; --t) {
-    const double *tile = c + t * kTile;
-    const Vector4 rows = Load(z + t * kPanel);
+    const Real *tile = c + t * kTile;
+    const Vector4<Real> rows = Load(z + t * kPanel);
     s0 += Load(tile) * rows;
     s1 += Load(tile + 4) * rows;
     s2 += Load(tile + 8) * rows;
     s3 += Load(tile + 12) * rows;
   }
-  const double sums[kPanel] = {s0[0] + s0[1] + s0[2] + s0[3], s1[0] + s1[1] + s1[2] + s1[3],
-                               s2[0] + s2[1] + s2[2] + s2[3], s3[0] + s3[1] + s3[2] + s3[3]};
+  const Real sums[kPanel] = {s0[0] + s0[1] + s0[2] + s0[3], s1[0] + s1[1] + s1[2] + s1[3],
+                             s2[0] + s2[1] + s2[2] + s2[3], s3[0] + s3[1] + s3[2] + s3[3]};
   for (int q = kPanel - 1; q >= 0; --q) {
-    double sum = sums[q];
+    Real sum = sums[q];
     for (int r = q + 1; r < kPanel; ++r) sum += c[q * kPanel + r] * z[r];
     z[q] = (z[q] - sum) * inverse[q];
   }
 }
 
 // sum_i a[i] b[i] over i < count, in four vector lanes and four independent sums.
-double Dot(const double *a, const double *b, int count) {
-  Vector4 s0 = Broadcast(0.0), s1 = s0;
+template <typename Real>
+Real Dot(const Real *a, const Real *b, int count) {
+  Vector4<Real> s0 = Broadcast(Real(0)), s1 = s0;
   int i = 0;
   for (; i + 8 <= count; i += 8) {
     s0 += Load(a + i) * Load(b + i);
@@ -88,35 +106,40 @@ double Dot(const double *a, const double *b, int count) {
     i += 4;
   }
   s0 += s1;
-  double sum = (s0[0] + s0[1]) + (s0[2] + s0[3]);
+  Real sum = (s0[0] + s0[1]) + (s0[2] + s0[3]);
   for (; i < count; ++i) sum += a[i] * b[i];
   return sum;
 }
 
 }  // namespace
 
-size_t TiledFactor::PanelEntries(int columns, int height) {
+template <typename Real>
+size_t TiledFactor<Real>::PanelEntries(int columns, int height) {
   size_t entries = 0;
   for (int j = 0; j + kPanel <= columns; j += kPanel)
     entries += static_cast<size_t>(kTile) * Tiles(height - j);
   return entries;
 }
 
-size_t TiledFactor::SupernodeEntries(int columns, int height) {
+template <typename Real>
+size_t TiledFactor<Real>::SupernodeEntries(int columns, int height) {
   size_t entries = PanelEntries(columns, height);
   for (int j = columns / kPanel * kPanel; j < columns; ++j) entries += height - j;
   return (entries + kPanel - 1) / kPanel * kPanel;  // the next supernode's panels stay aligned
 }
 
-void TiledFactor::From(const cholmod_factor *L, int limit) {
+template <typename Real>
+void TiledFactor<Real>::From(const cholmod_factor *L, int limit) {
   Copy(L, limit, false);
 }
 
-void TiledFactor::MoveFrom(cholmod_factor *L, int limit) {
+template <typename Real>
+void TiledFactor<Real>::MoveFrom(cholmod_factor *L, int limit) {
   Copy(L, limit, true);
 }
 
-void TiledFactor::Copy(const cholmod_factor *L, int limit, bool release) {
+template <typename Real>
+void TiledFactor<Real>::Copy(const cholmod_factor *L, int limit, bool release) {
   n_ = static_cast<int>(L->n);
   const int *perm = static_cast<const int *>(L->Perm), *super = static_cast<const int *>(L->super),
             *pi = static_cast<const int *>(L->pi), *s = static_cast<const int *>(L->s),
@@ -161,11 +184,12 @@ void TiledFactor::Copy(const cholmod_factor *L, int limit, bool release) {
     CopySupernode(x + source[k], stride[k], k);
     if (k + 1 < supernodes_) behind.Consumed(x + source[k + 1]);
   }
-  y_.assign(n_, 0.0);
-  work_.assign(largest + kPanel, 0.0);
+  y_.assign(n_, Real(0));
+  work_.assign(largest + kPanel, Real(0));
 }
 
-double TiledFactor::EntriesBefore(int limit) const {
+template <typename Real>
+double TiledFactor<Real>::EntriesBefore(int limit) const {
   double entries = 0;
   for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k) {
     const int columns = std::min(first_column_[k + 1], limit) - first_column_[k];
@@ -177,42 +201,46 @@ double TiledFactor::EntriesBefore(int limit) const {
 
 // Stored supernode k's values from CHOLMOD's column-major block: x[j * stride +
 // i] is its entry (i, j), row i of its rows, column j of its columns.
-void TiledFactor::CopySupernode(const double *x, int stride, int k) {
+template <typename Real>
+void TiledFactor<Real>::CopySupernode(const double *x, int stride, int k) {
   const int columns = first_column_[k + 1] - first_column_[k],
             height = row_start_[k + 1] - row_start_[k];
   // The entry (i, j), zero above the diagonal and below the last row.
   auto entry = [&](int i, int j) {
     return i >= j && i < height ? x[static_cast<size_t>(j) * stride + i] : 0.0;
   };
-  for (int j = 0; j < columns; ++j) inverse_diagonal_[first_column_[k] + j] = 1.0 / entry(j, j);
-  double *out = values_.data() + value_start_[k];
+  for (int j = 0; j < columns; ++j)
+    inverse_diagonal_[first_column_[k] + j] = static_cast<Real>(1.0 / entry(j, j));
+  Real *out = values_.data() + value_start_[k];
   int j = 0;
   for (; j + kPanel <= columns; j += kPanel)
     for (int t = 0; t < Tiles(height - j); ++t)
       for (int q = 0; q < kPanel; ++q)
-        for (int r = 0; r < kPanel; ++r) *out++ = entry(j + t * kPanel + r, j + q);
+        for (int r = 0; r < kPanel; ++r)
+          *out++ = static_cast<Real>(entry(j + t * kPanel + r, j + q));
   for (; j < columns; ++j)
-    for (int i = j; i < height; ++i) *out++ = entry(i, j);
-  std::fill(out, values_.data() + value_start_[k + 1], 0.0);
+    for (int i = j; i < height; ++i) *out++ = static_cast<Real>(entry(i, j));
+  std::fill(out, values_.data() + value_start_[k + 1], Real(0));
 }
 
 // y <- L_k^-1 y over supernode k's columns (y's rows of the supernode updated).
-void TiledFactor::ForwardSupernode(int k) {
+template <typename Real>
+void TiledFactor<Real>::ForwardSupernode(int k) {
   const int first = first_column_[k], columns = first_column_[k + 1] - first,
             height = row_start_[k + 1] - row_start_[k];
   const int *rows = rows_.data() + row_start_[k];
-  double *z = work_.data();
+  Real *z = work_.data();
   for (int i = 0; i < height; ++i) z[i] = y_[rows[i]];
-  std::fill(z + height, z + height + kPanel, 0.0);  // the last tile's padding rows
-  const double *inverse = inverse_diagonal_.data() + first;
-  const double *c = values_.data() + value_start_[k];
+  std::fill(z + height, z + height + kPanel, Real(0));  // the last tile's padding rows
+  const Real *inverse = inverse_diagonal_.data() + first;
+  const Real *c = values_.data() + value_start_[k];
   int j = 0;
   for (; j + kPanel <= columns; j += kPanel) {
     ForwardPanel(c, Tiles(height - j), inverse + j, z + j);
     c += static_cast<size_t>(kTile) * Tiles(height - j);
   }
   for (; j < columns; ++j) {  // plain columns: c[i - j] is row i
-    const double v = z[j] * inverse[j];
+    const Real v = z[j] * inverse[j];
     z[j] = v;
     for (int i = j + 1; i < height; ++i) z[i] -= c[i - j] * v;
     c += height - j;
@@ -221,17 +249,18 @@ void TiledFactor::ForwardSupernode(int k) {
 }
 
 // y <- L_k^-T y over supernode k's columns (the rows below them solved already).
-void TiledFactor::BackwardSupernode(int k) {
+template <typename Real>
+void TiledFactor<Real>::BackwardSupernode(int k) {
   const int first = first_column_[k], columns = first_column_[k + 1] - first,
             height = row_start_[k + 1] - row_start_[k];
   const int *rows = rows_.data() + row_start_[k];
-  double *z = work_.data();
+  Real *z = work_.data();
   for (int i = 0; i < height; ++i) z[i] = y_[rows[i]];
-  std::fill(z + height, z + height + kPanel, 0.0);
-  const double *inverse = inverse_diagonal_.data() + first;
+  std::fill(z + height, z + height + kPanel, Real(0));
+  const Real *inverse = inverse_diagonal_.data() + first;
   const int panels = columns / kPanel;
-  const double *panels_end = values_.data() + value_start_[k] + PanelEntries(columns, height);
-  const double *c = panels_end;
+  const Real *panels_end = values_.data() + value_start_[k] + PanelEntries(columns, height);
+  const Real *c = panels_end;
   for (int j = panels * kPanel; j < columns; ++j) c += height - j;
   for (int j = columns - 1; j >= panels * kPanel; --j) {  // plain columns, last first
     c -= height - j;
@@ -245,20 +274,26 @@ void TiledFactor::BackwardSupernode(int k) {
   for (int i = 0; i < columns; ++i) y_[first + i] = z[i];
 }
 
-void TiledFactor::Forward(int limit) {
+template <typename Real>
+void TiledFactor<Real>::Forward(int limit) {
   for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k) ForwardSupernode(k);
 }
 
-void TiledFactor::Backward(int limit) {
+template <typename Real>
+void TiledFactor<Real>::Backward(int limit) {
   for (int k = supernodes_ - 1; k >= 0; --k)
     if (first_column_[k] < limit) BackwardSupernode(k);
 }
 
-void TiledFactor::Solve(const double *b, double *x) {
-  for (int i = 0; i < n_; ++i) y_[i] = b[permutation_[i]];
+template <typename Real>
+void TiledFactor<Real>::Solve(const double *b, double *x) {
+  for (int i = 0; i < n_; ++i) y_[i] = static_cast<Real>(b[permutation_[i]]);
   Forward(n_);
   Backward(n_);
   for (int i = 0; i < n_; ++i) x[permutation_[i]] = y_[i];
 }
+
+template class TiledFactor<double>;
+template class TiledFactor<float>;
 
 }  // namespace softbody

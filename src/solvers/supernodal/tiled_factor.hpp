@@ -1,6 +1,7 @@
 // A supernodal Cholesky factor in the layout its two triangular sweeps stream,
-// and the solve x = A^-1 b with it (double precision: one rank's factor, or a
-// rank's piece of the split factor). Not collective.
+// and the solve x = A^-1 b with it, in the precision Real (double, or float:
+// half the bytes, for a preconditioner), one rank's factor or a rank's piece
+// of the split factor. Not collective.
 //
 // CHOLMOD's factor L of P A P^T, A = P^T L L^T P (supernode k: columns
 // [first, first + columns) of L, `height` rows each, the diagonal block on top,
@@ -11,14 +12,14 @@
 // with zero rows; the supernode's last columns % 4 columns follow as plain
 // columns, each from its diagonal down. So
 // - the forward sweep reads the factor as one ascending stream: per tile, four
-//   aligned vector loads and four multiply-adds with the panel's four solved
+//   aligned vector loads (four Reals each) and four multiply-adds with the panel's four solved
 //   values into four rows of the supernode's gathered right-hand side;
 // - the backward sweep reads it as one descending stream (supernodes last to
 //   first, panels last to first, tiles bottom to top): per tile, four
 //   multiply-adds into the panel's four dot products.
 // A supernode's rows are gathered from the permuted vector y into a dense work
 // vector before its columns and scattered back after them, the only indirect
-// accesses; the vectors (n doubles) stay in cache while the factor streams
+// accesses; the vectors (n Reals) stay in cache while the factor streams
 // from memory. A solve allocates nothing.
 //
 // The sweeps can stop at a column `limit` (the interior of a split factor,
@@ -36,9 +37,11 @@
 
 namespace softbody {
 
+template <typename Real>
 class TiledFactor {
  public:
-  // Columns per panel, and rows per tile: one vector of four doubles.
+  // Columns per panel, and rows per tile: one vector of four Reals (32 bytes
+  // in double, a cache line per tile; 16 and half a line in float).
   static constexpr int kPanel = 4;
 
   // Copies CHOLMOD's factor L (supernodal, real, double; its values present),
@@ -49,7 +52,8 @@ class TiledFactor {
   // factor, not two. L's values must not be read afterwards: the caller drops
   // them (CHOLMOD_PATTERN).
   void MoveFrom(cholmod_factor *L, int limit = std::numeric_limits<int>::max());
-  // x = A^-1 b (b and x of size n, in A's order; they may be the same array).
+  // x = A^-1 b (b and x of size n, in A's order; they may be the same array;
+  // rounded to Real and back).
   void Solve(const double *b, double *x);
   // On y() (the permuted vector, size n): y <- L^-1 y over the columns
   // j < limit (their updates reach every row), and y <- L^-T y over the
@@ -57,10 +61,10 @@ class TiledFactor {
   // the limit given to From.
   void Forward(int limit);
   void Backward(int limit);
-  double *y() { return y_.data(); }
+  Real *y() { return y_.data(); }
   // L's permutation: y[i] is row permutation()[i] of A's vectors.
   const int *permutation() const { return permutation_.data(); }
-  // Entries a pair of sweeps streams (with the tiles' zeros): the factor's bytes / 8.
+  // Entries a pair of sweeps streams (with the tiles' zeros): the factor's bytes / sizeof(Real).
   double StoredEntries() const { return static_cast<double>(values_.size()); }
   // CHOLMOD's entries (explicit zeros included, tiles' padding not) of the
   // columns before `limit`, each from its diagonal down.
@@ -80,10 +84,13 @@ class TiledFactor {
   // CHOLMOD's Perm, and its super, pi and s with straddling supernodes split at the limit.
   std::vector<int> permutation_, first_column_, row_start_, rows_;
   std::vector<size_t> value_start_;  // per supernode: its first value, a multiple of kPanel
-  LargeArray<double> values_;
-  std::vector<double> inverse_diagonal_;  // per column: 1 / L_jj
-  std::vector<double> y_;                 // the permuted right-hand side, then solution
-  std::vector<double> work_;              // a supernode's rows, gathered (largest height + kPanel)
+  LargeArray<Real> values_;
+  std::vector<Real> inverse_diagonal_;  // per column: 1 / L_jj
+  std::vector<Real> y_;                 // the permuted right-hand side, then solution
+  std::vector<Real> work_;              // a supernode's rows, gathered (largest height + kPanel)
 };
+
+extern template class TiledFactor<double>;
+extern template class TiledFactor<float>;
 
 }  // namespace softbody
