@@ -46,6 +46,30 @@ const char *PartitionNote(Partitioner partitioner) {
   }
 }
 
+// How the meshes were read and held, for the "scene" line ("" on one rank, unless
+// a mesh file was read in slabs).
+std::string MeshHoldingNote(const Scene &scene, int ranks) {
+  const int in_slabs = scene.meshes_read_in_slabs;
+  const bool on_rank0 = in_slabs < static_cast<int>(scene.bodies.size());
+  if (ranks == 1 && in_slabs == 0) return "";
+  if (scene.meshes_held) return "; meshes whole on every rank";
+  if (scene.meshes_released)
+    return "; meshes whole on every rank until contact's set-up, then released";
+  std::string read;
+  if (in_slabs == 0)
+    read = "meshes read on rank 0, then held in slabs";
+  else if (!on_rank0)
+    read =
+        in_slabs == 1 ? "mesh read in slabs by every rank" : "meshes read in slabs by every rank";
+  else
+    read = std::to_string(in_slabs) + " of " + std::to_string(scene.bodies.size()) +
+           " meshes read in slabs by every rank, the rest on rank 0, then held in slabs";
+  const char *fixed = scene.fixed_meshes_released
+                          ? " (the fixed bodies' also whole on every rank until contact's set-up)"
+                          : "";
+  return "; " + read + fixed;
+}
+
 // "  scene ..." and "  unknowns ..." lines.
 PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                      const BodiesWithoutUnknowns &b) {
@@ -57,18 +81,10 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
     max_dofs = std::max(max_dofs, dofs);
   }
   const size_t bodies = scene.bodies.size();
-  const char *held = scene.read_in_slabs ? "; mesh read in slabs by every rank"
-                     : layout.size == 1  ? ""
-                     : scene.meshes_held ? "; meshes whole on every rank"
-                     : scene.meshes_released
-                         ? "; meshes whole on every rank until contact's set-up, then released"
-                     : scene.fixed_meshes_released
-                         ? "; meshes read on rank 0, then held in slabs (the fixed bodies' also "
-                           "whole on every rank until contact's set-up)"
-                         : "; meshes read on rank 0, then held in slabs";
+  const std::string held = MeshHoldingNote(scene, layout.size);
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
-                        scene.num_vertices(), (long long)scene.num_tets(), held));
+                        scene.num_vertices(), (long long)scene.num_tets(), held.c_str()));
   PetscCall(PetscPrintf(comm,
                         "  unknowns     %" PetscInt_FMT " DOFs on %d %s (%" PetscInt_FMT
                         " to %" PetscInt_FMT " per rank%s; %s vertex order)\n",

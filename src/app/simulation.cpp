@@ -145,8 +145,8 @@ PetscErrorCode Simulation::CheckFiles() {
 }
 
 // Rank 0 reads and validates the scene and its meshes; every rank the -deform
-// events. Each rank gets its shares of the meshes (mesh_share.hpp): a scene of
-// one .h5 body is read in slabs by every rank, never whole. When contact may
+// events. Each rank gets its shares of the meshes (mesh_share.hpp): .h5 meshes
+// are read in slabs by every rank, never whole. When contact may
 // need them, the fixed bodies' meshes reach every rank whole (contact builds
 // the rest from the shares); -scene_replicate sends every mesh whole to every
 // rank. Bodies that nothing can set in motion add no unknowns (partition.hpp);
@@ -155,15 +155,11 @@ PetscErrorCode Simulation::CheckFiles() {
 PetscErrorCode Simulation::ReadScene() {
   PetscFunctionBeginUser;
   const ContactOptions &contact = options_.contact;
-  // Whether contact may need the meshes is known for sure only once the
-  // bodies are counted; .h5 meshes are left unread until then unless it will.
-  const bool may_need = options_.scene.replicate || ContactMayRun(contact, 1);
-  PetscCall(LoadScene(comm_, options_.scene, !may_need, &scene_));
+  PetscCall(LoadScene(comm_, options_.scene, true, &scene_));
   PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
-  holding_ = options_.scene.replicate ? MeshHolding::kWhole
-             : may_need || ContactMayRun(contact, scene_.bodies.size())
-                 ? MeshHolding::kSlabsAndFixed
-                 : MeshHolding::kSlabs;
+  holding_ = options_.scene.replicate                       ? MeshHolding::kWhole
+             : ContactMayRun(contact, scene_.bodies.size()) ? MeshHolding::kSlabsAndFixed
+                                                            : MeshHolding::kSlabs;
   PetscCall(DistributeScene(comm_, options_.scene.meshing, holding_, &scene_, &share_));
   if (!restart() && options_.output.matrix_dir.empty()) {
     MotionSources sources{options_.integration.gravity.squaredNorm() > 0, bool(contact.ground),
@@ -173,7 +169,7 @@ PetscErrorCode Simulation::ReadScene() {
     int marked;
     PetscCall(MarkBodiesAtRest(comm_, sources, &scene_, &share_, &marked));
   }
-  if (holding_ == MeshHolding::kSlabsAndFixed) PetscCall(KeepFixedMeshes(comm_, &scene_));
+  if (holding_ == MeshHolding::kSlabsAndFixed) PetscCall(KeepFixedMeshes(comm_, share_, &scene_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

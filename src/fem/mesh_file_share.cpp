@@ -70,9 +70,10 @@ PetscErrorCode OrderedCentroid(MPI_Comm comm, const Rows3 &corners, Eigen::Vecto
 // Collective. The placed tets' checks of the serial reader (LoadPlacedMesh):
 // finite positions, no tet degenerate once placed; the first failure (lowest tet)
 // on every rank as one message.
-PetscErrorCode CheckPlaced(MPI_Comm comm, const Scene &scene, const MeshShare &share) {
+PetscErrorCode CheckPlaced(MPI_Comm comm, const Scene &scene, const Body &body,
+                           const MeshShare &share) {
   PetscFunctionBeginUser;
-  const std::string &path = scene.bodies[0].mesh_path;
+  const std::string &path = body.mesh_path;
   int finite = share.rest.allFinite();
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &finite, 1, MPI_INT, MPI_LAND, comm));
   PetscCheck(finite, comm, PETSC_ERR_USER_INPUT, "%s",
@@ -95,42 +96,40 @@ PetscErrorCode CheckPlaced(MPI_Comm comm, const Scene &scene, const MeshShare &s
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Collective. The share's slabs from the file's slabs (one body: the same rows).
-PetscErrorCode ShareOfSlabs(MPI_Comm comm, const Scene &scene, const MeshSlabs &slabs,
+// The body's share from its file's slabs, in the file's numbering (no initial
+// velocities: the scene's share fetches them).
+PetscErrorCode ShareOfSlabs(MPI_Comm comm, const Body &body, const MeshSlabs &slabs,
                             MeshShare *share) {
   PetscFunctionBeginUser;
   PetscCheck(slabs.num_tets <= PETSC_MAX_INT, comm, PETSC_ERR_SUP,
-             "%lld tets: more than this PETSc's indices hold",
+             "mesh %s: %lld tets: more than this PETSc's indices hold", body.mesh_path.c_str(),
              static_cast<long long>(slabs.num_tets));
   share->num_vertices = static_cast<PetscInt>(slabs.num_vertices);
   share->first_vertex = static_cast<PetscInt>(slabs.first_vertex);
   share->rest = slabs.vertices;
-  share->velocities.resize(share->rest.rows(), 3);
-  PetscCall(FetchRootRows(comm, share->num_vertices, share->first_vertex, share->slab_size(),
-                          MPI_DOUBLE, 3, scene.initial_velocities.data(),
-                          share->velocities.data()));
   share->num_all_tets = slabs.num_tets;
   share->first_tet = slabs.first_tet;
   share->tets.resize(slabs.tets.rows());
   for (Eigen::Index t = 0; t < slabs.tets.rows(); ++t)
     for (int a = 0; a < 4; ++a) share->tets[t][a] = static_cast<PetscInt>(slabs.tets(t, a));
   share->tet_body.assign(share->tets.size(), 0);
-  share->body_fixed.assign(1, scene.bodies[0].fixed);
+  share->body_fixed.assign(1, body.fixed);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 }  // namespace
 
-PetscErrorCode ReadShareFromMeshFile(MPI_Comm comm, const Scene &scene, MeshShare *share) {
+PetscErrorCode ReadBodyShareFromFile(MPI_Comm comm, const Scene &scene, size_t b,
+                                     MeshShare *share) {
   PetscFunctionBeginUser;
-  PetscCheck(scene.bodies.size() == 1 && scene.bodies[0].mesh_deferred, comm, PETSC_ERR_PLIB,
-             "a mesh file is read in slabs only for a scene of one body");
-  const Body &body = scene.bodies[0];
+  const Body &body = scene.bodies[b];
+  PetscCheck(body.mesh_deferred, comm, PETSC_ERR_PLIB, "mesh %s: not a deferred .h5 mesh",
+             body.mesh_path.c_str());
   *share = MeshShare();
   {
     MeshSlabs slabs;
     PetscCall(ReadMeshSlabs(comm, body.mesh_path, &slabs));
-    PetscCall(ShareOfSlabs(comm, scene, slabs, share));
+    PetscCall(ShareOfSlabs(comm, body, slabs, share));
   }
   Rows3 corners;
   PetscCall(TetCornersFromSlabs(comm, *share, &corners));
@@ -138,7 +137,7 @@ PetscErrorCode ReadShareFromMeshFile(MPI_Comm comm, const Scene &scene, MeshShar
   Eigen::Vector3d centroid;
   PetscCall(OrderedCentroid(comm, corners, &centroid));
   PlaceVertices(centroid, body.position, body.quaternion, &share->rest);
-  PetscCall(CheckPlaced(comm, scene, *share));
+  PetscCall(CheckPlaced(comm, scene, body, *share));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -59,68 +59,167 @@ MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size) {
 
 namespace {
 
-// Rank 0: every body's placed vertices, natural order.
-std::vector<double> AllRestPositions(const Scene &scene) {
-  std::vector<double> rest;
-  rest.reserve(3 * static_cast<size_t>(scene.num_vertices()));
-  for (const Body &body : scene.bodies)
-    rest.insert(rest.end(), body.mesh.vertices.data(),
-                body.mesh.vertices.data() + body.mesh.vertices.size());
-  return rest;
+// Where the scene's rows (its natural vertices, or its tets) are before
+// DistributeScene moves them to the scene's even shares: a body read by rank 0
+// (text formats) lies whole on rank 0, a deferred body's file slabs on every
+// rank (ReadBodyShareFromFile). A rank's source rows are, in this order: on
+// rank 0 the rank-0 bodies' rows (bodies in scene order), then its slab of each
+// deferred body (bodies in scene order).
+class SourceLayout {
+ public:
+  // rows[b]: body b's rows; deferred[b]: whether body b is read in slabs.
+  SourceLayout(const std::vector<int64_t> &rows, const std::vector<char> &deferred, int size)
+      : rows_(rows), deferred_(deferred), size_(size), first_(rows.size() + 1, 0) {
+    rank0_before_.resize(rows.size());
+    for (size_t b = 0; b < rows.size(); ++b) {
+      first_[b + 1] = first_[b] + rows[b];
+      rank0_before_[b] = rank0_rows_;
+      if (!deferred[b]) rank0_rows_ += rows[b];
+    }
+  }
+
+  // Source rows on `rank`.
+  int64_t RowsOn(int rank) const { return OffsetOn(rank, rows_.size()); }
+
+  // Rank and index among its source rows of scene row `row`. Rows asked in
+  // increasing order cost O(1) each, amortised (the last body's offset is kept).
+  PetscSFNode Locate(int64_t row) {
+    const size_t b = std::upper_bound(first_.begin(), first_.end(), row) - first_.begin() - 1;
+    const int64_t local = row - first_[b];
+    if (!deferred_[b]) return {0, static_cast<PetscInt>(rank0_before_[b] + local)};
+    int lo = 0, hi = size_ - 1;  // the slab holding `local`: EvenShareBegin is monotone
+    while (lo < hi) {
+      const int mid = (lo + hi + 1) / 2;
+      if (EvenShareBegin(rows_[b], size_, mid) <= local)
+        lo = mid;
+      else
+        hi = mid - 1;
+    }
+    if (b != cached_body_ || lo != cached_rank_) {
+      cached_body_ = b;
+      cached_rank_ = lo;
+      cached_offset_ = OffsetOn(lo, b);
+    }
+    return {lo,
+            static_cast<PetscInt>(cached_offset_ + local - EvenShareBegin(rows_[b], size_, lo))};
+  }
+
+ private:
+  // Source rows on `rank` before those of body `body`.
+  int64_t OffsetOn(int rank, size_t body) const {
+    int64_t offset = rank == 0 ? rank0_rows_ : 0;
+    for (size_t b = 0; b < body; ++b)
+      if (deferred_[b])
+        offset += EvenShareBegin(rows_[b], size_, rank + 1) - EvenShareBegin(rows_[b], size_, rank);
+    return offset;
+  }
+
+  std::vector<int64_t> rows_;
+  std::vector<char> deferred_;
+  int size_;
+  std::vector<int64_t> first_;         // scene row of body b's row 0; last: all rows
+  std::vector<int64_t> rank0_before_;  // rank-0 bodies' rows before body b
+  int64_t rank0_rows_ = 0;
+  size_t cached_body_ = SIZE_MAX;
+  int cached_rank_ = -1;
+  int64_t cached_offset_ = 0;
+};
+
+// Collective. A star forest whose leaves are the scene rows [first, first + count)
+// and whose roots are the source rows (SourceLayout).
+PetscErrorCode CreateSourceSF(MPI_Comm comm, SourceLayout *layout, int64_t first, int64_t count,
+                              PetscSF *sf) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  PetscSFNode *remote;
+  PetscCall(PetscMalloc1(count, &remote));
+  for (int64_t i = 0; i < count; ++i) remote[i] = layout->Locate(first + i);
+  PetscCall(PetscSFCreate(comm, sf));
+  PetscCall(PetscSFSetGraph(*sf, static_cast<PetscInt>(layout->RowsOn(rank)),
+                            static_cast<PetscInt>(count), nullptr, PETSC_OWN_POINTER, remote,
+                            PETSC_OWN_POINTER));
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Rank 0: every tet as its natural vertices, and its body.
-void AllTets(const Scene &scene, std::vector<std::array<PetscInt, 4>> *tets,
-             std::vector<int32_t> *bodies) {
-  tets->reserve(scene.num_tets());
-  bodies->reserve(scene.num_tets());
+// This rank's source rows of the vertices (placed rest positions) and of the
+// tets (natural vertices), as SourceLayout orders them.
+void SourceRows(const Scene &scene, const std::vector<MeshShare> &file_shares, PetscMPIInt rank,
+                std::vector<double> *rest, std::vector<std::array<PetscInt, 4>> *tets) {
+  if (rank == 0)
+    for (const Body &body : scene.bodies) {
+      if (body.mesh_deferred) continue;
+      rest->insert(rest->end(), body.mesh.vertices.data(),
+                   body.mesh.vertices.data() + body.mesh.vertices.size());
+      for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
+        std::array<PetscInt, 4> tet;
+        for (int a = 0; a < 4; ++a) tet[a] = body.first_vertex + body.mesh.tets(t, a);
+        tets->push_back(tet);
+      }
+    }
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
-    const Body &body = scene.bodies[b];
-    for (int32_t t = 0; t < body.mesh.num_tets(); ++t) {
-      std::array<PetscInt, 4> tet;
-      for (int a = 0; a < 4; ++a) tet[a] = body.first_vertex + body.mesh.tets(t, a);
+    if (!scene.bodies[b].mesh_deferred) continue;
+    const MeshShare &file = file_shares[b];
+    rest->insert(rest->end(), file.rest.data(), file.rest.data() + file.rest.size());
+    for (std::array<PetscInt, 4> tet : file.tets) {
+      for (PetscInt &vertex : tet) vertex += scene.bodies[b].first_vertex;
       tets->push_back(tet);
-      bodies->push_back(static_cast<int32_t>(b));
     }
   }
 }
 
-// Collective. Every rank's shares from rank 0's whole scene.
-PetscErrorCode SendSharesFromRankZero(MPI_Comm comm, const Scene &scene, MeshShare *share) {
+// Collective. Every rank's shares of the scene: the rank-0 bodies from rank 0's
+// meshes, the deferred ones from every rank's file slabs (file_shares[b], empty
+// for the others), the initial velocities from rank 0.
+PetscErrorCode GatherShares(MPI_Comm comm, const Scene &scene,
+                            const std::vector<MeshShare> &file_shares, MeshShare *share) {
   PetscFunctionBeginUser;
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
   PetscCallMPI(MPI_Comm_size(comm, &size));
+  std::vector<int64_t> vertex_rows, tet_rows;
+  std::vector<char> deferred;
+  for (const Body &body : scene.bodies) {
+    vertex_rows.push_back(body.num_vertices());
+    tet_rows.push_back(body.num_tets());
+    deferred.push_back(body.mesh_deferred);
+  }
+  *share = MeshShare();
   const PetscInt N = scene.num_vertices();
   share->num_vertices = N;
   share->first_vertex = EvenShareBegin(N, size, rank);
   const PetscInt slab = EvenShareBegin(N, size, rank + 1) - share->first_vertex;
+  share->num_all_tets = scene.num_tets();
+  PetscCheck(share->num_all_tets <= PETSC_MAX_INT, comm, PETSC_ERR_SUP,
+             "%lld tets: more than this PETSc's indices hold",
+             static_cast<long long>(share->num_all_tets));
+  share->first_tet = EvenShareBegin(share->num_all_tets, size, rank);
+  const int64_t count = EvenShareBegin(share->num_all_tets, size, rank + 1) - share->first_tet;
   share->rest.resize(slab, 3);
   share->velocities.resize(slab, 3);
+  share->tets.resize(count);
   {
-    const std::vector<double> rest = rank == 0 ? AllRestPositions(scene) : std::vector<double>();
-    PetscCall(FetchRootRows(comm, N, share->first_vertex, slab, MPI_DOUBLE, 3, rest.data(),
-                            share->rest.data()));
+    std::vector<double> rest;
+    std::vector<std::array<PetscInt, 4>> tets;
+    SourceRows(scene, file_shares, rank, &rest, &tets);
+    SourceLayout vertices(vertex_rows, deferred, size), all_tets(tet_rows, deferred, size);
+    PetscSF sf;
+    PetscCall(CreateSourceSF(comm, &vertices, share->first_vertex, slab, &sf));
+    PetscCall(FetchFromSlabs(sf, MPI_DOUBLE, 3, rest.data(), share->rest.data()));
+    PetscCall(PetscSFDestroy(&sf));
+    PetscCall(CreateSourceSF(comm, &all_tets, share->first_tet, count, &sf));
+    PetscCall(FetchFromSlabs(sf, MPIU_INT, 4, tets.data(), share->tets.data()));
+    PetscCall(PetscSFDestroy(&sf));
   }
   PetscCall(FetchRootRows(comm, N, share->first_vertex, slab, MPI_DOUBLE, 3,
                           scene.initial_velocities.data(), share->velocities.data()));
-  share->num_all_tets = scene.num_tets();
-  PetscCheck(share->num_all_tets <= PETSC_MAX_INT, comm, PETSC_ERR_SUP,
-             "%lld tets: more than this PETSc's indices hold; convert the mesh (softbody-convert)",
-             static_cast<long long>(share->num_all_tets));
-  const PetscInt T = static_cast<PetscInt>(share->num_all_tets);
-  share->first_tet = EvenShareBegin(T, size, rank);
-  const PetscInt count =
-      static_cast<PetscInt>(EvenShareBegin(T, size, rank + 1) - share->first_tet);
-  share->tets.resize(count);
-  share->tet_body.resize(count);
-  std::vector<std::array<PetscInt, 4>> tets;
-  std::vector<int32_t> bodies;
-  if (rank == 0) AllTets(scene, &tets, &bodies);
-  const PetscInt first = static_cast<PetscInt>(share->first_tet);
-  PetscCall(FetchRootRows(comm, T, first, count, MPIU_INT, 4, tets.data(), share->tets.data()));
-  PetscCall(
-      FetchRootRows(comm, T, first, count, MPI_INT32_T, 1, bodies.data(), share->tet_body.data()));
+  int64_t body_first = 0;  // scene tet of the body's tet 0
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    const int64_t begin = std::max(body_first, share->first_tet);
+    const int64_t end = std::min(body_first + tet_rows[b], share->first_tet + count);
+    for (int64_t t = begin; t < end; ++t) share->tet_body.push_back(static_cast<int32_t>(b));
+    body_first += tet_rows[b];
+  }
   for (const Body &body : scene.bodies) share->body_fixed.push_back(body.fixed);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -187,16 +286,68 @@ PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, Mes
     if (deferred) PetscCall(LoadDeferredMeshesOnRankZero(comm, meshing, scene));
     PetscCall(BroadcastMeshes(comm, scene));
     *share = ShareScene(*scene, rank, size);
-  } else if (deferred && holding == MeshHolding::kSlabs) {
-    PetscCall(ReadShareFromMeshFile(comm, *scene, share));
-    scene->DropMeshes();
-    scene->read_in_slabs = true;
   } else {
-    if (deferred) PetscCall(LoadDeferredMeshesOnRankZero(comm, meshing, scene));
-    *share = MeshShare();
-    PetscCall(SendSharesFromRankZero(comm, *scene, share));
-    if (holding == MeshHolding::kSlabs) scene->DropMeshes();
+    std::vector<MeshShare> file_shares(scene->bodies.size());
+    for (size_t b = 0; b < scene->bodies.size(); ++b)
+      if (scene->bodies[b].mesh_deferred)
+        PetscCall(ReadBodyShareFromFile(comm, *scene, b, &file_shares[b]));
+    PetscCall(GatherShares(comm, *scene, file_shares, share));
+    scene->meshes_read_in_slabs =
+        static_cast<int>(std::count_if(scene->bodies.begin(), scene->bodies.end(),
+                                       [](const Body &body) { return body.mesh_deferred; }));
+    scene->DropMeshes();
   }
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode KeepFixedMeshes(MPI_Comm comm, const MeshShare &share, Scene *scene) {
+  PetscFunctionBeginUser;
+  std::vector<PetscInt> naturals;  // every fixed body's vertices, then its tets
+  std::vector<PetscInt> tet_rows;
+  int64_t first_tet = 0;
+  for (Body &body : scene->bodies) {
+    body.count_vertices = body.num_vertices();
+    body.count_tets = body.num_tets();
+    body.mesh = TetMesh();
+    if (body.fixed) {
+      for (PetscInt v = 0; v < body.count_vertices; ++v) naturals.push_back(body.first_vertex + v);
+      for (int64_t t = 0; t < body.count_tets; ++t)
+        tet_rows.push_back(static_cast<PetscInt>(first_tet + t));
+    }
+    first_tet += body.count_tets;
+  }
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> rest(naturals.size(), 3);
+  std::vector<std::array<PetscInt, 4>> tets(tet_rows.size());
+  PetscSF sf;
+  PetscCall(CreateSlabSF(comm, share, naturals, &sf));
+  PetscCall(FetchFromSlabs(sf, MPI_DOUBLE, 3, share.rest.data(), rest.data()));
+  PetscCall(PetscSFDestroy(&sf));
+  {
+    PetscLayout shares;  // the tets' even shares
+    PetscCall(PetscLayoutCreate(comm, &shares));
+    PetscCall(PetscLayoutSetLocalSize(shares, share.num_tets()));
+    PetscCall(PetscLayoutSetUp(shares));
+    PetscCall(PetscSFCreate(comm, &sf));
+    PetscCall(PetscSFSetGraphLayout(sf, shares, static_cast<PetscInt>(tet_rows.size()), nullptr,
+                                    PETSC_OWN_POINTER, tet_rows.data()));
+    PetscCall(PetscLayoutDestroy(&shares));
+    PetscCall(FetchFromSlabs(sf, MPIU_INT, 4, share.tets.data(), tets.data()));
+    PetscCall(PetscSFDestroy(&sf));
+  }
+  Eigen::Index vertex = 0;
+  size_t tet = 0;
+  for (Body &body : scene->bodies) {
+    if (!body.fixed) continue;
+    body.mesh.vertices = rest.middleRows(vertex, body.count_vertices);
+    body.mesh.tets.resize(body.count_tets, 4);
+    for (int64_t t = 0; t < body.count_tets; ++t, ++tet)
+      for (int a = 0; a < 4; ++a)
+        body.mesh.tets(t, a) = static_cast<int32_t>(tets[tet][a] - body.first_vertex);
+    vertex += body.count_vertices;
+  }
+  scene->initial_velocities.resize(0, 3);
+  scene->meshes_held = false;
+  scene->fixed_meshes_held = true;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

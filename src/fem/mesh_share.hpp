@@ -46,25 +46,29 @@ struct MeshShare {
 // are left empty.
 MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size);
 
-// How DistributeScene leaves the meshes.
+// How the meshes are held once distributed.
 enum class MeshHolding {
   kSlabs,          // no rank holds a mesh whole
-  kSlabsAndFixed,  // the same, but rank 0 keeps its meshes for KeepFixedMeshes (contact)
+  kSlabsAndFixed,  // the same, then the fixed bodies' whole on every rank (KeepFixedMeshes)
   kWhole,          // every rank holds every mesh (-scene_replicate)
 };
 
 // Collective, after LoadScene (rank 0 holds the meshes, but not the deferred .h5
 // ones). kWhole: rank 0 reads the deferred meshes (LoadDeferredMeshes), every
 // rank receives the meshes and initial velocities (BroadcastMeshes) and takes
-// its shares from them. kSlabs: no rank keeps a mesh whole (scene->meshes_held
-// false everywhere): a deferred mesh (a scene of one .h5 body) is read in slabs
-// by every rank (ReadShareFromMeshFile), else rank 0 sends every rank its
-// shares (a PetscSF from rank 0's arrays to the slabs) and drops its meshes.
-// kSlabsAndFixed: rank 0 reads the deferred meshes and sends every rank its
-// shares, and keeps its meshes until KeepFixedMeshes (scene.hpp) keeps only the
-// fixed bodies', on every rank.
+// its shares from them. Otherwise no rank keeps a mesh whole (scene->meshes_held
+// false everywhere): every rank reads its slabs of each deferred mesh
+// (ReadBodyShareFromFile), and the shares are gathered by one PetscSF per kind of
+// row from rank 0's meshes and the ranks' file slabs (meshes_read_in_slabs
+// counts the latter); rank 0 then drops its meshes. The shares are the same
+// whichever way a mesh came (bit for bit).
 PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, MeshHolding holding,
                                Scene *scene, MeshShare *share);
+
+// Collective, after DistributeScene with MeshHolding::kSlabsAndFixed, once the
+// fixed flags are final (MarkBodiesAtRest): the fixed bodies' meshes whole on
+// every rank (fixed_meshes_held), fetched from the shares.
+PetscErrorCode KeepFixedMeshes(MPI_Comm comm, const MeshShare &share, Scene *scene);
 
 // Collective. A star forest with one root per vertex of this rank's slab and one
 // leaf per entry of `naturals` (natural vertices, each in [0, num_vertices), any

@@ -354,28 +354,6 @@ PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode KeepFixedMeshes(MPI_Comm comm, Scene *scene) {
-  PetscFunctionBeginUser;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  for (Body &body : scene->bodies) {
-    body.count_vertices = body.num_vertices();
-    body.count_tets = body.num_tets();
-    if (!body.fixed) {
-      body.mesh = TetMesh();
-      continue;
-    }
-    body.mesh.vertices.resize(body.count_vertices, 3);
-    body.mesh.tets.resize(body.count_tets, 4);
-    PetscCall(BroadcastArray(comm, body.mesh.vertices.data(), body.mesh.vertices.size()));
-    PetscCall(BroadcastArray(comm, body.mesh.tets.data(), body.mesh.tets.size()));
-  }
-  scene->initial_velocities.resize(0, 3);
-  scene->meshes_held = false;
-  scene->fixed_meshes_held = true;
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, bool defer_h5_meshes,
                          Scene *scene) {
   PetscFunctionBeginUser;

@@ -76,9 +76,9 @@ struct Scene {
   // Bytes of the meshes and initial velocities this rank held when contact was
   // set up (ReleaseMeshes; 0 before).
   int64_t contact_setup_mesh_bytes = 0;
-  // Whether every rank read its slabs of the mesh file (a deferred .h5 mesh)
-  // instead of receiving them from rank 0.
-  bool read_in_slabs = false;
+  // Bodies whose mesh file every rank read in slabs (deferred .h5 meshes)
+  // instead of receiving them from rank 0 (DistributeScene).
+  int meshes_read_in_slabs = 0;
 
   int32_t num_vertices() const;
   int64_t num_tets() const;
@@ -149,11 +149,5 @@ PetscErrorCode LoadScene(MPI_Comm comm, const SceneOptions &options, bool defer_
 
 // Collective. Rank 0's meshes and initial velocities on every rank (after LoadScene).
 PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene);
-
-// Collective, while rank 0 holds the meshes (DistributeScene with
-// MeshHolding::kSlabsAndFixed), once the fixed flags are final (MarkBodiesAtRest):
-// the fixed bodies' meshes on every rank (fixed_meshes_held); rank 0 drops the
-// free bodies' meshes and the initial velocities.
-PetscErrorCode KeepFixedMeshes(MPI_Comm comm, Scene *scene);
 
 }  // namespace softbody

@@ -18,7 +18,12 @@ Scene (written into the work dir): one 3 x 1 x 1 m block (tools/box_mesh.py,
   file equals the one from the text mesh bit for bit at 1, 3 and 4 ranks (the
   placement's centroid is summed in file order across the ranks);
 - placed too far from the origin, the .h5 block fails on every rank with the one-line
-  error of the text reader (tetrahedron 1 degenerate once placed), exit code 1.
+  error of the text reader (tetrahedron 1 degenerate once placed), exit code 1;
+- a scene of three blocks under gravity, two of them .h5 meshes (one free, one fixed
+  beneath it) and one text mesh falling onto the free one: at 1, 2 and 3 ranks every
+  rank reads its slabs of both files (the summary says 2 of 3), the result file equals
+  the all-text scene's bit for bit, and the free .h5 block rests on the fixed one
+  (whose whole mesh contact fetched from the shares) instead of falling through it.
 """
 import os
 import subprocess
@@ -41,6 +46,9 @@ READ_IN_SLABS = "mesh read in slabs by every rank"
 PLACED = ((0.3, -1.7, 2.9), (0.9, 0.2, -0.4, 0.1))
 FAR = ((3e17, -1.7, 2.9), (0.9, 0.2, -0.4, 0.1))
 WHOLE = "meshes whole on every rank"
+MIXED = ("2 of 3 meshes read in slabs by every rank, the rest on rank 0, then held in slabs (the fixed "
+         "bodies' also whole on every rank until contact's set-up)")
+STACK_STEPS = 30
 FIXED_WHOLE = ("meshes read on rank 0, then held in slabs (the fixed bodies' also whole on every rank "
                "until contact's set-up)")
 
@@ -116,11 +124,40 @@ def check_mesh_file(args, checks, simulate):
         differ = datasets_equal(from_text, from_h5)
         checks.check(not differ, f".h5 read in slabs on {ranks} ranks equals the text mesh's run "
                                  f"(differing datasets: {differ})")
+    check_mixed_scene(args, checks, simulate)
     far = placed_scene(args, "far-h5.txt", "block.h5", FAR)
     result = harness.run(args, 3, ["-scene", far, "-steps", 1], check=False)
     errors = [l for l in (result.stdout + result.stderr).splitlines() if "error:" in l]
     checks.check(result.returncode == 1 and len(errors) == 1 and "tetrahedron 1 is degenerate once placed" in errors[0],
                  f".h5 placed too far: exit {result.returncode}, error lines {errors}")
+
+
+def stacked_scene(args, name, free_h5, fixed_h5):
+    """Three blocks: free `free_h5` above fixed `fixed_h5` (5 cm apart), and a free
+    text block 40 cm above the first."""
+    bodies = [(free_h5, 100.0, 5e4, 0.3, False, (0, 0.6, 0), (1, 0, 0, 0)),
+              ("block.mesh", 100.0, 5e4, 0.3, False, (0, 2.0, 0), (1, 0, 0, 0)),
+              (fixed_h5, 100.0, 5e4, 0.3, True, (0, -0.45, 0), (1, 0, 0, 0))]
+    return harness.write_scene(os.path.join(args.work, name), bodies)
+
+
+def check_mixed_scene(args, checks, simulate):
+    text = stacked_scene(args, "stack-text.txt", "block.mesh", "block.mesh")
+    h5 = stacked_scene(args, "stack-h5.txt", "block.h5", "block.h5")
+    options = ["-steps", STACK_STEPS, "-gravity", "0,-9.81,0"]
+    for ranks in (1, 2, 3):
+        from_text, _ = simulate(f"stack-text-{ranks}", ranks, ["-scene", text] + options)
+        from_h5, h5_out = simulate(f"stack-h5-{ranks}", ranks, ["-scene", h5] + options)
+        checks.check(MIXED in scene_line(h5_out), f"mixed scene, {ranks} ranks: {scene_line(h5_out)!r}")
+        differ = datasets_equal(from_text, from_h5)
+        checks.check(not differ, f"two .h5 meshes in slabs and a text mesh on {ranks} ranks equal the "
+                                 f"text scene's run (differing datasets: {differ})")
+    frames = harness.read_frames(from_h5)
+    body = np.asarray(frames["mesh/vertex_body"])
+    lowest = frames["positions"][-1][body == 0, 1].min()
+    # Falling freely for the run's 0.6 s it would end 1.77 m lower, below -1.6 m.
+    checks.check(-0.1 < lowest < 0.1, f"the free .h5 block rests on the fixed one: lowest y {lowest:.3g} m "
+                                      "(fixed block's top at 0.05 m)")
 
 
 if __name__ == "__main__":
