@@ -14,7 +14,10 @@ namespace {
 // The rest positions and initial velocities of the natural vertices [begin, end).
 void CopyVertexSlab(const Scene &scene, PetscInt begin, PetscInt end, MeshShare *share) {
   share->rest.resize(end - begin, 3);
-  share->velocities = scene.initial_velocities.middleRows(begin, end - begin);
+  share->velocities.setZero(end - begin, 3);
+  for (const InitialVelocity &entry : scene.initial_velocities)
+    if (entry.vertex >= begin && entry.vertex < end)
+      for (int c = 0; c < 3; ++c) share->velocities(entry.vertex - begin, c) = entry.velocity[c];
   for (const Body &body : scene.bodies) {
     const PetscInt first = std::max<PetscInt>(begin, body.first_vertex);
     const PetscInt last = std::min<PetscInt>(end, body.first_vertex + body.mesh.num_vertices());
@@ -168,6 +171,33 @@ void SourceRows(const Scene &scene, const std::vector<MeshShare> &file_shares, P
   }
 }
 
+// Collective. share->velocities: zero, but the velocity section's entries (on
+// rank 0, by natural vertex) sent to their slabs.
+PetscErrorCode SpreadInitialVelocities(MPI_Comm comm, const Scene &scene, MeshShare *share) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  share->velocities.setZero(share->slab_size(), 3);
+  std::vector<PetscInt> naturals;
+  std::vector<double> velocities;
+  if (rank == 0)
+    for (const InitialVelocity &entry : scene.initial_velocities) {
+      naturals.push_back(static_cast<PetscInt>(entry.vertex));
+      velocities.insert(velocities.end(), entry.velocity.begin(), entry.velocity.end());
+    }
+  PetscSF sf;
+  PetscCall(CreateSlabSF(comm, *share, naturals, &sf));
+  MPI_Datatype unit;
+  PetscCallMPI(MPI_Type_contiguous(3, MPI_DOUBLE, &unit));
+  PetscCallMPI(MPI_Type_commit(&unit));
+  // One entry per vertex (ReadScene), so REPLACE has no order to depend on.
+  PetscCall(PetscSFReduceBegin(sf, unit, velocities.data(), share->velocities.data(), MPI_REPLACE));
+  PetscCall(PetscSFReduceEnd(sf, unit, velocities.data(), share->velocities.data(), MPI_REPLACE));
+  PetscCallMPI(MPI_Type_free(&unit));
+  PetscCall(PetscSFDestroy(&sf));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // Collective. Every rank's shares of the scene: the rank-0 bodies from rank 0's
 // meshes, the deferred ones from every rank's file slabs (file_shares[b], empty
 // for the others), the initial velocities from rank 0.
@@ -196,7 +226,6 @@ PetscErrorCode GatherShares(MPI_Comm comm, const Scene &scene,
   share->first_tet = EvenShareBegin(share->num_all_tets, size, rank);
   const int64_t count = EvenShareBegin(share->num_all_tets, size, rank + 1) - share->first_tet;
   share->rest.resize(slab, 3);
-  share->velocities.resize(slab, 3);
   share->tets.resize(count);
   {
     std::vector<double> rest;
@@ -211,8 +240,7 @@ PetscErrorCode GatherShares(MPI_Comm comm, const Scene &scene,
     PetscCall(FetchFromSlabs(sf, MPIU_INT, 4, tets.data(), share->tets.data()));
     PetscCall(PetscSFDestroy(&sf));
   }
-  PetscCall(FetchRootRows(comm, N, share->first_vertex, slab, MPI_DOUBLE, 3,
-                          scene.initial_velocities.data(), share->velocities.data()));
+  PetscCall(SpreadInitialVelocities(comm, scene, share));
   int64_t body_first = 0;  // scene tet of the body's tet 0
   for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const int64_t begin = std::max(body_first, share->first_tet);
@@ -253,26 +281,6 @@ PetscErrorCode LoadDeferredMeshesOnRankZero(MPI_Comm comm, const MeshingOptions 
 }
 
 }  // namespace
-
-PetscErrorCode FetchRootRows(MPI_Comm comm, PetscInt total, PetscInt first, PetscInt rows,
-                             MPI_Datatype type, int width, const void *root_rows, void *rows_here) {
-  PetscFunctionBeginUser;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  PetscLayout root;
-  PetscCall(PetscLayoutCreate(comm, &root));
-  PetscCall(PetscLayoutSetLocalSize(root, rank == 0 ? total : 0));
-  PetscCall(PetscLayoutSetUp(root));
-  std::vector<PetscInt> wanted(rows);
-  std::iota(wanted.begin(), wanted.end(), first);
-  PetscSF sf;
-  PetscCall(PetscSFCreate(comm, &sf));
-  PetscCall(PetscSFSetGraphLayout(sf, root, rows, nullptr, PETSC_OWN_POINTER, wanted.data()));
-  PetscCall(PetscLayoutDestroy(&root));
-  PetscCall(FetchFromSlabs(sf, type, width, root_rows, rows_here));
-  PetscCall(PetscSFDestroy(&sf));
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
 
 PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, MeshHolding holding,
                                Scene *scene, MeshShare *share) {
@@ -345,7 +353,7 @@ PetscErrorCode KeepFixedMeshes(MPI_Comm comm, const MeshShare &share, Scene *sce
         body.mesh.tets(t, a) = static_cast<int32_t>(tets[tet][a] - body.first_vertex);
     vertex += body.count_vertices;
   }
-  scene->initial_velocities.resize(0, 3);
+  scene->initial_velocities = std::vector<InitialVelocity>();
   scene->meshes_held = false;
   scene->fixed_meshes_held = true;
   PetscFunctionReturn(PETSC_SUCCESS);

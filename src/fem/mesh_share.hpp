@@ -77,12 +77,6 @@ PetscErrorCode KeepFixedMeshes(MPI_Comm comm, const MeshShare &share, Scene *sce
 PetscErrorCode CreateSlabSF(MPI_Comm comm, const MeshShare &share,
                             const std::vector<PetscInt> &naturals, PetscSF *sf);
 
-// Collective. Rows [first, first + rows) of rank 0's `total` rows (`width`
-// entries of `type` each, in root_rows on rank 0; ignored elsewhere) into
-// `rows_here`, through a PetscSF whose roots are all on rank 0.
-PetscErrorCode FetchRootRows(MPI_Comm comm, PetscInt total, PetscInt first, PetscInt rows,
-                             MPI_Datatype type, int width, const void *root_rows, void *rows_here);
-
 // Collective. values[i] = the slab's `per_vertex` entries (`width` of them per
 // vertex, each of `type`) of naturals[i], through CreateSlabSF's forest.
 PetscErrorCode FetchFromSlabs(PetscSF sf, MPI_Datatype type, int width, const void *per_vertex,

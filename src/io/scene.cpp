@@ -39,9 +39,18 @@ void Scene::DropMeshes() {
     body.count_tets = body.num_tets();
     body.mesh = TetMesh();
   }
-  initial_velocities.resize(0, 3);
+  initial_velocities = std::vector<InitialVelocity>();
   meshes_held = false;
   fixed_meshes_held = false;
+}
+
+Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> DenseInitialVelocities(
+    const Scene &scene) {
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> dense =
+      Eigen::MatrixXd::Zero(scene.num_vertices(), 3);
+  for (const InitialVelocity &entry : scene.initial_velocities)
+    for (int c = 0; c < 3; ++c) dense(entry.vertex, c) = entry.velocity[c];
+  return dense;
 }
 
 void PlaceMesh(const Eigen::Vector3d &position, const Eigen::Vector4d &quaternion_wxyz,
@@ -166,15 +175,25 @@ void ReadVelocitySection(TextReader &in, const std::vector<std::string_view> &co
     if (v < 0 || v >= body.num_vertices())
       in.Fail("vertex index " + std::to_string(v) + " out of range 0.." +
               std::to_string(body.num_vertices() - 1) + " of mesh " + std::to_string(b));
-    for (int c = 0; c < 3; ++c)
-      scene->initial_velocities(body.first_vertex + v, c) = in.ParseReal(fields[2 + c], "velocity");
+    InitialVelocity entry{body.first_vertex + v, {}};
+    for (int c = 0; c < 3; ++c) entry.velocity[c] = in.ParseReal(fields[2 + c], "velocity");
     ++scene->num_velocity_entries;
-    if (body.fixed) ++scene->ignored_fixed_velocities;
+    if (body.fixed)
+      ++scene->ignored_fixed_velocities;
+    else
+      scene->initial_velocities.push_back(entry);
   }
   if (in.NextLine(&fields)) in.Fail("unexpected content after the velocity section");
-  for (const Body &body : scene->bodies)
-    if (body.fixed)
-      scene->initial_velocities.middleRows(body.first_vertex, body.num_vertices()).setZero();
+  // By vertex, the file's last line for a vertex kept.
+  std::vector<InitialVelocity> &entries = scene->initial_velocities;
+  std::stable_sort(
+      entries.begin(), entries.end(),
+      [](const InitialVelocity &a, const InitialVelocity &b) { return a.vertex < b.vertex; });
+  std::vector<InitialVelocity> unique;
+  for (size_t i = 0; i < entries.size(); ++i)
+    if (i + 1 == entries.size() || entries[i + 1].vertex != entries[i].vertex)
+      unique.push_back(entries[i]);
+  entries.swap(unique);
 }
 
 }  // namespace
@@ -218,8 +237,6 @@ Scene ReadScene(const std::string &path, const MeshingOptions &meshing, bool def
     scene.bodies.back().first_vertex = first_vertex;
     first_vertex += scene.bodies.back().num_vertices();
   }
-  scene.initial_velocities.setZero(first_vertex, 3);
-
   if (!in.NextLine(&fields)) return scene;  // no velocity section: all at rest
   ReadVelocitySection(in, fields, &scene);
   return scene;
@@ -274,15 +291,16 @@ PetscErrorCode ProcessSceneOptions(MPI_Comm comm, SceneOptions *options) {
 
 namespace {
 
-// MPI counts are ints: larger arrays travel in pieces of this many elements.
-constexpr size_t kBroadcastPiece = size_t(1) << 28;
+// MPI counts are ints: larger arrays travel in pieces of at most this many bytes.
+constexpr size_t kBroadcastPieceBytes = size_t(1) << 30;
 
 template <typename T>
 PetscErrorCode BroadcastArray(MPI_Comm comm, T *data, size_t count) {
   PetscFunctionBeginUser;
-  for (size_t begin = 0; begin < count; begin += kBroadcastPiece) {
-    const int piece = static_cast<int>(std::min(kBroadcastPiece, count - begin) * sizeof(T));
-    PetscCallMPI(MPI_Bcast(data + begin, piece, MPI_BYTE, 0, comm));
+  const size_t piece = kBroadcastPieceBytes / sizeof(T);  // elements
+  for (size_t begin = 0; begin < count; begin += piece) {
+    const int bytes = static_cast<int>(std::min(piece, count - begin) * sizeof(T));
+    PetscCallMPI(MPI_Bcast(data + begin, bytes, MPI_BYTE, 0, comm));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -346,9 +364,10 @@ PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene) {
     PetscCall(BroadcastArray(comm, body.mesh.vertices.data(), body.mesh.vertices.size()));
     PetscCall(BroadcastArray(comm, body.mesh.tets.data(), body.mesh.tets.size()));
   }
-  scene->initial_velocities.resize(scene->num_vertices(), 3);
-  PetscCall(
-      BroadcastArray(comm, scene->initial_velocities.data(), scene->initial_velocities.size()));
+  uint64_t entries = scene->initial_velocities.size();
+  PetscCallMPI(MPI_Bcast(&entries, 1, MPI_UINT64_T, 0, comm));
+  scene->initial_velocities.resize(entries);
+  PetscCall(BroadcastArray(comm, scene->initial_velocities.data(), entries));
   scene->meshes_held = true;
   scene->fixed_meshes_held = true;
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -16,6 +16,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -53,12 +54,20 @@ struct Body {
   int64_t num_tets() const { return count_tets >= 0 ? count_tets : mesh.num_tets(); }
 };
 
+// A vertex's initial velocity, from a line of the scene's velocity section.
+struct InitialVelocity {
+  int64_t vertex;                  // natural index
+  std::array<double, 3> velocity;  // m/s
+};
+
 struct Scene {
   std::string path;
   std::vector<Body> bodies;
-  // Natural order, #V x 3 initial velocities (m/s), zero where none is given;
-  // empty where the meshes are not held.
-  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> initial_velocities;
+  // The velocity section's entries on bodies that are not fixed, by increasing
+  // natural vertex, one per vertex (a later line for a vertex replaces an
+  // earlier one); every other vertex starts at rest. O(entries), not O(vertices):
+  // held where the meshes are (DropMeshes frees it).
+  std::vector<InitialVelocity> initial_velocities;
   int num_velocity_entries = 0;      // entries in the file's velocity section
   int ignored_fixed_velocities = 0;  // of which on fixed bodies (they never move)
   // Whether this rank holds the bodies' meshes and the initial velocities
@@ -95,6 +104,11 @@ struct Scene {
     DropMeshes();
   }
 };
+
+// Not collective. The initial velocities as a #V x 3 matrix in natural order (m/s),
+// zero where none is given: for small scenes and tests.
+Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> DenseInitialVelocities(
+    const Scene &scene);
 
 // Reads and validates a scene and its meshes (OFF surfaces meshed with `meshing`);
 // with defer_h5_meshes, softbody .h5 meshes are only opened for their counts

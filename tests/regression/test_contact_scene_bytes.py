@@ -15,8 +15,9 @@ triangles per box counted here as the faces that one tet only names):
     whole until contact's set-up (4 ranks); the "whole scene" line counts 0 MB of
     meshes on every rank at the end, and 0 MB during contact's set-up (1 and 4
     ranks: there is no fixed body); with -scene_replicate (4 ranks) every mesh is
-    whole during the set-up, 48 V + 16 T (positions and initial velocities 24 B
-    per vertex each, tets 16 B); with a third box, fixed, under the two (4 ranks),
+    whole during the set-up, 24 V + 16 T (positions 24 B per vertex, tets 16 B;
+    the initial velocities take 32 B per line of the velocity section, and these
+    scenes have none); with a third box, fixed, under the two (4 ranks),
     the largest rank holds that box's mesh only, 24 V / 2 + 16 T / 2;
 (b) the obstacles' lists on 1 rank: every tet (its 4 vertices and body, its key
     vertex and its index: 28 B) and boundary triangle (3 vertices and body, key and
@@ -133,9 +134,9 @@ def check_setup_meshes(args, checks, scene, run, V, T):
     """(a): the meshes held during contact's set-up, whole (-scene_replicate) or the fixed body's."""
     whole = scene_bytes(line(harness.run(args, 4, ["-scene", scene, "-scene_replicate"] + run).stdout,
                              "whole scene")).get("setup", -1)
-    checks.check(close(whole, 48 * V + 16 * T),
+    checks.check(close(whole, 24 * V + 16 * T),
                  f"4 ranks, -scene_replicate: meshes during contact's set-up {whole:.0f} B, expected "
-                 f"48 V + 16 T = {48 * V + 16 * T} B")
+                 f"24 V + 16 T = {24 * V + 16 * T} B")
     with_fixed = os.path.join(args.work, "two-boxes-on-a-fixed-one.txt")
     with open(scene) as f, open(with_fixed, "w") as g:
         lines = f.read().splitlines()

@@ -35,7 +35,6 @@ struct Stiffness {
     body.mesh = BoxMesh(5, 4, 3, 0.1);
     body.first_vertex = 0;
     scene.bodies.push_back(body);
-    scene.initial_velocities.setZero(body.mesh.num_vertices(), 3);
     PetscMPIInt rank, size;
     MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     MPI_Comm_size(PETSC_COMM_WORLD, &size);

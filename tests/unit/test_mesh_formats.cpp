@@ -482,10 +482,10 @@ TEST_F(OffTest, SceneMixesFormats) {
   // Placement is rigid (identity rotation): OFF vertex 7 keeps its offset from vertex 0.
   const Body &off = scene.bodies[0];
   EXPECT_LT((Vertex(off.mesh, 7) - Vertex(off.mesh, 0) - Eigen::Vector3d(2, 1, 0.5)).norm(), 1e-14);
-  EXPECT_EQ(scene.initial_velocities.row(off.first_vertex + 7), Eigen::RowVector3d(0, 0, 1));
-  EXPECT_EQ(scene.initial_velocities.row(scene.bodies[2].first_vertex + 44),
-            Eigen::RowVector3d(0, 1, 0));
-  EXPECT_EQ(scene.initial_velocities.cwiseAbs().sum(), 2.0);
+  const auto velocities = DenseInitialVelocities(scene);
+  EXPECT_EQ(velocities.row(off.first_vertex + 7), Eigen::RowVector3d(0, 0, 1));
+  EXPECT_EQ(velocities.row(scene.bodies[2].first_vertex + 44), Eigen::RowVector3d(0, 1, 0));
+  EXPECT_EQ(velocities.cwiseAbs().sum(), 2.0);
   EXPECT_TRUE(scene.bodies[3].fixed);
 
   // The meshing options reach the OFF body only.

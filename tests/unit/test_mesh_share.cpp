@@ -49,8 +49,8 @@ Scene ThreeBoxes() {
     first += body.mesh.num_vertices();
     scene.bodies.push_back(body);
   }
-  scene.initial_velocities.resize(first, 3);
-  for (int32_t v = 0; v < first; ++v) scene.initial_velocities.row(v) << v, -v, 0.5 * v;
+  for (int32_t v = 0; v < first; ++v)
+    scene.initial_velocities.push_back({v, {double(v), -double(v), 0.5 * v}});
   return scene;
 }
 
@@ -67,7 +67,7 @@ TEST(ShareScene, SlabsAndSharesPutTogetherAreTheScene) {
       for (int c = 0; c < 3; ++c) {
         const size_t at = 6 * (body.first_vertex + v) + 2 * c;
         EXPECT_EQ(all[at], body.mesh.vertices(v, c));
-        EXPECT_EQ(all[at + 1], scene.initial_velocities(body.first_vertex + v, c));
+        EXPECT_EQ(all[at + 1], scene.initial_velocities[body.first_vertex + v].velocity[c]);
       }
   std::vector<std::array<PetscInt, 5>> tets;  // natural vertices and body
   for (PetscInt t = 0; t < share.num_tets(); ++t)

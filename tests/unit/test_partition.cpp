@@ -63,7 +63,6 @@ Scene ThreeBoxes() {
     first += body.mesh.num_vertices();
     scene.bodies.push_back(body);
   }
-  scene.initial_velocities.setZero(first, 3);
   return scene;
 }
 
@@ -190,7 +189,6 @@ Scene ThreeBoxesWithStrayVertex() {
   mesh.vertices.conservativeResize(mesh.num_vertices() + 1, 3);
   mesh.vertices.row(mesh.num_vertices() - 1) << 9, 9, 9;
   for (size_t b = 1; b < scene.bodies.size(); ++b) ++scene.bodies[b].first_vertex;
-  scene.initial_velocities.setZero(scene.initial_velocities.rows() + 1, 3);
   return scene;
 }
 

@@ -321,14 +321,15 @@ TEST_F(ReadSceneTest, PlacesBodiesAndReadsVelocities) {
   EXPECT_LT((VolumeWeightedCentroid(cube.mesh) - Eigen::Vector3d(-1, 0.5, 4)).norm(), 1e-14);
 
   // Velocities land at natural index first_vertex + vertex; all others stay zero.
-  ASSERT_EQ(scene.initial_velocities.rows(), 13);
+  ASSERT_EQ(scene.num_vertices(), 13);
+  EXPECT_EQ(scene.initial_velocities.size(), 2u);
   EXPECT_EQ(scene.num_velocity_entries, 2);
   EXPECT_EQ(scene.ignored_fixed_velocities, 0);
   Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> expected_velocities =
       Eigen::MatrixXd::Zero(13, 3);
   expected_velocities.row(4) << 0.1, 0.2, 0.3;
   expected_velocities.row(5 + 7) << -1, -2, -3;
-  EXPECT_EQ(scene.initial_velocities, expected_velocities);
+  EXPECT_EQ(DenseInitialVelocities(scene), expected_velocities);
 }
 
 TEST_F(ReadSceneTest, MissingVelocitySectionMeansAtRest) {
@@ -337,11 +338,30 @@ TEST_F(ReadSceneTest, MissingVelocitySectionMeansAtRest) {
   ASSERT_EQ(scene.bodies.size(), 1u);
   EXPECT_TRUE(scene.bodies[0].fixed);
   EXPECT_EQ(scene.num_velocity_entries, 0);
-  ASSERT_EQ(scene.initial_velocities.rows(), 8);
-  EXPECT_TRUE(scene.initial_velocities.isZero(0.0));
+  ASSERT_EQ(scene.num_vertices(), 8);
+  EXPECT_TRUE(scene.initial_velocities.empty());
   // Identity rotation, zero translation: the cube is centred on the origin.
   EXPECT_LT((scene.bodies[0].mesh.vertices.row(7) - Eigen::RowVector3d(0.5, 0.5, 0.5)).norm(),
             1e-15);
+}
+
+// Entries are kept by vertex, one each: a vertex named twice takes its last line.
+TEST_F(ReadSceneTest, LaterVelocityLineForAVertexWins) {
+  const std::string path = Write("twice.txt",
+                                 "1\n"
+                                 "meshes/cube.mesh 1000 1e5 0.3 0 0 0 0 1 0 0 0\n"
+                                 "4\n"
+                                 "0 6 1 1 1\n"
+                                 "0 2 0 0 -2\n"
+                                 "0 6 3 0 0\n"
+                                 "0 1 0 5 0\n");
+  const Scene scene = ReadScene(path);
+  EXPECT_EQ(scene.num_velocity_entries, 4);
+  ASSERT_EQ(scene.initial_velocities.size(), 3u);
+  EXPECT_EQ(scene.initial_velocities[0].vertex, 1);
+  EXPECT_EQ(scene.initial_velocities[1].vertex, 2);
+  EXPECT_EQ(scene.initial_velocities[2].vertex, 6);
+  EXPECT_EQ(DenseInitialVelocities(scene).row(6), Eigen::RowVector3d(3, 0, 0));
 }
 
 TEST_F(ReadSceneTest, VelocitiesOfFixedBodiesAreCountedAndDropped) {
@@ -355,8 +375,9 @@ TEST_F(ReadSceneTest, VelocitiesOfFixedBodiesAreCountedAndDropped) {
   const Scene scene = ReadScene(path);
   EXPECT_EQ(scene.num_velocity_entries, 2);
   EXPECT_EQ(scene.ignored_fixed_velocities, 1);
-  EXPECT_TRUE(scene.initial_velocities.topRows(8).isZero(0.0));
-  EXPECT_EQ(scene.initial_velocities.row(8), Eigen::RowVector3d(0, 0, -2));
+  EXPECT_TRUE(DenseInitialVelocities(scene).topRows(8).isZero(0.0));
+  EXPECT_EQ(DenseInitialVelocities(scene).row(8), Eigen::RowVector3d(0, 0, -2));
+  EXPECT_EQ(scene.initial_velocities.size(), 1u);
 }
 
 TEST_F(ReadSceneTest, ErrorsNameFileAndLine) {

@@ -30,7 +30,6 @@ Scene BoxScene(int nx, int ny, int nz) {
   body.mesh = BoxMesh(nx, ny, nz, 0.1);
   body.first_vertex = 0;
   scene.bodies.push_back(body);
-  scene.initial_velocities.setZero(body.mesh.num_vertices(), 3);
   return scene;
 }
 
