@@ -19,9 +19,10 @@ Every point is run twice, -steps 1 and -steps 1 + S (S = -scale_steps); the long
 run minus the short one, over S, is the traffic of a step, the short run is the
 set-up's (with the first step). Measured from outside the program:
   - /usr/bin/time -f %M around every rank: each rank's peak resident set (MB);
-  - PETSc's -log_view summary: the point-to-point messages and bytes PETSc sends
-    (its halo exchanges and scatters), per rank as the largest, smallest and mean,
-    the time of each softbody log stage (src/app/log_stages.hpp);
+  - PETSc's log: the point-to-point messages and bytes PETSc sends (its halo
+    exchanges and scatters) on every rank (softbody's -log_rank_messages lines),
+    and from the -log_view summary the time of each softbody log stage
+    (src/app/log_stages.hpp);
   - Open MPI's monitoring components (pml_monitoring_enable 2, one file per rank):
     the bytes and messages each rank sends inside collectives (reductions,
     broadcasts, the boxes contact gathers), and the point-to-point messages
@@ -126,7 +127,8 @@ COLUMNS = ["series", "mode", "contact", "ranks", "tets", "vertices", "tets_per_r
            "step_mpi_p2p_bytes_mean", "step_mpi_p2p_bytes_min",
            "load_avg", "status", "message"]
 RANK_COLUMNS = ["series", "mode", "contact", "ranks", "tets", "rank", "mem_mb", "setup_coll_bytes",
-                "step_coll_bytes", "step_coll_msgs", "step_mpi_p2p_bytes", "step_mpi_p2p_msgs"]
+                "step_p2p_bytes", "step_p2p_msgs", "step_coll_bytes", "step_coll_msgs", "step_mpi_p2p_bytes",
+                "step_mpi_p2p_msgs", "step_bytes"]
 # softbody's log stages (src/app/log_stages.hpp) -> columns: each stage's time in the
 # long run, the slowest rank's (s).
 STAGES = {"Set-up": "setup_s", "Assembly": "assembly_s", "Factorisation": "factorisation_s", "Contact": "contact_s"}
@@ -313,29 +315,23 @@ def read_monitoring(prefix, ranks):
 
 
 def read_petsc_summary(text, ranks):
-    """From -log_view's summary (printed by rank 0): the slowest rank's run time (s),
-    the point-to-point messages and bytes PETSc logged per rank, as the largest, the
-    smallest and the mean over ranks (PETSc counts every message it sends or receives,
-    its halo exchanges on persistent requests included, and reports half the sum: what
-    a rank sends in a symmetric exchange), and each log stage's time (s, mean over
-    ranks). (-log_view's per-rank detailed format would give every rank's count, but
-    writing it costs rank 0 tens of MB at exit, which the memory figure would include.)"""
-    summary = {"time_s": 0.0, "p2p_bytes_max": 0.0, "p2p_bytes_min": 0.0, "p2p_bytes_mean": 0.0,
-               "p2p_msgs_max": 0.0, "p2p_msgs_mean": 0.0, "stages": {}}
+    """From softbody's output: the point-to-point messages and bytes PETSc logged on
+    every rank (its -log_rank_messages lines, counted as -log_view counts them: every
+    message a rank sends or receives, its halo exchanges on persistent requests
+    included, and half the sum: what a rank sends in a symmetric exchange), lists
+    indexed by rank; and from -log_view's summary (printed by rank 0) the slowest
+    rank's run time (s) and each log stage's time (s, mean over ranks)."""
+    summary = {"time_s": 0.0, "p2p_msgs": [0.0] * ranks, "p2p_bytes": [0.0] * ranks, "stages": {}}
     number = r"([0-9.]+e[+-]\d+)"
     time_line = re.search(r"^Time \(sec\):\s+" + number, text, re.M)
     if time_line:
         summary["time_s"] = float(time_line.group(1))
-    for label, key in (("MPI Msg Count:", "p2p_msgs"), ("MPI Msg Len \\(bytes\\):", "p2p_bytes")):
-        line = re.search("^" + label + r"\s+" + number + r"\s+([0-9.]+)\s+" + number + r"\s+" + number, text, re.M)
-        if line:
-            largest, ratio, total = float(line.group(1)), float(line.group(2)), float(line.group(4))
-            summary[key + "_max"], summary[key + "_mean"] = largest, total / ranks
-            summary[key + "_min"] = largest / ratio if ratio > 0 else 0.0
-    if summary["p2p_msgs_max"] == 0:
-        # PETSc adds the length of a persistent send it starts with no message in it
-        # (a one-rank run shows bytes and 0 messages): no message, no bytes.
-        summary.update(p2p_bytes_max=0.0, p2p_bytes_min=0.0, p2p_bytes_mean=0.0)
+    for rank, msgs, length in re.findall(r"^\s*messages\s+rank (\d+): (\d+) messages, (\d+) bytes", text, re.M):
+        if int(rank) < ranks:
+            # PETSc adds the length of a persistent send it starts with no message in it
+            # (a one-rank run shows bytes and 0 messages): no message, no bytes.
+            summary["p2p_msgs"][int(rank)] = float(msgs)
+            summary["p2p_bytes"][int(rank)] = float(length) if int(msgs) > 0 else 0.0
     block = text.split("Summary of Stages:", 1)
     for line in block[1].splitlines()[2:] if len(block) == 2 else []:
         match = re.match(r"\s*\d+:\s+(.+?):\s+" + number, line)
@@ -408,7 +404,7 @@ def measure(args, scene, extra, mode, ranks, steps, stem):
         if name.startswith(os.path.basename(stem) + "."):
             os.remove(os.path.join(os.path.dirname(stem), name))
     options = ["-scene", scene, "-mode", mode, "-dt", repr(DT), "-steps", str(steps),
-               "-log_view"] + extra
+               "-log_view", "-log_rank_messages"] + extra
     if args.solver_options != "default":
         options = ["-options_file", args.solver_options] + options
     rank_command = ["sh", "-c", f'exec {TIME} -f %M -o "$0.$OMPI_COMM_WORLD_RANK" "$@"', stem + ".rss",
@@ -493,30 +489,25 @@ def fill_measurements(args, row, results, rank_rows):
     for rank in range(ranks):
         per_rank.append({**{key: row[key] for key in ("series", "mode", "contact", "ranks", "tets")}, "rank": rank,
                          "mem_mb": memory[rank], "setup_coll_bytes": short_sent[rank]["coll_bytes"],
+                         **{"step_" + key: step(long_log[key][rank], short_log[key][rank])
+                            for key in ("p2p_bytes", "p2p_msgs")},
                          **{"step_" + key: step(long_sent[rank][key], short_sent[rank][key])
                             for key in ("coll_bytes", "coll_msgs", "mpi_p2p_bytes", "mpi_p2p_msgs")}})
+        # Bytes of a rank: PETSc's (persistent requests), the collectives' and softbody's
+        # own point-to-point (the contact halos, non-persistent; PETSc sends almost
+        # nothing on non-persistent requests: 18 kB per step at 8 ranks before the halos).
+        per_rank[-1]["step_bytes"] = sum(per_rank[-1]["step_" + key]
+                                         for key in ("p2p_bytes", "coll_bytes", "mpi_p2p_bytes"))
     rank_rows.extend(per_rank)
     mem = np.array(memory)
     row.update(mem_max_mb=mem.max(), mem_mean_mb=mem.mean(), mem_min_mb=mem.min(), mem_rank0_mb=mem[0],
                mem_sum_mb=mem.sum(), mem_imbalance=mem.max() / mem.mean(), status="ok")
-    coll = np.array([r["step_coll_bytes"] for r in per_rank])
-    coll_msgs = np.array([r["step_coll_msgs"] for r in per_rank])
-    for key in ("max", "min", "mean"):
-        row[f"step_p2p_bytes_{key}"] = step(long_log[f"p2p_bytes_{key}"], short_log[f"p2p_bytes_{key}"])
-    mpi_p2p = np.array([r["step_mpi_p2p_bytes"] for r in per_rank])
-    mpi_p2p_msgs = np.array([r["step_mpi_p2p_msgs"] for r in per_rank])
-    row.update(step_coll_bytes_max=coll.max(), step_coll_bytes_mean=coll.mean(), step_coll_bytes_min=coll.min(),
-               step_mpi_p2p_bytes_max=mpi_p2p.max(), step_mpi_p2p_bytes_mean=mpi_p2p.mean(),
-               step_mpi_p2p_bytes_min=mpi_p2p.min(),
-               step_msgs_mean=step(long_log["p2p_msgs_mean"], short_log["p2p_msgs_mean"]) + coll_msgs.mean()
-               + mpi_p2p_msgs.mean(),
-               setup_bytes_mean=short_log["p2p_bytes_mean"] + np.mean([r["setup_coll_bytes"] for r in per_rank]))
-    # Bytes of a rank: PETSc's (persistent requests), the collectives' and softbody's
-    # own point-to-point (the contact halos, non-persistent; PETSc sends almost
-    # nothing on non-persistent requests: 18 kB per step at 8 ranks before the halos).
-    for key in ("max", "min", "mean"):
-        row[f"step_bytes_{key}"] = (row[f"step_p2p_bytes_{key}"] + row[f"step_coll_bytes_{key}"]
-                                    + row[f"step_mpi_p2p_bytes_{key}"])
+    for name in ("step_bytes", "step_p2p_bytes", "step_coll_bytes", "step_mpi_p2p_bytes"):
+        values = np.array([r[name] for r in per_rank])  # max and min over the ranks' own figures
+        row.update({f"{name}_max": values.max(), f"{name}_mean": values.mean(), f"{name}_min": values.min()})
+    row.update(step_msgs_mean=np.mean([r["step_p2p_msgs"] + r["step_coll_msgs"] + r["step_mpi_p2p_msgs"]
+                                       for r in per_rank]),
+               setup_bytes_mean=np.mean(short_log["p2p_bytes"]) + np.mean([r["setup_coll_bytes"] for r in per_rank]))
 
 
 # ----------------------------------------------------------------------------- model

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <ctime>
 #include <string>
+#include <vector>
 
 #include "app/run_control.hpp"
 #include "common/held_bytes.hpp"
@@ -413,6 +414,23 @@ PetscErrorCode PrintTimesAndEnergy(MPI_Comm comm, const IntegratorOptions &o,
 }
 
 }  // namespace
+
+PetscErrorCode PrintRankMessages(MPI_Comm comm) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank, size;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  PetscCallMPI(MPI_Comm_size(comm, &size));
+  // As PetscLogView's "MPI Msg Count" and "MPI Msg Len" per rank.
+  const double mine[2] = {
+      0.5 * (petsc_send_ct + petsc_isend_ct + petsc_recv_ct + petsc_irecv_ct),
+      0.5 * (petsc_send_len + petsc_isend_len + petsc_recv_len + petsc_irecv_len)};
+  std::vector<double> all(rank == 0 ? 2 * size : 0);
+  PetscCallMPI(MPI_Gather(mine, 2, MPI_DOUBLE, all.data(), 2, MPI_DOUBLE, 0, comm));
+  for (PetscMPIInt r = 0; r < (rank == 0 ? size : 0); ++r)
+    PetscCall(PetscPrintf(PETSC_COMM_SELF, "  messages     rank %d: %.0f messages, %.0f bytes\n", r,
+                          all[2 * r], all[2 * r + 1]));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
 
 PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                const IntegratorOptions &integration, const OutputOptions &output,

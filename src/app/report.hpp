@@ -55,6 +55,12 @@ PetscErrorCode PrintRunSummary(MPI_Comm comm, const Scene &scene, const DofLayou
 
 // Rank 0 prints, on stderr, the one line that says a signal stopped the run and
 // what the result file holds.
+// Collective. -log_rank_messages: rank 0 prints, for every rank, the point-to-point
+// messages and bytes PETSc's log counted there since the start, as -log_view's
+// summary counts them (half of sent plus received: what a rank sends in a
+// symmetric exchange), "  messages     rank R: N messages, B bytes".
+PetscErrorCode PrintRankMessages(MPI_Comm comm);
+
 PetscErrorCode PrintInterruption(MPI_Comm comm, int signal, const IntegratorOptions &integration,
                                  const OutputOptions &output, const RunReport &report);
 

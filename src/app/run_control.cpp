@@ -66,8 +66,9 @@ bool StderrIsTerminal() {
 PetscErrorCode ProcessRunControlOptions(MPI_Comm comm, RunControlOptions *o) {
   PetscFunctionBeginUser;
   PetscBool progress_set = PETSC_FALSE;
-  PetscCall(CheckOptionSyntax(
-      comm, {{OptionSyntax::kBool, "-quiet"}, {OptionSyntax::kBool, "-progress"}}));
+  PetscCall(CheckOptionSyntax(comm, {{OptionSyntax::kBool, "-quiet"},
+                                     {OptionSyntax::kBool, "-progress"},
+                                     {OptionSyntax::kBool, "-log_rank_messages"}}));
   PetscOptionsBegin(comm, nullptr, "Run control", nullptr);
   PetscCall(PetscOptionsBool("-quiet",
                              "Print nothing but errors (no run summary, no progress line)", nullptr,
@@ -77,6 +78,11 @@ PetscErrorCode ProcessRunControlOptions(MPI_Comm comm, RunControlOptions *o) {
                        "Progress line on stderr (step, time, steps/s, ETA, solver iterations); "
                        "default: when stderr is a terminal and not -quiet",
                        nullptr, o->progress, &o->progress, &progress_set));
+  PetscCall(PetscOptionsBool(
+      "-log_rank_messages",
+      "At the end, one line per rank: the point-to-point messages and bytes PETSc logged on it "
+      "(half of those sent and received, as -log_view counts them; also with -quiet)",
+      nullptr, o->rank_messages, &o->rank_messages, nullptr));
   PetscOptionsEnd();
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));

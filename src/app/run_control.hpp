@@ -22,12 +22,13 @@
 namespace softbody {
 
 struct RunControlOptions {
-  PetscBool quiet = PETSC_FALSE;     // -quiet
-  PetscBool progress = PETSC_FALSE;  // show the progress line (-progress, or a terminal)
+  PetscBool quiet = PETSC_FALSE;          // -quiet
+  PetscBool progress = PETSC_FALSE;       // show the progress line (-progress, or a terminal)
+  PetscBool rank_messages = PETSC_FALSE;  // -log_rank_messages
 };
 
-// Collective. Reads -quiet and -progress; decides on rank 0 whether the
-// progress line is shown.
+// Collective. Reads -quiet, -progress and -log_rank_messages; decides on rank 0
+// whether the progress line is shown.
 PetscErrorCode ProcessRunControlOptions(MPI_Comm comm, RunControlOptions *options);
 
 // Not collective. Installs the SIGINT/SIGTERM handlers (after PetscInitialize,

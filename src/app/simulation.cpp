@@ -415,6 +415,7 @@ PetscErrorCode Simulation::PrintSummary(int *exit_code) {
     PetscCall(PrintRunSummary(comm_, scene_, layout_, options_.integration, options_.output,
                               integrator_.statistics(),
                               has_unknowns() ? integrator_.solver() : nullptr, contact_, report_));
+  if (options_.control.rank_messages) PetscCall(PrintRankMessages(comm_));
   if (stop_signal_) {
     PetscCall(
         PrintInterruption(comm_, stop_signal_, options_.integration, options_.output, report_));

@@ -27,11 +27,18 @@ it does not compute itself.
    the two agree within MEMORY_RELATIVE + MEMORY_ABSOLUTE_MB (two runs of the same
    deterministic program; the probe misses growth after its last poll).
 
+8. Per-rank figures: the messages PETSc logged on each rank (softbody's
+   -log_rank_messages lines, which the tool reads) sum to the total of -log_view's
+   own summary in every run's log (its 4 digits); and a point's largest, smallest
+   and mean bytes per step are those of its ranks' rows in scale-ranks.csv, so the
+   largest is never below the mean.
+
 Run with --probe PREFIX COMMAND... it is the probe: runs COMMAND, writes the last
 VmHWM it read (kB) to PREFIX.RANK and exits with COMMAND's status.
 """
 import csv
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -114,6 +121,34 @@ def check_memory_probe(checks, args, folder, rank_rows):
                      f"rank {rank}: time's %M {time_mb:.1f} MB, VmHWM {hwm:.1f} MB (within {tolerance:.1f} MB)")
 
 
+def check_rank_messages(checks, folder, rows, rank_rows):
+    """8: the per-rank lines against -log_view's total; the rows' extremes against the ranks'."""
+    logs = sorted(name for name in os.listdir(os.path.join(folder, "runs")) if name.endswith(".log"))
+    compared = 0
+    for name in logs:
+        text = open(os.path.join(folder, "runs", name)).read()
+        lines = re.findall(r"^\s*messages\s+rank \d+: \d+ messages, (\d+) bytes", text, re.M)
+        total = re.search(r"^MPI Msg Len \(bytes\):\s+\S+\s+\S+\s+\S+\s+([0-9.]+e[+-]\d+)", text, re.M)
+        if lines and total and float(total.group(1)) > 0:
+            compared += 1
+            ours = sum(float(b) for b in lines)
+            checks.check(abs(ours / float(total.group(1)) - 1) <= 1e-3,
+                         f"{name}: the ranks' lines sum to {ours:.0f} B, -log_view's total {total.group(1)}")
+    checks.check(compared >= 4, f"per-rank message lines compared with -log_view's total in {compared} logs")
+    for row in rows:
+        if row["status"] != "ok":
+            continue
+        mine = [float(r["step_bytes"]) for r in rank_rows if (r["series"], r["contact"], r["ranks"])
+                == (row["series"], row["contact"], row["ranks"])]
+        label = f"{row['series']} contact {row['contact']} P = {row['ranks']}"
+        close = lambda a, b: abs(a - b) <= 1e-5 * max(abs(b), 1.0)  # the CSV's 6 digits
+        checks.check(len(mine) == int(row["ranks"]) and close(max(mine), float(row["step_bytes_max"]))
+                     and close(min(mine), float(row["step_bytes_min"]))
+                     and float(row["step_bytes_min"]) <= float(row["step_bytes_mean"]) <= float(row["step_bytes_max"]),
+                     f"{label}: step bytes largest / mean / smallest {row['step_bytes_max']} / "
+                     f"{row['step_bytes_mean']} / {row['step_bytes_min']} from the ranks' {mine}")
+
+
 def main():
     if len(sys.argv) > 2 and sys.argv[1] == "--probe":
         sys.exit(probe(sys.argv[2], sys.argv[3:]))
@@ -172,6 +207,7 @@ def main():
     png = os.path.join(folder, "scale.png")
     checks.check(os.path.isfile(png) and open(png, "rb").read(8) == b"\x89PNG\r\n\x1a\n", "scale.png written")
     check_memory_probe(checks, args, folder, rank_rows)
+    check_rank_messages(checks, folder, rows, rank_rows)
     checks.exit()
 
 
