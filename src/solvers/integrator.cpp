@@ -7,6 +7,7 @@
 #include "common/options.hpp"
 #include "common/text_reader.hpp"
 #include "fem/block_matrix.hpp"
+#include "fem/block_product.hpp"
 #include "solvers/solver.hpp"
 #include "solvers/warp/warp_preconditioner.hpp"
 
@@ -340,6 +341,7 @@ PetscErrorCode ImplicitEuler::CreateMatrices(MPI_Comm comm, const Scene &scene,
     PetscCall(CopyToBlockMatrix(K_, &blocks));
     PetscCall(MatDestroy(&K_));
     K_ = blocks;
+    PetscCall(UseBlockProducts(K_));
     PetscCall(VecDuplicate(rest_, &displacement_));
   }
   PetscFunctionReturn(PETSC_SUCCESS);
