@@ -7,12 +7,8 @@
 #include <gtest/gtest.h>
 #include <petscmat.h>
 
-#include "box_mesh.hpp"
-#include "fem/assembly.hpp"
+#include "box_stiffness.hpp"
 #include "fem/block_matrix.hpp"
-#include "fem/partition.hpp"
-#include "fem/row_assembly.hpp"
-#include "io/scene.hpp"
 #include "petsc_environment.hpp"
 
 using namespace softbody;
@@ -20,35 +16,8 @@ using namespace softbody;
 namespace {
 
 // The stiffness K of a 5 x 4 x 3-cell box (row assembler, MATAIJ, block size 3).
-struct Stiffness {
-  Scene scene;
-  MeshShare share;
-  DofLayout layout;
-  State state;
-  RowAssembler assembler;
-  Mat K = nullptr;
-
-  Stiffness() {
-    Body body;
-    body.material = {1000.0, 1e6, 0.3};
-    body.fixed = false;
-    body.mesh = BoxMesh(5, 4, 3, 0.1);
-    body.first_vertex = 0;
-    scene.bodies.push_back(body);
-    PetscMPIInt rank, size;
-    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
-    MPI_Comm_size(PETSC_COMM_WORLD, &size);
-    share = ShareScene(scene, rank, size);
-    LocalTets tets;
-    BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions(), &share, &layout);
-    MigrateTets(PETSC_COMM_WORLD, share, layout, &tets);
-    const LocalElements elements = CollectLocalElements(scene, layout, tets);
-    CreateState(PETSC_COMM_WORLD, share, layout, elements, &state);
-    assembler.Setup(PETSC_COMM_WORLD, scene, layout, std::move(tets), 1.0, state.rest_positions);
-    assembler.CreateMatrix(&K);
-    assembler.Fill(K, RowAssembler::FillTerms().Stiffness(1.0));
-  }
-  ~Stiffness() { MatDestroy(&K); }
+struct Stiffness : BoxStiffness {
+  Stiffness() : BoxStiffness(5, 4, 3) {}
 };
 
 }  // namespace

@@ -10,56 +10,30 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <random>
 
-#include "box_mesh.hpp"
-#include "fem/assembly.hpp"
+#include "box_stiffness.hpp"
 #include "fem/block_matrix.hpp"
 #include "fem/block_product.hpp"
-#include "fem/partition.hpp"
-#include "fem/row_assembly.hpp"
-#include "io/scene.hpp"
 #include "petsc_environment.hpp"
 
 using namespace softbody;
 
 namespace {
 
-// K of an nx x ny x nz-cell box, in blocks, twice: *petsc with PETSc's kernels,
-// *ours with UseBlockProducts; x a vector to multiply.
-struct Products {
-  Scene scene;
-  MeshShare share;
-  DofLayout layout;
-  State state;
-  RowAssembler assembler;
+// K of an nx x ny x nz-cell box, in blocks, twice: petsc with PETSc's kernels,
+// ours with UseBlockProducts; x a vector to multiply.
+struct Products : BoxStiffness {
   Mat petsc = nullptr, ours = nullptr;
   Vec x = nullptr;
 
-  Products(int nx, int ny, int nz) {
-    Body body;
-    body.material = {1000.0, 1e6, 0.3};
-    body.fixed = false;
-    body.mesh = BoxMesh(nx, ny, nz, 0.1);
-    body.first_vertex = 0;
-    scene.bodies.push_back(body);
-    PetscMPIInt rank, size;
-    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
-    MPI_Comm_size(PETSC_COMM_WORLD, &size);
-    share = ShareScene(scene, rank, size);
-    LocalTets tets;
-    BuildDofLayout(PETSC_COMM_WORLD, PartitionOptions(), &share, &layout);
-    MigrateTets(PETSC_COMM_WORLD, share, layout, &tets);
-    const LocalElements elements = CollectLocalElements(scene, layout, tets);
-    CreateState(PETSC_COMM_WORLD, share, layout, elements, &state);
-    assembler.Setup(PETSC_COMM_WORLD, scene, layout, std::move(tets), 1.0, state.rest_positions);
-    Mat K;
-    assembler.CreateMatrix(&K);
-    assembler.Fill(K, RowAssembler::FillTerms().Stiffness(1.0));
+  Products(int nx, int ny, int nz) : BoxStiffness(nx, ny, nz) {
     CopyToBlockMatrix(K, &petsc);
     CopyToBlockMatrix(K, &ours);
-    MatDestroy(&K);
     UseBlockProducts(ours);
+    PetscMPIInt rank;
+    MPI_Comm_rank(PETSC_COMM_WORLD, &rank);
     // Displacements of all sizes and signs, as the products see them.
     VecDuplicate(state.rest_positions, &x);
     PetscInt begin, end;
