@@ -43,7 +43,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
       vertices += body.mesh.num_vertices();
     }
     fuzz::Require(scene.num_vertices() == vertices, "velocity rows");
-    fuzz::Require(scene.initial_velocities.allFinite(), "non-finite velocity");
+    int64_t previous = -1;  // entries by increasing vertex, one each, finite, in range
+    for (const softbody::InitialVelocity &entry : scene.initial_velocities) {
+      fuzz::Require(entry.vertex > previous && entry.vertex < scene.num_vertices(),
+                    "velocity entries out of order or range");
+      previous = entry.vertex;
+      for (double component : entry.velocity)
+        fuzz::Require(std::isfinite(component), "non-finite velocity");
+    }
+    fuzz::Require(scene.initial_velocities.size() + scene.ignored_fixed_velocities <=
+                      static_cast<size_t>(scene.num_velocity_entries),
+                  "velocity entries");
     fuzz::Require(scene.ignored_fixed_velocities <= scene.num_velocity_entries, "velocity counts");
   });
   return 0;
