@@ -138,6 +138,57 @@ PetscErrorCode RowDots(const std::vector<Row> &rows, PetscInt begin, PetscInt en
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Rows whose A^-1 J_j^T one application of a factorisation's PCMatApply
+// solves together (on one rank the supernodal factor sweeps once per four).
+constexpr PetscInt kRowsPerBatch = 16;
+
+// Collective. Whether the unconstrained solver is a factorisation applied once
+// (KSPPREONLY), whose PC can solve many right-hand sides at once.
+PetscErrorCode AppliesFactorOnce(KSP solver, bool *once) {
+  PetscFunctionBeginUser;
+  KSPType type;
+  PetscCall(KSPGetType(solver, &type));
+  PetscBool preonly;
+  PetscCall(PetscStrcmp(type, KSPPREONLY, &preonly));
+  *once = preonly;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. partial[j m + i] = J_i A^-1 J_j^T over the owned entries for the
+// rows j of [first, first + count) (count <= kRowsPerBatch), by one PCMatApply of
+// the solver's PC on the columns J_j^T; B and X dense blocks of kRowsPerBatch
+// columns laid out as the solver's vectors.
+PetscErrorCode BatchOfRowSolves(KSP solver, const std::vector<Row> &rows, size_t first,
+                                PetscInt count, PetscInt begin, PetscInt end, Mat B, Mat X,
+                                double *partial, PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  PetscInt lda;
+  PetscCall(MatDenseGetLDA(B, &lda));
+  PetscScalar *b;
+  PetscCall(MatDenseGetArrayWrite(B, &b));
+  std::fill(b, b + lda * kRowsPerBatch, 0.0);
+  for (PetscInt c = 0; c < count; ++c)
+    AddRowTranspose(rows[first + c], 1.0, begin, end, b + c * lda);
+  PetscCall(MatDenseRestoreArrayWrite(B, &b));
+  PC pc;
+  PetscCall(KSPGetPC(solver, &pc));
+  PetscCall(PCMatApply(pc, B, X));
+  PCFailedReason failed;
+  PetscCall(PCGetFailedReason(pc, &failed));
+  PetscCheck(failed == PC_NOERROR, PetscObjectComm((PetscObject)solver), PETSC_ERR_NOT_CONVERGED,
+             "a two-sided contact solve did not converge (%s)", PCFailedReasons[failed]);
+  const PetscScalar *x;
+  PetscCall(MatDenseGetLDA(X, &lda));
+  PetscCall(MatDenseGetArrayRead(X, &x));
+  const size_t m = rows.size();
+  for (PetscInt c = 0; c < count; ++c)
+    for (size_t i = 0; i < m; ++i)
+      partial[(first + c) * m + i] = RowDot(rows[i], begin, end, x + c * lda);
+  PetscCall(MatDenseRestoreArrayRead(X, &x));
+  *iterations += count;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // Collective. x = A^-1 y with the unconstrained solver (zero initial guess).
 PetscErrorCode SolveUnconstrained(KSP solver, Vec y, Vec x, PetscInt *iterations) {
   PetscFunctionBeginUser;
@@ -315,9 +366,27 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
   bool kept;
   PetscCall(KeepDelassusColumns(solver, RowVertices(rows), &kept, iterations));
   // Partial sums of D = J A^-1 J^T and of J v0 (v0 = A^-1 b) over the owned
-  // entries: A^-1 J_j^T from the kept columns, else by a back-solve.
+  // entries: A^-1 J_j^T from the kept columns, else by a back-solve (with a
+  // factorisation, kRowsPerBatch rows per application of it).
   std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);
-  for (Eigen::Index j = 0; j <= m; ++j) {
+  bool batched = false;
+  PetscCall(AppliesFactorOnce(solver, &batched));
+  batched = batched && !kept && m > 0;
+  if (batched) {
+    Mat B, X;
+    PetscInt local;
+    PetscCall(VecGetLocalSize(b, &local));
+    PetscCall(
+        MatCreateDense(comm, local, PETSC_DECIDE, PETSC_DETERMINE, kRowsPerBatch, nullptr, &B));
+    PetscCall(MatDuplicate(B, MAT_DO_NOT_COPY_VALUES, &X));
+    for (Eigen::Index j = 0; j < m; j += kRowsPerBatch)
+      PetscCall(BatchOfRowSolves(solver, rows, static_cast<size_t>(j),
+                                 std::min<PetscInt>(kRowsPerBatch, static_cast<PetscInt>(m - j)),
+                                 begin, end, B, X, partial.data(), iterations));
+    PetscCall(MatDestroy(&B));
+    PetscCall(MatDestroy(&X));
+  }
+  for (Eigen::Index j = batched ? m : 0; j <= m; ++j) {
     if (j < m && kept) {
       PetscCall(CombineColumns(rows[j], delassus_columns_, work_));
     } else if (j < m) {

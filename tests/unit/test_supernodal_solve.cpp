@@ -167,6 +167,47 @@ TYPED_TEST(TiledFactorTest, SolvesLikeDenseCholesky) {
   }
 }
 
+// SolveColumns: seven columns (a group of four and one of three) in a matrix
+// with a leading dimension larger than n; each equals Solve's result to
+// round-off (the sums of the dot products run in another order) and is the
+// same bits whichever group and lane it went through; rows beyond n are untouched.
+TYPED_TEST(TiledFactorTest, ColumnsFourAtATimeEqualSingleSolves) {
+  using Factor = typename TestFixture::Factor;
+  const int grid = 6, dofs = 3, n = grid * grid * grid * dofs, count = 7, ld = n + 5;
+  const double kRoundOff = std::is_same_v<TypeParam, double> ? 1e-13 : TestFixture::kTolerance;
+  const std::vector<double> a = GridDense(grid, dofs, 13u);
+  cholmod_common common;
+  cholmod_start(&common);
+  common.supernodal = CHOLMOD_SUPERNODAL;
+  cholmod_factor *L = CholmodFactor(a, n, &common);
+  Factor tiled;
+  tiled.From(L);
+  std::vector<double> b(static_cast<size_t>(ld) * count, 0.0);
+  for (int j = 0; j < count; ++j) {
+    const std::vector<double> column = RandomVector(n, 20u + j);
+    std::copy(column.begin(), column.end(), b.begin() + static_cast<size_t>(j) * ld);
+  }
+  constexpr double kUntouched = -7.25;
+  std::vector<double> x(b.size(), kUntouched);
+  tiled.SolveColumns(count, b.data(), ld, x.data(), ld);
+  for (int j = 0; j < count; ++j) {
+    std::vector<double> single(n);
+    tiled.Solve(b.data() + static_cast<size_t>(j) * ld, single.data());
+    const std::vector<double> column(x.begin() + static_cast<size_t>(j) * ld,
+                                     x.begin() + static_cast<size_t>(j) * ld + n);
+    EXPECT_LT(RelativeDifference(column, single), kRoundOff) << "column " << j;
+    for (int i = n; i < ld; ++i) EXPECT_EQ(x[static_cast<size_t>(j) * ld + i], kUntouched);
+  }
+  // The same column in another lane of another group: the same bits.
+  std::vector<double> one(x.begin() + 5 * static_cast<size_t>(ld),
+                          x.begin() + 5 * static_cast<size_t>(ld) + n);
+  std::vector<double> again(n);
+  tiled.SolveColumns(1, b.data() + 5 * static_cast<size_t>(ld), ld, again.data(), n);
+  EXPECT_EQ(again, one);
+  cholmod_free_factor(&L, &common);
+  cholmod_finish(&common);
+}
+
 TYPED_TEST(TiledFactorTest, SweepsStoppedInsideASupernode) {
   using Factor = typename TestFixture::Factor;
   const int grid = 6, dofs = 3, n = grid * grid * grid * dofs;

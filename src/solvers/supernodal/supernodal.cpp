@@ -756,6 +756,44 @@ PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Y = A^-1 X for the columns of a dense X: on one rank four columns per sweep
+// of the factor (TiledFactor::SolveColumns; each column equal to PCApply's to
+// round-off), on several ranks PCApply column by column.
+PetscErrorCode PCMatApply_Supernodal(PC pc, Mat X, Mat Y) {
+  PetscFunctionBeginUser;
+  Supernodal *s = static_cast<Supernodal *>(pc->data);
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(PetscObjectComm((PetscObject)pc), &size));
+  PetscInt columns;
+  PetscCall(MatGetSize(X, nullptr, &columns));
+  if (size > 1 || s->failed) {
+    for (PetscInt j = 0; j < columns; ++j) {
+      Vec x, y;
+      PetscCall(MatDenseGetColumnVecRead(X, j, &x));
+      PetscCall(MatDenseGetColumnVecWrite(Y, j, &y));
+      PetscCall(PCApply_Supernodal(pc, x, y));
+      PetscCall(MatDenseRestoreColumnVecWrite(Y, j, &y));
+      PetscCall(MatDenseRestoreColumnVecRead(X, j, &x));
+    }
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  const PetscScalar *x;
+  PetscScalar *y;
+  PetscInt ldx, ldy;
+  PetscCall(MatDenseGetLDA(X, &ldx));
+  PetscCall(MatDenseGetLDA(Y, &ldy));
+  PetscCall(MatDenseGetArrayRead(X, &x));
+  PetscCall(MatDenseGetArrayWrite(Y, &y));
+  if (s->precision == kSingle)
+    s->single.SolveColumns(static_cast<int>(columns), x, ldx, y, ldy);
+  else
+    s->full.SolveColumns(static_cast<int>(columns), x, ldx, y, ldy);
+  PetscCall(MatDenseRestoreArrayWrite(Y, &y));
+  PetscCall(MatDenseRestoreArrayRead(X, &x));
+  PetscCall(PetscLogFlops(4.0 * s->nonzeros * columns));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode PCView_Supernodal(PC pc, PetscViewer viewer) {
   PetscFunctionBeginUser;
   Supernodal *s = static_cast<Supernodal *>(pc->data);
@@ -787,6 +825,7 @@ PetscErrorCode PCCreate_Supernodal(PC pc) {
   pc->data = new Supernodal();
   pc->ops->setup = PCSetUp_Supernodal;
   pc->ops->apply = PCApply_Supernodal;
+  pc->ops->matapply = PCMatApply_Supernodal;
   pc->ops->reset = PCReset_Supernodal;
   pc->ops->destroy = PCDestroy_Supernodal;
   pc->ops->setfromoptions = PCSetFromOptions_Supernodal;

@@ -111,6 +111,70 @@ Real Dot(const Real *a, const Real *b, int count) {
   return sum;
 }
 
+// Four right-hand sides at once: row i's four values are one vector, z[i]
+// (lane l: right-hand side l), and every operation acts on each lane alone, so
+// a column's result does not depend on the others solved with it. The factor
+// streams once for four columns. The products are the single-column kernels';
+// their sums run in another order (to round-off: a tile's rows are summed in
+// two partial sums per column here, in a vector's lanes there).
+
+// ForwardPanel, four columns: z[0..3] the panel's rows, z[4..) the rows below.
+template <typename Real>
+void ForwardPanelFour(const Real *c, int tiles, const Real *inverse, Vector4<Real> *z) {
+  for (int q = 0; q < kPanel; ++q) {
+    z[q] *= Broadcast(inverse[q]);
+    for (int r = q + 1; r < kPanel; ++r) z[r] -= Broadcast(c[q * kPanel + r]) * z[q];
+  }
+  const Vector4<Real> v0 = z[0], v1 = z[1], v2 = z[2], v3 = z[3];  // held in registers
+  for (int t = 1; t < tiles; ++t) {
+    const Real *tile = c + t * kTile;
+    Vector4<Real> *out = z + t * kPanel;
+    for (int r = 0; r < kPanel; ++r)
+      out[r] -= Broadcast(tile[r]) * v0 + Broadcast(tile[4 + r]) * v1 +
+                Broadcast(tile[8 + r]) * v2 + Broadcast(tile[12 + r]) * v3;
+  }
+}
+
+// BackwardPanel, four columns: per panel column q two partial sums (the tile's
+// even and odd rows), for a short chain of dependent additions.
+template <typename Real>
+void BackwardPanelFour(const Real *c, int tiles, const Real *inverse, Vector4<Real> *z) {
+  Vector4<Real> total[kPanel];
+  for (int q = 0; q < kPanel; q += 2) {  // two columns at a time: 4 sums and 4 rows in registers
+    Vector4<Real> even0 = Broadcast(Real(0)), odd0 = even0, even1 = even0, odd1 = even0;
+    for (int t = tiles - 1; t >= 1; --t) {
+      const Real *tile = c + t * kTile;
+      const Vector4<Real> *rows = z + t * kPanel;
+      even0 += Broadcast(tile[q * kPanel]) * rows[0] + Broadcast(tile[q * kPanel + 2]) * rows[2];
+      odd0 += Broadcast(tile[q * kPanel + 1]) * rows[1] + Broadcast(tile[q * kPanel + 3]) * rows[3];
+      even1 += Broadcast(tile[(q + 1) * kPanel]) * rows[0] +
+               Broadcast(tile[(q + 1) * kPanel + 2]) * rows[2];
+      odd1 += Broadcast(tile[(q + 1) * kPanel + 1]) * rows[1] +
+              Broadcast(tile[(q + 1) * kPanel + 3]) * rows[3];
+    }
+    total[q] = even0 + odd0;
+    total[q + 1] = even1 + odd1;
+  }
+  for (int q = kPanel - 1; q >= 0; --q) {
+    Vector4<Real> sum = total[q];
+    for (int r = q + 1; r < kPanel; ++r) sum += Broadcast(c[q * kPanel + r]) * z[r];
+    z[q] = (z[q] - sum) * Broadcast(inverse[q]);
+  }
+}
+
+// Dot, four columns: sum_i a[i] b[i] with b's rows vectors, in two partial sums.
+template <typename Real>
+Vector4<Real> DotFour(const Real *a, const Vector4<Real> *b, int count) {
+  Vector4<Real> even = Broadcast(Real(0)), odd = even;
+  int i = 0;
+  for (; i + 2 <= count; i += 2) {
+    even += Broadcast(a[i]) * b[i];
+    odd += Broadcast(a[i + 1]) * b[i + 1];
+  }
+  if (i < count) even += Broadcast(a[i]) * b[i];
+  return even + odd;
+}
+
 }  // namespace
 
 template <typename Real>
@@ -186,6 +250,8 @@ void TiledFactor<Real>::Copy(const cholmod_factor *L, int limit, bool release) {
   }
   y_.assign(n_, Real(0));
   work_.assign(largest + kPanel, Real(0));
+  y4_.resize(0);  // SolveColumns sizes them on its first call
+  work4_.resize(0);
 }
 
 template <typename Real>
@@ -272,6 +338,79 @@ void TiledFactor<Real>::BackwardSupernode(int k) {
     BackwardPanel(c, Tiles(height - j), inverse + j, z + j);
   }
   for (int i = 0; i < columns; ++i) y_[first + i] = z[i];
+}
+
+// ForwardSupernode on four columns (y4_, work4_: four Reals per row).
+template <typename Real>
+void TiledFactor<Real>::ForwardSupernodeFour(int k) {
+  const int first = first_column_[k], columns = first_column_[k + 1] - first,
+            height = row_start_[k + 1] - row_start_[k];
+  const int *rows = rows_.data() + row_start_[k];
+  Vector4<Real> *y = reinterpret_cast<Vector4<Real> *>(y4_.data());
+  Vector4<Real> *z = reinterpret_cast<Vector4<Real> *>(work4_.data());
+  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
+  std::fill(z + height, z + height + kPanel, Broadcast(Real(0)));
+  const Real *inverse = inverse_diagonal_.data() + first;
+  const Real *c = values_.data() + value_start_[k];
+  int j = 0;
+  for (; j + kPanel <= columns; j += kPanel) {
+    ForwardPanelFour(c, Tiles(height - j), inverse + j, z + j);
+    c += static_cast<size_t>(kTile) * Tiles(height - j);
+  }
+  for (; j < columns; ++j) {
+    const Vector4<Real> v = z[j] * Broadcast(inverse[j]);
+    z[j] = v;
+    for (int i = j + 1; i < height; ++i) z[i] -= Broadcast(c[i - j]) * v;
+    c += height - j;
+  }
+  for (int i = 0; i < height; ++i) y[rows[i]] = z[i];
+}
+
+// BackwardSupernode on four columns.
+template <typename Real>
+void TiledFactor<Real>::BackwardSupernodeFour(int k) {
+  const int first = first_column_[k], columns = first_column_[k + 1] - first,
+            height = row_start_[k + 1] - row_start_[k];
+  const int *rows = rows_.data() + row_start_[k];
+  Vector4<Real> *y = reinterpret_cast<Vector4<Real> *>(y4_.data());
+  Vector4<Real> *z = reinterpret_cast<Vector4<Real> *>(work4_.data());
+  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
+  std::fill(z + height, z + height + kPanel, Broadcast(Real(0)));
+  const Real *inverse = inverse_diagonal_.data() + first;
+  const int panels = columns / kPanel;
+  const Real *panels_end = values_.data() + value_start_[k] + PanelEntries(columns, height);
+  const Real *c = panels_end;
+  for (int j = panels * kPanel; j < columns; ++j) c += height - j;
+  for (int j = columns - 1; j >= panels * kPanel; --j) {
+    c -= height - j;
+    z[j] = (z[j] - DotFour(c + 1, z + j + 1, height - j - 1)) * Broadcast(inverse[j]);
+  }
+  c = panels_end;
+  for (int j = (panels - 1) * kPanel; j >= 0; j -= kPanel) {
+    c -= static_cast<size_t>(kTile) * Tiles(height - j);
+    BackwardPanelFour(c, Tiles(height - j), inverse + j, z + j);
+  }
+  for (int i = 0; i < columns; ++i) y[first + i] = z[i];
+}
+
+template <typename Real>
+void TiledFactor<Real>::SolveColumns(int count, const double *b, size_t ldb, double *x,
+                                     size_t ldx) {
+  if (y4_.size() == 0) {
+    y4_.resize(static_cast<size_t>(kPanel) * n_);
+    work4_.resize(static_cast<size_t>(kPanel) * work_.size());
+  }
+  for (int first = 0; first < count; first += kPanel) {
+    const int lanes = std::min(kPanel, count - first);
+    for (int i = 0; i < n_; ++i)
+      for (int l = 0; l < kPanel; ++l)
+        y4_[kPanel * i + l] =
+            l < lanes ? static_cast<Real>(b[(first + l) * ldb + permutation_[i]]) : Real(0);
+    for (int k = 0; k < supernodes_; ++k) ForwardSupernodeFour(k);
+    for (int k = supernodes_ - 1; k >= 0; --k) BackwardSupernodeFour(k);
+    for (int i = 0; i < n_; ++i)
+      for (int l = 0; l < lanes; ++l) x[(first + l) * ldx + permutation_[i]] = y4_[kPanel * i + l];
+  }
 }
 
 template <typename Real>

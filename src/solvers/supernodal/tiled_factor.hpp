@@ -55,6 +55,12 @@ class TiledFactor {
   // x = A^-1 b (b and x of size n, in A's order; they may be the same array;
   // rounded to Real and back).
   void Solve(const double *b, double *x);
+  // x_j = A^-1 b_j for the columns j < count of b (column-major, leading
+  // dimension ldb) into those of x (ldx), four at a time: the factor streams
+  // once per four columns, and each column is Solve's result bit for bit.
+  // The first call allocates the four columns' vectors (4 n Reals and a
+  // supernode's rows, each rounded up to 2 MB).
+  void SolveColumns(int count, const double *b, size_t ldb, double *x, size_t ldx);
   // On y() (the permuted vector, size n): y <- L^-1 y over the columns
   // j < limit (their updates reach every row), and y <- L^-T y over the
   // columns j < limit with the others' y taken as known; limit must be n or
@@ -79,6 +85,8 @@ class TiledFactor {
   void CopySupernode(const double *x, int stride, int k);
   void ForwardSupernode(int k);
   void BackwardSupernode(int k);
+  void ForwardSupernodeFour(int k);
+  void BackwardSupernodeFour(int k);
 
   int n_ = 0, supernodes_ = 0;
   // CHOLMOD's Perm, and its super, pi and s with straddling supernodes split at the limit.
@@ -88,6 +96,9 @@ class TiledFactor {
   std::vector<Real> inverse_diagonal_;  // per column: 1 / L_jj
   std::vector<Real> y_;                 // the permuted right-hand side, then solution
   std::vector<Real> work_;              // a supernode's rows, gathered (largest height + kPanel)
+  // The same for four columns (SolveColumns): four Reals per row, row-major,
+  // aligned for whole-vector access.
+  LargeArray<Real> y4_, work4_;
 };
 
 extern template class TiledFactor<double>;
