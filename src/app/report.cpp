@@ -48,8 +48,9 @@ const char *PartitionNote(Partitioner partitioner) {
 }
 
 // How the meshes were read and held, for the "scene" line ("" on one rank, unless
-// a mesh file was read in slabs).
-std::string MeshHoldingNote(const Scene &scene, int ranks) {
+// a mesh file was read in slabs); `immobile`: bodies fixed or at rest, whose
+// meshes contact's set-up held whole.
+std::string MeshHoldingNote(const Scene &scene, int ranks, int immobile) {
   const int in_slabs = scene.meshes_read_in_slabs;
   const bool on_rank0 = in_slabs < static_cast<int>(scene.bodies.size());
   if (ranks == 1 && in_slabs == 0) return "";
@@ -65,7 +66,7 @@ std::string MeshHoldingNote(const Scene &scene, int ranks) {
   else
     read = std::to_string(in_slabs) + " of " + std::to_string(scene.bodies.size()) +
            " meshes read in slabs by every rank, the rest on rank 0, then held in slabs";
-  const char *fixed = scene.fixed_meshes_released
+  const char *fixed = scene.fixed_meshes_released && immobile > 0
                           ? " (the fixed bodies' also whole on every rank until contact's set-up)"
                           : "";
   return "; " + read + fixed;
@@ -82,7 +83,8 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
     max_dofs = std::max(max_dofs, dofs);
   }
   const size_t bodies = scene.bodies.size();
-  const std::string held = MeshHoldingNote(scene, layout.size);
+  const std::string held =
+      MeshHoldingNote(scene, layout.size, b.fixed_bodies + b.resting_bodies);
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets(), held.c_str()));

@@ -11,8 +11,8 @@ free state keeps natural-indexed slot, body and flag arrays
 
 Expected, from the mesh file alone (V vertices and T tets per box, F boundary
 triangles per box counted here as the faces that one tet only names):
-(a) the "scene" line says the meshes were held in slabs, the fixed bodies' also
-    whole until contact's set-up (4 ranks); the "whole scene" line counts 0 MB of
+(a) the "scene" line says the meshes were held in slabs (4 ranks), and with a fixed
+    body that its mesh was also whole until contact's set-up; the "whole scene" line counts 0 MB of
     meshes on every rank at the end, and 0 MB during contact's set-up (1 and 4
     ranks: there is no fixed body); with -scene_replicate (4 ranks) every mesh is
     whole during the set-up, 24 V + 16 T (positions 24 B per vertex, tets 16 B;
@@ -50,8 +50,8 @@ BOX = ((4.0, 0.5, 0.5), (32, 4, 4))
 RANKS = (1, 4)
 HELD_FRACTION = 0.75  # the largest rank's tets on 4 ranks over the scene's, at most
 TOLERANCE = 0.01  # relative: the summary prints 3 significant digits
-IN_SLABS = ("meshes read on rank 0, then held in slabs (the fixed bodies' also whole on every rank "
-            "until contact's set-up)")
+IN_SLABS = "meshes read on rank 0, then held in slabs"
+FIXED_ALSO = " (the fixed bodies' also whole on every rank until contact's set-up)"
 SETUP = r"meshes during contact's set-up (?P<setup>[0-9.e+-]+) MB"
 PART = r"{} (?P<{}>[0-9.e+-]+) MB"
 
@@ -141,8 +141,10 @@ def check_setup_meshes(args, checks, scene, run, V, T):
     with open(scene) as f, open(with_fixed, "w") as g:
         lines = f.read().splitlines()
         g.write("3\n" + "\n".join(lines[1:]) + "\nbox.mesh 1000 1e5 0.3 1 0 -0.3 0 1 0 0 0\n")
-    fixed = scene_bytes(line(harness.run(args, 4, ["-scene", with_fixed] + run).stdout,
-                             "whole scene")).get("setup", -1)
+    stdout = harness.run(args, 4, ["-scene", with_fixed] + run).stdout
+    checks.check(line(stdout, "scene ").endswith(IN_SLABS + FIXED_ALSO),
+                 f"4 ranks, a fixed box under the two: {line(stdout, 'scene ')!r}")
+    fixed = scene_bytes(line(stdout, "whole scene")).get("setup", -1)
     checks.check(close(fixed, 24 * V // 2 + 16 * T // 2),
                  f"4 ranks, a fixed box under the two: meshes during contact's set-up {fixed:.0f} B, "
                  f"expected the fixed box's 24 V / 2 + 16 T / 2 = {24 * V // 2 + 16 * T // 2} B")
