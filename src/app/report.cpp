@@ -83,8 +83,7 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
     max_dofs = std::max(max_dofs, dofs);
   }
   const size_t bodies = scene.bodies.size();
-  const std::string held =
-      MeshHoldingNote(scene, layout.size, b.fixed_bodies + b.resting_bodies);
+  const std::string held = MeshHoldingNote(scene, layout.size, b.fixed_bodies + b.resting_bodies);
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets(), held.c_str()));
