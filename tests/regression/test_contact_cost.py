@@ -133,13 +133,20 @@ for rows, pivots, how in solves:
 print("(e) the two-sided solve's kept columns (stack, linear, 2 ranks)")
 stack_options = ["-options_file", os.path.join(ROOT, "config", "practical3.opts"), "-dt", "0.01", "-steps", "100",
                  "-output_every", "10"]
+
+
+def check_agreement(kept, plain, label):
+    """(e): frames with the kept columns and with a back-solve per row agree."""
+    for key in ("positions", "velocities"):
+        a, b = np.asarray(kept[key]), np.asarray(plain[key])
+        difference, largest = np.abs(a - b).max(), np.abs(b).max()
+        checks.check(a.shape == b.shape and difference <= AGREEMENT * largest,
+                     f"(e) {label}{key}: largest difference {difference:.2e} <= {AGREEMENT:g} x {largest:.3g}")
+
+
 kept, kept_out = simulate("stack-columns", 2, [], STACK, stack_options)
 plain, plain_out = simulate("stack-per-row", 2, ["-constraint_correction", "0"], STACK, stack_options)
-for key in ("positions", "velocities"):
-    a, b = np.asarray(kept[key]), np.asarray(plain[key])
-    difference, largest = np.abs(a - b).max(), np.abs(b).max()
-    checks.check(a.shape == b.shape and difference <= AGREEMENT * largest,
-                 f"(e) {key}: largest difference {difference:.2e} <= {AGREEMENT:g} x {largest:.3g}")
+check_agreement(kept, plain, "")
 kinds_kept, kinds_plain = step_kinds(kept_out), step_kinds(plain_out)
 checks.check(kinds_kept is not None and kinds_plain is not None, "(e) both summaries have a steps line")
 if kinds_kept and kinds_plain:
@@ -148,10 +155,5 @@ if kinds_kept and kinds_plain:
                  f"(e) back-solves per contact step {with_columns:g} <= {BACK_SOLVE_SHARE:g} x {per_row:g}")
 one_kept, _ = simulate("stack-columns-1", 1, [], STACK, stack_options)
 one_rows, _ = simulate("stack-per-row-1", 1, ["-constraint_correction", "0"], STACK, stack_options)
-for key in ("positions", "velocities"):
-    a, b = np.asarray(one_kept[key]), np.asarray(one_rows[key])
-    difference, largest = np.abs(a - b).max(), np.abs(b).max()
-    checks.check(a.shape == b.shape and difference <= AGREEMENT * largest,
-                 f"(e) 1 rank, rows four per sweep: {key} largest difference {difference:.2e} <= "
-                 f"{AGREEMENT:g} x {largest:.3g}")
+check_agreement(one_kept, one_rows, "1 rank, rows four per sweep: ")
 checks.exit()
