@@ -118,9 +118,9 @@ Real Dot(const Real *a, const Real *b, int count) {
 // their sums run in another order (to round-off: a tile's rows are summed in
 // two partial sums per column here, in a vector's lanes there).
 
-// ForwardPanel, four columns: z[0..3] the panel's rows, z[4..) the rows below.
+// ForwardPanel for four columns: z[0..3] the panel's rows, z[4..) the rows below.
 template <typename Real>
-void ForwardPanelFour(const Real *c, int tiles, const Real *inverse, Vector4<Real> *z) {
+void ForwardPanel(const Real *c, int tiles, const Real *inverse, Vector4<Real> *z) {
   for (int q = 0; q < kPanel; ++q) {
     z[q] *= Broadcast(inverse[q]);
     for (int r = q + 1; r < kPanel; ++r) z[r] -= Broadcast(c[q * kPanel + r]) * z[q];
@@ -135,10 +135,10 @@ void ForwardPanelFour(const Real *c, int tiles, const Real *inverse, Vector4<Rea
   }
 }
 
-// BackwardPanel, four columns: per panel column q two partial sums (the tile's
+// BackwardPanel for four columns: per panel column q two partial sums (the tile's
 // even and odd rows), for a short chain of dependent additions.
 template <typename Real>
-void BackwardPanelFour(const Real *c, int tiles, const Real *inverse, Vector4<Real> *z) {
+void BackwardPanel(const Real *c, int tiles, const Real *inverse, Vector4<Real> *z) {
   Vector4<Real> total[kPanel];
   for (int q = 0; q < kPanel; q += 2) {  // two columns at a time: 4 sums and 4 rows in registers
     Vector4<Real> even0 = Broadcast(Real(0)), odd0 = even0, even1 = even0, odd1 = even0;
@@ -162,9 +162,9 @@ void BackwardPanelFour(const Real *c, int tiles, const Real *inverse, Vector4<Re
   }
 }
 
-// Dot, four columns: sum_i a[i] b[i] with b's rows vectors, in two partial sums.
+// Dot for four columns: sum_i a[i] b[i] with b's rows vectors, in two partial sums.
 template <typename Real>
-Vector4<Real> DotFour(const Real *a, const Vector4<Real> *b, int count) {
+Vector4<Real> Dot(const Real *a, const Vector4<Real> *b, int count) {
   Vector4<Real> even = Broadcast(Real(0)), odd = even;
   int i = 0;
   for (; i + 2 <= count; i += 2) {
@@ -289,15 +289,16 @@ void TiledFactor<Real>::CopySupernode(const double *x, int stride, int k) {
   std::fill(out, values_.data() + value_start_[k + 1], Real(0));
 }
 
-// y <- L_k^-1 y over supernode k's columns (y's rows of the supernode updated).
+// y <- L_k^-1 y over supernode k's columns (y's rows of the supernode updated);
+// Row: Real (one column; z the work vector) or a vector of four (SolveColumns).
 template <typename Real>
-void TiledFactor<Real>::ForwardSupernode(int k) {
+template <typename Row>
+void TiledFactor<Real>::ForwardSupernode(int k, Row *y, Row *z) {
   const int first = first_column_[k], columns = first_column_[k + 1] - first,
             height = row_start_[k + 1] - row_start_[k];
   const int *rows = rows_.data() + row_start_[k];
-  Real *z = work_.data();
-  for (int i = 0; i < height; ++i) z[i] = y_[rows[i]];
-  std::fill(z + height, z + height + kPanel, Real(0));  // the last tile's padding rows
+  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
+  std::fill(z + height, z + height + kPanel, Row{});  // the last tile's padding rows
   const Real *inverse = inverse_diagonal_.data() + first;
   const Real *c = values_.data() + value_start_[k];
   int j = 0;
@@ -306,23 +307,23 @@ void TiledFactor<Real>::ForwardSupernode(int k) {
     c += static_cast<size_t>(kTile) * Tiles(height - j);
   }
   for (; j < columns; ++j) {  // plain columns: c[i - j] is row i
-    const Real v = z[j] * inverse[j];
+    const Row v = z[j] * inverse[j];
     z[j] = v;
     for (int i = j + 1; i < height; ++i) z[i] -= c[i - j] * v;
     c += height - j;
   }
-  for (int i = 0; i < height; ++i) y_[rows[i]] = z[i];
+  for (int i = 0; i < height; ++i) y[rows[i]] = z[i];
 }
 
 // y <- L_k^-T y over supernode k's columns (the rows below them solved already).
 template <typename Real>
-void TiledFactor<Real>::BackwardSupernode(int k) {
+template <typename Row>
+void TiledFactor<Real>::BackwardSupernode(int k, Row *y, Row *z) {
   const int first = first_column_[k], columns = first_column_[k + 1] - first,
             height = row_start_[k + 1] - row_start_[k];
   const int *rows = rows_.data() + row_start_[k];
-  Real *z = work_.data();
-  for (int i = 0; i < height; ++i) z[i] = y_[rows[i]];
-  std::fill(z + height, z + height + kPanel, Real(0));
+  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
+  std::fill(z + height, z + height + kPanel, Row{});
   const Real *inverse = inverse_diagonal_.data() + first;
   const int panels = columns / kPanel;
   const Real *panels_end = values_.data() + value_start_[k] + PanelEntries(columns, height);
@@ -336,59 +337,6 @@ void TiledFactor<Real>::BackwardSupernode(int k) {
   for (int j = (panels - 1) * kPanel; j >= 0; j -= kPanel) {
     c -= static_cast<size_t>(kTile) * Tiles(height - j);
     BackwardPanel(c, Tiles(height - j), inverse + j, z + j);
-  }
-  for (int i = 0; i < columns; ++i) y_[first + i] = z[i];
-}
-
-// ForwardSupernode on four columns (y4_, work4_: four Reals per row).
-template <typename Real>
-void TiledFactor<Real>::ForwardSupernodeFour(int k) {
-  const int first = first_column_[k], columns = first_column_[k + 1] - first,
-            height = row_start_[k + 1] - row_start_[k];
-  const int *rows = rows_.data() + row_start_[k];
-  Vector4<Real> *y = reinterpret_cast<Vector4<Real> *>(y4_.data());
-  Vector4<Real> *z = reinterpret_cast<Vector4<Real> *>(work4_.data());
-  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
-  std::fill(z + height, z + height + kPanel, Broadcast(Real(0)));
-  const Real *inverse = inverse_diagonal_.data() + first;
-  const Real *c = values_.data() + value_start_[k];
-  int j = 0;
-  for (; j + kPanel <= columns; j += kPanel) {
-    ForwardPanelFour(c, Tiles(height - j), inverse + j, z + j);
-    c += static_cast<size_t>(kTile) * Tiles(height - j);
-  }
-  for (; j < columns; ++j) {
-    const Vector4<Real> v = z[j] * Broadcast(inverse[j]);
-    z[j] = v;
-    for (int i = j + 1; i < height; ++i) z[i] -= Broadcast(c[i - j]) * v;
-    c += height - j;
-  }
-  for (int i = 0; i < height; ++i) y[rows[i]] = z[i];
-}
-
-// BackwardSupernode on four columns.
-template <typename Real>
-void TiledFactor<Real>::BackwardSupernodeFour(int k) {
-  const int first = first_column_[k], columns = first_column_[k + 1] - first,
-            height = row_start_[k + 1] - row_start_[k];
-  const int *rows = rows_.data() + row_start_[k];
-  Vector4<Real> *y = reinterpret_cast<Vector4<Real> *>(y4_.data());
-  Vector4<Real> *z = reinterpret_cast<Vector4<Real> *>(work4_.data());
-  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
-  std::fill(z + height, z + height + kPanel, Broadcast(Real(0)));
-  const Real *inverse = inverse_diagonal_.data() + first;
-  const int panels = columns / kPanel;
-  const Real *panels_end = values_.data() + value_start_[k] + PanelEntries(columns, height);
-  const Real *c = panels_end;
-  for (int j = panels * kPanel; j < columns; ++j) c += height - j;
-  for (int j = columns - 1; j >= panels * kPanel; --j) {
-    c -= height - j;
-    z[j] = (z[j] - DotFour(c + 1, z + j + 1, height - j - 1)) * Broadcast(inverse[j]);
-  }
-  c = panels_end;
-  for (int j = (panels - 1) * kPanel; j >= 0; j -= kPanel) {
-    c -= static_cast<size_t>(kTile) * Tiles(height - j);
-    BackwardPanelFour(c, Tiles(height - j), inverse + j, z + j);
   }
   for (int i = 0; i < columns; ++i) y[first + i] = z[i];
 }
@@ -406,8 +354,10 @@ void TiledFactor<Real>::SolveColumns(int count, const double *b, size_t ldb, dou
       for (int l = 0; l < kPanel; ++l)
         y4_[kPanel * i + l] =
             l < lanes ? static_cast<Real>(b[(first + l) * ldb + permutation_[i]]) : Real(0);
-    for (int k = 0; k < supernodes_; ++k) ForwardSupernodeFour(k);
-    for (int k = supernodes_ - 1; k >= 0; --k) BackwardSupernodeFour(k);
+    Vector4<Real> *y = reinterpret_cast<Vector4<Real> *>(y4_.data());
+    Vector4<Real> *z = reinterpret_cast<Vector4<Real> *>(work4_.data());
+    for (int k = 0; k < supernodes_; ++k) ForwardSupernode(k, y, z);
+    for (int k = supernodes_ - 1; k >= 0; --k) BackwardSupernode(k, y, z);
     for (int i = 0; i < n_; ++i)
       for (int l = 0; l < lanes; ++l) x[(first + l) * ldx + permutation_[i]] = y4_[kPanel * i + l];
   }
@@ -415,13 +365,14 @@ void TiledFactor<Real>::SolveColumns(int count, const double *b, size_t ldb, dou
 
 template <typename Real>
 void TiledFactor<Real>::Forward(int limit) {
-  for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k) ForwardSupernode(k);
+  for (int k = 0; k < supernodes_ && first_column_[k] < limit; ++k)
+    ForwardSupernode(k, y_.data(), work_.data());
 }
 
 template <typename Real>
 void TiledFactor<Real>::Backward(int limit) {
   for (int k = supernodes_ - 1; k >= 0; --k)
-    if (first_column_[k] < limit) BackwardSupernode(k);
+    if (first_column_[k] < limit) BackwardSupernode(k, y_.data(), work_.data());
 }
 
 template <typename Real>

@@ -83,10 +83,12 @@ class TiledFactor {
   static size_t SupernodeEntries(int columns, int height);
   void Copy(const cholmod_factor *L, int limit, bool release);
   void CopySupernode(const double *x, int stride, int k);
-  void ForwardSupernode(int k);
-  void BackwardSupernode(int k);
-  void ForwardSupernodeFour(int k);
-  void BackwardSupernodeFour(int k);
+  // One supernode's part of a sweep on the permuted vector y, gathering its
+  // rows into z; Row: Real, or four Reals in one vector (SolveColumns).
+  template <typename Row>
+  void ForwardSupernode(int k, Row *y, Row *z);
+  template <typename Row>
+  void BackwardSupernode(int k, Row *y, Row *z);
 
   int n_ = 0, supernodes_ = 0;
   // CHOLMOD's Perm, and its super, pi and s with straddling supernodes split at the limit.
