@@ -1,6 +1,7 @@
 #include "solvers/supernodal/tiled_factor.hpp"
 
 #include <algorithm>
+#include <cstddef>
 #include <cstring>
 
 #include "common/release_pages.hpp"
@@ -49,6 +50,36 @@ inline Vector4<Real> Broadcast(Real a) {
 // Tiles of a panel whose diagonal is `rows_below` rows above the supernode's end.
 inline int Tiles(int rows_below) {
   return (rows_below + kPanel - 1) / kPanel;
+}
+
+// A cache line's bytes: the unit of the prefetches below.
+constexpr std::ptrdiff_t kCacheLine = 64;
+// Rows gathered per line of the factor prefetched. A gathered row is an indexed
+// load from the vector, in cache, and takes about as long as memory needs for
+// half a line at the triad's rate. Measured on the 103 k-tet TetGen rung (one
+// rank, interleaved runs): solves about 5 % faster than without prefetching;
+// a line per row or per four rows no better than per two.
+constexpr int kRowsPerPrefetch = 2;
+
+// z[i] = y[rows[i]] for i < height, prefetching meanwhile the factor's bytes
+// [begin, end) that the sweep reads first after the gather: from begin upwards
+// (ascending) or from end downwards (descending). Without it memory idles
+// while a supernode's rows are gathered, until the tile loop asks for its lines.
+template <typename Row>
+void GatherAndPrefetch(const Row *y, const int *rows, int height, Row *z, const void *begin,
+                       const void *end, bool ascending) {
+  const char *first = static_cast<const char *>(begin), *last = static_cast<const char *>(end);
+  const std::ptrdiff_t lines = (last - first) / kCacheLine;
+  const char *line = ascending ? first : last - kCacheLine;
+  const std::ptrdiff_t step = ascending ? kCacheLine : -kCacheLine;
+  std::ptrdiff_t fetched = 0;
+  for (int i = 0; i < height; ++i) {
+    z[i] = y[rows[i]];
+    if (i % kRowsPerPrefetch == 0 && fetched < lines) {
+      __builtin_prefetch(line + fetched * step, 0, 0);
+      ++fetched;
+    }
+  }
 }
 
 // z[0..3] are the panel's rows on its diagonal tile c (c[q * 4 + r]: row r,
@@ -297,10 +328,10 @@ void TiledFactor<Real>::ForwardSupernode(int k, Row *y, Row *z) {
   const int first = first_column_[k], columns = first_column_[k + 1] - first,
             height = row_start_[k + 1] - row_start_[k];
   const int *rows = rows_.data() + row_start_[k];
-  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
+  const Real *c = values_.data() + value_start_[k];
+  GatherAndPrefetch(y, rows, height, z, c, values_.data() + value_start_[k + 1], true);
   std::fill(z + height, z + height + kPanel, Row{});  // the last tile's padding rows
   const Real *inverse = inverse_diagonal_.data() + first;
-  const Real *c = values_.data() + value_start_[k];
   int j = 0;
   for (; j + kPanel <= columns; j += kPanel) {
     ForwardPanel(c, Tiles(height - j), inverse + j, z + j);
@@ -322,7 +353,8 @@ void TiledFactor<Real>::BackwardSupernode(int k, Row *y, Row *z) {
   const int first = first_column_[k], columns = first_column_[k + 1] - first,
             height = row_start_[k + 1] - row_start_[k];
   const int *rows = rows_.data() + row_start_[k];
-  for (int i = 0; i < height; ++i) z[i] = y[rows[i]];
+  GatherAndPrefetch(y, rows, height, z, values_.data() + value_start_[k],
+                    values_.data() + value_start_[k + 1], false);
   std::fill(z + height, z + height + kPanel, Row{});
   const Real *inverse = inverse_diagonal_.data() + first;
   const int panels = columns / kPanel;
