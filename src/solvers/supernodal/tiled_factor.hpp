@@ -20,7 +20,9 @@
 // A supernode's rows are gathered from the permuted vector y into a dense work
 // vector before its columns and scattered back after them, the only indirect
 // accesses; the vectors (n Reals) stay in cache while the factor streams
-// from memory. A solve allocates nothing.
+// from memory, and while a supernode's rows are gathered its first lines of
+// the factor are prefetched, so that memory does not idle between supernodes.
+// A solve allocates nothing.
 //
 // The sweeps can stop at a column `limit` (the interior of a split factor,
 // supernodal.cpp's Split): a supernode that straddles it is stored as two, its
