@@ -204,8 +204,7 @@ PetscErrorCode PrintSceneBytes(MPI_Comm comm, const Scene &scene, const DofLayou
   if (!contact.active()) PetscFunctionReturn(PETSC_SUCCESS);
   const ContactSceneBytes c = contact.scene_bytes();
   const int64_t meshes = scene.MeshBytes();
-  const int64_t numbering = HeldBytes(layout.free_of_natural) + HeldBytes(layout.natural_of_free) +
-                            HeldBytes(layout.petsc_of_free);
+  const int64_t numbering = HeldBytes(layout.petsc_of_natural);
   int64_t bytes[] = {meshes,
                      numbering,
                      c.free_state,

@@ -58,7 +58,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
   DecideParts(scene, layout);
   if (!ContactMayRun(options, scene.bodies.size())) PetscFunctionReturn(PETSC_SUCCESS);
   PetscCheck(scene.fixed_meshes_held &&
-                 static_cast<PetscInt>(layout.free_of_natural.size()) == scene.num_vertices(),
+                 static_cast<PetscInt>(layout.petsc_of_natural.size()) == scene.num_vertices(),
              comm, PETSC_ERR_PLIB,
              "contact needs the fixed bodies' meshes and the replicated numbering on every rank "
              "(ContactMayRun)");
@@ -105,7 +105,7 @@ std::vector<int32_t> ContactSolver::RestVerticesNeeded(const ContactMeshes &mesh
     for (Eigen::Index k = 0; k < boundary.size(); ++k)
       naturals.push_back(body.first_vertex + boundary.data()[k]);
     for (int32_t v = body.first_vertex; v < body.first_vertex + body.num_vertices(); ++v)
-      if (layout_->free_of_natural[v] < 0) naturals.push_back(v);
+      if (layout_->PetscVertexOfNatural(v) < 0) naturals.push_back(v);
   }
   return naturals;
 }

@@ -17,7 +17,7 @@ FreeState::~FreeState() {
 }
 
 int64_t FreeState::SceneBytes() const {
-  return HeldBytes(body_of_) + HeldBytes(free_) + HeldBytes(slot_);
+  return HeldBytes(slot_);
 }
 
 int32_t FreeState::Slot(int32_t natural) {
@@ -41,14 +41,13 @@ void FreeState::SetupBodies(const Scene &scene, const ContactMeshes &meshes,
   scene_ = &scene;
   meshes_ = &meshes;
   num_bodies_ = scene.bodies.size();
-  body_of_.resize(V);
+  body_first_.resize(num_bodies_);
   slot_.assign(V, -1);
   body_edge_.assign(num_bodies_, 0.0);
   body_reach_.assign(num_bodies_, 0.0);
   for (size_t b = 0; b < num_bodies_; ++b) {
     const Body &body = scene.bodies[b];
-    for (int32_t v = 0; v < body.num_vertices(); ++v)
-      body_of_[body.first_vertex + v] = static_cast<int32_t>(b);
+    body_first_[b] = body.first_vertex;
     double length = 0;
     const int32_t first = body.first_vertex;
     const auto edges = BoundaryEdges(meshes.boundary(b));
@@ -66,14 +65,12 @@ PetscErrorCode FreeState::SetupMasses(MPI_Comm comm, const DofLayout &layout, Ve
   layout_ = &layout;
   same_body_ = same_body;
   owned_natural_.assign(layout.natural_of_owned.begin(), layout.natural_of_owned.end());
-  const int32_t V = static_cast<int32_t>(body_of_.size());
-  free_.assign(V, 0);
+  const int32_t V = static_cast<int32_t>(slot_.size());
   static_box_.assign(num_bodies_, Box());
   for (int32_t n = 0; n < V; ++n) {
-    free_[n] = layout.PetscVertexOfNatural(n) >= 0;
-    if (free_[n]) continue;
+    if (is_free(n)) continue;
     position_ref(n) = RestPosition(n);
-    static_box_[body_of_[n]].Extend(position(n));
+    static_box_[body_of(n)].Extend(position(n));
   }
   for (const int32_t n : owned_natural_) position_ref(n) = RestPosition(n);
   body_box_ = static_box_;
@@ -99,7 +96,7 @@ PetscErrorCode FreeState::SumBodyMasses(MPI_Comm comm) {
   PetscFunctionBeginUser;
   std::vector<double> owned_mass(num_bodies_, 0.0);
   for (const int32_t natural : owned_natural_)
-    owned_mass[body_of_[natural]] += 1.0 / inverse_mass(natural);
+    owned_mass[body_of(natural)] += 1.0 / inverse_mass(natural);
   body_mass_.resize(num_bodies_);
   PetscCallMPI(MPI_Allreduce(owned_mass.data(), body_mass_.data(),
                              static_cast<int>(owned_mass.size()), MPI_DOUBLE, MPI_SUM, comm));
@@ -123,7 +120,7 @@ PetscErrorCode FreeState::SetupScatteredSet(Vec lumped_mass, const std::vector<i
                                             ScatteredSet *set) {
   PetscFunctionBeginUser;
   for (const int32_t n : naturals)
-    if (free_[n]) set->naturals.push_back(n);
+    if (is_free(n)) set->naturals.push_back(n);
   std::sort(set->naturals.begin(), set->naturals.end());
   set->naturals.erase(std::unique(set->naturals.begin(), set->naturals.end()), set->naturals.end());
   std::vector<PetscInt> dofs;
@@ -188,7 +185,7 @@ PetscErrorCode FreeState::WriteOwnedState(Vec x, Vec v, PetscReal dt, std::vecto
       x_[3 * s + c] = ax[3 * p + c] + dt * av[3 * p + c];
       v_[3 * s + c] = av[3 * p + c];
     }
-    (*boxes)[body_of_[n]].Extend(position(n));
+    (*boxes)[body_of(n)].Extend(position(n));
     MarkCurrent(n);
   }
   PetscCall(VecRestoreArrayRead(x, &ax));
@@ -223,7 +220,7 @@ PetscErrorCode FreeState::ExchangeHalo(const std::vector<Box> &owned_boxes) {
   PetscCall(PlanHalo(
       comm_, owned_boxes, owned_natural_.size(),
       [&](int32_t p, const RankBox &box) {
-        const int32_t n = owned_natural_[p], body = body_of_[n];
+        const int32_t n = owned_natural_[p], body = body_of(n);
         return (same_body_ || box.body != body) &&
                box.box().Contains(position(n), body_reach_[body]);
       },

@@ -25,14 +25,16 @@
 // Positions, velocities and inverse masses are kept per slot: for this rank's
 // own vertices, those it received and those without unknowns (rest positions
 // fetched at set-up, contact_meshes.hpp), O(local + halo + fixed); the map from
-// natural vertex to slot, the body and the free flag stay natural-indexed on
-// every rank (9 B per scene vertex, SceneBytes); the messages are O(halo).
+// natural vertex to slot stays natural-indexed on every rank (4 B per scene
+// vertex, SceneBytes); a vertex's body is found from the bodies' first vertices,
+// and whether it moves from the layout's numbering; the messages are O(halo).
 // The free bodies' tets and triangles that the obstacles' grids need travel
 // with the halo's vertices (AttachItems, free_items.hpp).
 #pragma once
 
 #include <petscvec.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -113,17 +115,21 @@ class FreeState {
     const int32_t s = slot_[natural];
     return s < 0 ? 0.0 : inverse_mass_[s];
   }
-  int32_t body_of(int32_t natural) const { return body_of_[natural]; }
+  int32_t body_of(int32_t natural) const {
+    return static_cast<int32_t>(std::upper_bound(body_first_.begin(), body_first_.end(), natural) -
+                                body_first_.begin()) -
+           1;
+  }
   double edge(size_t body) const { return body_edge_[body]; }
   double mass(size_t body) const { return body_mass_[body]; }
   // The halo's reach for the body's vertices (m).
   double reach(size_t body) const { return body_reach_[body]; }
   // Whether the vertex has unknowns (moves).
-  bool is_free(int32_t natural) const { return free_[natural]; }
+  bool is_free(int32_t natural) const { return layout_->PetscVertexOfNatural(natural) >= 0; }
   // Whether the arrays hold the vertex's state of the last Exchange (fixed
   // vertices always).
   bool current(int32_t natural) const {
-    return !free_[natural] || (slot_[natural] >= 0 && stamp_[slot_[natural]] == stamp_now_);
+    return !is_free(natural) || (slot_[natural] >= 0 && stamp_[slot_[natural]] == stamp_now_);
   }
   // The free vertices the last Exchange brought or wrote, owned first.
   const std::vector<int32_t> &current_free() const { return current_free_; }
@@ -172,8 +178,7 @@ class FreeState {
   const ContactMeshes *meshes_ = nullptr;  // set-up only (SetupBodies to EndSetup)
   size_t num_bodies_ = 0;
   bool same_body_ = false;
-  std::vector<int32_t> body_of_;        // natural vertex -> body
-  std::vector<char> free_;              // natural vertex -> has unknowns
+  std::vector<int32_t> body_first_;     // per body: its first natural vertex
   std::vector<int32_t> owned_natural_;  // local vertex -> natural vertex
   // Per-slot state: only the vertices this rank owns, has received or reads
   // whatever the exchange (those without unknowns, the fixed set) have a slot.

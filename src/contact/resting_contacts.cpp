@@ -50,7 +50,7 @@ void RestingContacts::Restore(const std::vector<std::array<int32_t, 2>> &all,
         : entry == -1 ? !known.ground
                       : !known.bodies || static_cast<size_t>(entry) >= known.num_bodies)
       continue;
-    if (natural < 0 || static_cast<size_t>(natural) >= layout.free_of_natural.size()) continue;
+    if (natural < 0 || static_cast<size_t>(natural) >= layout.petsc_of_natural.size()) continue;
     const PetscInt local = layout.LocalOfNatural(natural);
     if (local < 0) continue;
     entries_.push_back({local, Contact{natural, feature >= 0 ? features.body_of(feature) : entry,

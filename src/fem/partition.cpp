@@ -301,17 +301,13 @@ PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, Me
 
 PetscErrorCode ReplicateNumbering(MPI_Comm comm, const MeshShare &share, DofLayout *layout) {
   PetscFunctionBeginUser;
-  std::vector<PetscInt> naturals, petsc;
+  // The slabs are consecutive ranges of natural vertices in rank order.
+  std::vector<PetscInt> slab(share.slab_size());
   for (PetscInt i = 0; i < share.slab_size(); ++i)
-    if (share.free_index[i] >= 0) {
-      naturals.push_back(share.first_vertex + i);
-      petsc.push_back(share.petsc_vertex[i]);
-    }
-  PetscCall(AllGatherRecords(comm, naturals, &layout->natural_of_free));
-  PetscCall(AllGatherRecords(comm, petsc, &layout->petsc_of_free));
-  layout->free_of_natural.assign(share.num_vertices, -1);
-  for (PetscInt f = 0; f < layout->num_free(); ++f)
-    layout->free_of_natural[layout->natural_of_free[f]] = f;
+    slab[i] = share.free_index[i] >= 0 ? share.petsc_vertex[i] : -1;
+  PetscCall(AllGatherRecords(comm, slab, &layout->petsc_of_natural));
+  PetscCheck(static_cast<PetscInt>(layout->petsc_of_natural.size()) == share.num_vertices, comm,
+             PETSC_ERR_PLIB, "the slabs do not cover the natural vertices");
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -41,12 +41,11 @@ struct DofLayout {
   // This rank's share (O(local), what scalable code uses): the natural vertex of
   // each owned PETSc vertex, in PETSc order.
   std::vector<PetscInt> natural_of_owned;
-  // Replicated (O(N) on every rank; empty unless ReplicateNumbering ran): for
-  // contact and -export_matrices, which still read them (docs/design/scale-out.md);
-  // new code uses natural_of_owned or a MeshShare lookup (mesh_share.hpp).
-  std::vector<PetscInt> free_of_natural;  // natural vertex -> free index, or -1
-  std::vector<PetscInt> natural_of_free;  // free index -> natural vertex
-  std::vector<PetscInt> petsc_of_free;    // free index -> PETSc vertex
+  // Replicated (O(N) on every rank, 4 B per vertex; empty unless
+  // ReplicateNumbering ran): for contact and -export_matrices, which still read
+  // it (docs/design/scale-out.md); new code uses natural_of_owned or a
+  // MeshShare lookup (mesh_share.hpp).
+  std::vector<PetscInt> petsc_of_natural;  // natural vertex -> PETSc vertex, or -1
   PetscMPIInt rank = 0, size = 1;
   Partitioner partitioner = Partitioner::kAuto;      // the one that ran (kAuto: one rank, none)
   VertexOrder vertex_order = VertexOrder::kNatural;  // the order inside each rank's block
@@ -58,22 +57,14 @@ struct DofLayout {
     return petsc >= local_begin() && petsc < vertex_start[rank + 1];
   }
   // Natural vertex -> PETSc vertex; -1 for a vertex without unknowns (fixed, at
-  // rest or stray).
-  PetscInt PetscVertexOfNatural(PetscInt natural) const {
-    const PetscInt free = free_of_natural[natural];
-    return free < 0 ? -1 : petsc_of_free[free];
-  }
-  // Free index -> index among this rank's vertices (0 .. local_count() - 1), or
-  // -1 when another rank owns the vertex.
-  PetscInt LocalOfFree(PetscInt free) const {
-    const PetscInt petsc = petsc_of_free[free];
-    return OwnsPetscVertex(petsc) ? petsc - local_begin() : -1;
-  }
-  // Natural vertex -> index among this rank's vertices, or -1 when the vertex has
-  // no unknowns (fixed, at rest or stray) or another rank owns it.
+  // rest or stray). Needs ReplicateNumbering.
+  PetscInt PetscVertexOfNatural(PetscInt natural) const { return petsc_of_natural[natural]; }
+  // Natural vertex -> index among this rank's vertices (0 .. local_count() - 1),
+  // or -1 when the vertex has no unknowns (fixed, at rest or stray) or another
+  // rank owns it. Needs ReplicateNumbering.
   PetscInt LocalOfNatural(PetscInt natural) const {
-    const PetscInt free = free_of_natural[natural];
-    return free < 0 ? -1 : LocalOfFree(free);
+    const PetscInt petsc = petsc_of_natural[natural];
+    return petsc >= 0 && OwnsPetscVertex(petsc) ? petsc - local_begin() : -1;
   }
 };
 
@@ -86,9 +77,9 @@ struct DofLayout {
 PetscErrorCode BuildDofLayout(MPI_Comm comm, const PartitionOptions &options, MeshShare *share,
                               DofLayout *layout);
 
-// Collective, after BuildDofLayout. The replicated arrays free_of_natural,
-// natural_of_free and petsc_of_free (O(N) on every rank), gathered from the slabs:
-// only for what still reads them, contact and -export_matrices.
+// Collective, after BuildDofLayout. The replicated petsc_of_natural (O(N) on
+// every rank), gathered from the slabs: only for what still reads it, contact
+// and -export_matrices.
 PetscErrorCode ReplicateNumbering(MPI_Comm comm, const MeshShare &share, DofLayout *layout);
 
 // Not collective. The body of a natural vertex (the last body starting at or before it).

@@ -615,10 +615,16 @@ PetscErrorCode ExportMatrices(const std::string &dir, const DofLayout &layout,
   PetscCall(
       AgreeOnSuccess(comm, !error, "option -export_matrices: cannot create folder '" + dir + "'"));
 
-  // Natural order of the free DOFs, with the PETSc layout's local sizes.
+  // Natural order of the free DOFs, with the PETSc layout's local sizes: the
+  // PETSc vertex of each free vertex (in natural order) this rank's rows hold.
   std::vector<PetscInt> natural;
-  for (PetscInt f = layout.local_begin(); f < layout.local_begin() + layout.local_count(); ++f)
-    for (int c = 0; c < 3; ++c) natural.push_back(3 * layout.petsc_of_free[f] + c);
+  PetscInt free = 0;
+  for (const PetscInt petsc : layout.petsc_of_natural) {
+    if (petsc < 0) continue;
+    if (free >= layout.local_begin() && free < layout.local_begin() + layout.local_count())
+      for (int c = 0; c < 3; ++c) natural.push_back(3 * petsc + c);
+    ++free;
+  }
   IS is;
   PetscCall(ISCreateGeneral(comm, static_cast<PetscInt>(natural.size()), natural.data(),
                             PETSC_COPY_VALUES, &is));

@@ -6,8 +6,9 @@ set up from the ranks' shares of the meshes (src/contact/contact_meshes.hpp): no
 free body's mesh is ever whole on a rank, only the fixed bodies' are, until
 contact is set up; the free bodies' tets and triangles a rank holds are those
 listed under its own vertices and its halo's (src/contact/free_items.hpp); the
-free state keeps natural-indexed slot, body and flag arrays
-(src/contact/free_state.hpp).
+free state keeps one natural-indexed array, the slot of each vertex
+(src/contact/free_state.hpp), and the numbering one, its PETSc vertex
+(src/fem/partition.hpp).
 
 Expected, from the mesh file alone (V vertices and T tets per box, F boundary
 triangles per box counted here as the faces that one tet only names):
@@ -27,9 +28,11 @@ triangles per box counted here as the faces that one tet only names):
     own, and the other body's tets listed under the vertices within the halo's
     reach of its part (0.66 measured). Lists replicated on every rank would hold
     the same on any rank count;
-(c) the free state: 9 B per scene vertex (body 4, free flag 1, slot 4; positions,
-    velocities and masses are kept per slot, for this rank's own and received
-    vertices only), within 1 %;
+(c) the free state: 4 B per scene vertex (the slot; positions, velocities and
+    masses are kept per slot, for this rank's own and received vertices only;
+    a vertex's body comes from the bodies' first vertices, whether it moves from
+    the numbering), within 1 %; the numbering: 4 B per scene vertex (its PETSc
+    vertex; 32-bit PetscInt, Debian's build);
 (d) overlap separation holds nothing at the end: no pair starts overlapping, and
     its surfaces are released after the first check.
 """
@@ -71,8 +74,8 @@ def line(stdout, start):
 def scene_bytes(text):
     """The "whole scene" line's parts (bytes), or {} when it is missing."""
     parts = {}
-    for label, key in (("meshes", "meshes"), ("free state", "free_state"), ("obstacles", "obstacles"),
-                       ("overlap separation", "separation")):
+    for label, key in (("meshes", "meshes"), ("numbering", "numbering"), ("free state", "free_state"),
+                       ("obstacles", "obstacles"), ("overlap separation", "separation")):
         match = re.search(PART.format(label, key), text)
         if match:
             parts[key] = float(match.group(key)) * 1e6
@@ -103,7 +106,7 @@ def main():
         stdout = harness.run(args, ranks, ["-scene", scene] + run).stdout
         whole = line(stdout, "whole scene")
         parts = scene_bytes(whole)
-        checks.check(len(parts) == 5, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
+        checks.check(len(parts) == 6, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
         if len(parts) != 5:
             continue
         if ranks > 1:
@@ -122,8 +125,10 @@ def main():
                          f"{ranks} ranks: obstacles {parts['obstacles']:.0f} B on the largest rank, of which "
                          f"tets {tets:.0f} B (all but 28 F), {tets / (28 * T):.2f} of the scene's 28 T "
                          f"(at most {HELD_FRACTION})")
-        checks.check(close(parts["free_state"], 9 * V),
-                     f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 9 V = {9 * V} B")
+        checks.check(close(parts["free_state"], 4 * V),
+                     f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 4 V = {4 * V} B")
+        checks.check(close(parts.get("numbering", -1), 4 * V),
+                     f"{ranks} ranks: numbering {parts['numbering']:.0f} B, expected 4 V = {4 * V} B")
         checks.check(parts["separation"] == 0,
                      f"{ranks} ranks: overlap separation {parts['separation']:.0f} B, expected 0 (released)")
     check_setup_meshes(args, checks, scene, run, V, T)
