@@ -17,6 +17,7 @@
 #include "fem/block_matrix.hpp"
 #include "fem/block_product.hpp"
 #include "petsc_environment.hpp"
+#include "vec_equal.hpp"
 
 using namespace softbody;
 
@@ -51,19 +52,6 @@ struct Products : BoxStiffness {
     VecDestroy(&x);
   }
 };
-
-bool BitwiseEqual(Vec a, Vec b) {
-  PetscInt n;
-  VecGetLocalSize(a, &n);
-  const PetscScalar *pa, *pb;
-  VecGetArrayRead(a, &pa);
-  VecGetArrayRead(b, &pb);
-  int equal = std::equal(pa, pa + n, pb);
-  VecRestoreArrayRead(a, &pa);
-  VecRestoreArrayRead(b, &pb);
-  MPI_Allreduce(MPI_IN_PLACE, &equal, 1, MPI_INT, MPI_LAND, PETSC_COMM_WORLD);
-  return equal;
-}
 
 double BestSeconds(Mat K, Vec x, Vec y, int repeats) {
   double best = 1e30;

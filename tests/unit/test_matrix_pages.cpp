@@ -19,6 +19,7 @@
 #include "fem/block_matrix.hpp"
 #include "fem/matrix_pages.hpp"
 #include "petsc_environment.hpp"
+#include "vec_equal.hpp"
 
 using namespace softbody;
 
@@ -37,19 +38,6 @@ Vec Product(Mat K) {
   MatMult(K, x, y);
   VecDestroy(&x);
   return y;
-}
-
-bool BitwiseEqual(Vec a, Vec b) {
-  PetscInt n;
-  VecGetLocalSize(a, &n);
-  const PetscScalar *pa, *pb;
-  VecGetArrayRead(a, &pa);
-  VecGetArrayRead(b, &pb);
-  int equal = std::equal(pa, pa + n, pb);
-  VecRestoreArrayRead(a, &pa);
-  VecRestoreArrayRead(b, &pb);
-  MPI_Allreduce(MPI_IN_PLACE, &equal, 1, MPI_INT, MPI_LAND, PETSC_COMM_WORLD);
-  return equal;
 }
 
 // Moves `moved` and checks it against its copy and its product made before.
