@@ -82,6 +82,39 @@ void GatherAndPrefetch(const Row *y, const int *rows, int height, Row *z, const 
   }
 }
 
+// Whether rows [0, count) of y are zero (every lane of a vector row). A
+// supernode whose own rows are zero when the forward sweep reaches it solves
+// zeros (0 / L_jj) and subtracts zero products from the rows below, which
+// leaves them as they are: skipping it is exact. With a sparse right-hand
+// side (a vertex's columns J^T, the constraint correction's A^-1 e) only the
+// supernodes on the paths from its rows up the elimination tree are nonzero,
+// so the forward sweep streams those alone; with a dense one the test stops
+// at its first row.
+inline bool IsZero(double a) {
+  return a == 0.0;
+}
+inline bool IsZero(float a) {
+  return a == 0.0f;
+}
+template <typename Vector>
+bool IsZeroVector(const Vector &v) {
+  for (int l = 0; l < kPanel; ++l)
+    if (v[l] != 0) return false;
+  return true;
+}
+inline bool IsZero(const Vector4<double> &v) {
+  return IsZeroVector(v);
+}
+inline bool IsZero(const Vector4<float> &v) {
+  return IsZeroVector(v);
+}
+template <typename Row>
+bool AllZero(const Row *y, int count) {
+  for (int i = 0; i < count; ++i)
+    if (!IsZero(y[i])) return false;
+  return true;
+}
+
 // z[0..3] are the panel's rows on its diagonal tile c (c[q * 4 + r]: row r,
 // column q); z[4..) the rows below, `tiles` - 1 more tiles. Solves the panel's
 // four values and subtracts their contributions from the rows below.
@@ -327,6 +360,7 @@ template <typename Row>
 void TiledFactor<Real>::ForwardSupernode(int k, Row *y, Row *z) {
   const int first = first_column_[k], columns = first_column_[k + 1] - first,
             height = row_start_[k + 1] - row_start_[k];
+  if (AllZero(y + first, columns)) return;  // it would solve zeros and subtract them
   const int *rows = rows_.data() + row_start_[k];
   const Real *c = values_.data() + value_start_[k];
   GatherAndPrefetch(y, rows, height, z, c, values_.data() + value_start_[k + 1], true);

@@ -22,7 +22,10 @@
 // accesses; the vectors (n Reals) stay in cache while the factor streams
 // from memory, and while a supernode's rows are gathered its first lines of
 // the factor are prefetched, so that memory does not idle between supernodes.
-// A solve allocates nothing.
+// The forward sweep skips a supernode whose own rows are zero when it comes to
+// it (exact: it would add zeros), so a sparse right-hand side streams only the
+// supernodes on its rows' paths up the elimination tree. A solve allocates
+// nothing.
 //
 // The sweeps can stop at a column `limit` (the interior of a split factor,
 // supernodal.cpp's Split): a supernode that straddles it is stored as two, its
