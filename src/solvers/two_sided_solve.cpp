@@ -9,6 +9,7 @@
 #include "common/exchange.hpp"
 #include "solvers/mixed_lcp.hpp"
 #include "solvers/projected_solve.hpp"
+#include "solvers/supernodal/supernodal.hpp"
 
 namespace softbody {
 
@@ -268,6 +269,26 @@ std::vector<PetscInt> RowVertices(const std::vector<Row> &rows) {
   return vertices;
 }
 
+// Not collective. With the supernodal factor, the batches' solves need A^-1 J_j^T
+// only at the rows' vertices (RowDots reads nothing else): on (true) they
+// compute those entries alone, off (false) every entry again.
+PetscErrorCode SetRowTargets(KSP solver, const std::vector<Row> &rows, PetscInt begin, PetscInt end,
+                             bool on) {
+  PetscFunctionBeginUser;
+  PC pc;
+  PetscCall(KSPGetPC(solver, &pc));
+  PetscBool supernodal;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &supernodal));
+  if (!supernodal) PetscFunctionReturn(PETSC_SUCCESS);
+  std::vector<PetscInt> dofs;
+  if (on)
+    for (const PetscInt p : RowVertices(rows))
+      if (p >= begin && p < end)
+        for (int k = 0; k < 3; ++k) dofs.push_back(3 * (p - begin) + k);
+  PetscCall(PCSupernodalSetSolveTargets(pc, static_cast<PetscInt>(dofs.size()), dofs.data()));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // x = A^-1 J_row^T from the kept columns of the row's vertices.
 PetscErrorCode CombineColumns(const Row &row, const std::map<PetscInt, std::array<Vec, 3>> &columns,
                               Vec x) {
@@ -379,10 +400,12 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
     PetscCall(
         MatCreateDense(comm, local, PETSC_DECIDE, PETSC_DETERMINE, kRowsPerBatch, nullptr, &B));
     PetscCall(MatDuplicate(B, MAT_DO_NOT_COPY_VALUES, &X));
+    PetscCall(SetRowTargets(solver, rows, begin, end, true));
     for (Eigen::Index j = 0; j < m; j += kRowsPerBatch)
       PetscCall(BatchOfRowSolves(solver, rows, static_cast<size_t>(j),
                                  std::min<PetscInt>(kRowsPerBatch, static_cast<PetscInt>(m - j)),
                                  begin, end, B, X, partial.data(), iterations));
+    PetscCall(SetRowTargets(solver, rows, begin, end, false));
     PetscCall(MatDestroy(&B));
     PetscCall(MatDestroy(&X));
   }

@@ -208,6 +208,53 @@ TYPED_TEST(TiledFactorTest, ColumnsFourAtATimeEqualSingleSolves) {
   cholmod_finish(&common);
 }
 
+// Sparse right-hand sides (one node's unknowns each, as a contact row's J^T):
+// the forward sweep skips the supernodes still zero, and the solution is
+// LAPACK's to the precision's accuracy; with SetSolveTargets on some rows, the
+// backward sweep visits only their supernodes' paths, and those rows are the
+// unrestricted solve's bits; an empty target list restores full solves.
+TYPED_TEST(TiledFactorTest, SparseColumnsAndTargetRows) {
+  using Factor = typename TestFixture::Factor;
+  const int grid = 7, dofs = 3, n = grid * grid * grid * dofs, count = 6;
+  const std::vector<double> a = GridDense(grid, dofs, 29u);
+  cholmod_common common;
+  cholmod_start(&common);
+  common.supernodal = CHOLMOD_SUPERNODAL;
+  cholmod_factor *L = CholmodFactor(a, n, &common);
+  Factor tiled;
+  tiled.From(L);
+  const int nodes[count] = {0, 17, 100, 171, 250, 342};  // spread over the grid
+  std::vector<double> b(static_cast<size_t>(n) * count, 0.0);
+  std::vector<int> targets;
+  for (int j = 0; j < count; ++j)
+    for (int d = 0; d < dofs; ++d) {
+      b[static_cast<size_t>(j) * n + nodes[j] * dofs + d] = 1.0 + d;
+      targets.push_back(nodes[j] * dofs + d);
+    }
+  std::vector<double> full(b.size()), restricted(b.size(), 0.0), again(b.size());
+  tiled.SolveColumns(count, b.data(), n, full.data(), n);
+  for (int j = 0; j < count; ++j) {
+    const std::vector<double> column(b.begin() + static_cast<size_t>(j) * n,
+                                     b.begin() + static_cast<size_t>(j + 1) * n);
+    const std::vector<double> x(full.begin() + static_cast<size_t>(j) * n,
+                                full.begin() + static_cast<size_t>(j + 1) * n);
+    EXPECT_LT(RelativeDifference(x, DenseSolve(a, column)), TestFixture::kTolerance)
+        << "column " << j;
+  }
+  tiled.SetSolveTargets(targets);
+  tiled.SolveColumns(count, b.data(), n, restricted.data(), n);
+  for (int j = 0; j < count; ++j)
+    for (const int row : targets)
+      EXPECT_EQ(restricted[static_cast<size_t>(j) * n + row],
+                full[static_cast<size_t>(j) * n + row])
+          << "column " << j << ", row " << row;
+  tiled.SetSolveTargets({});
+  tiled.SolveColumns(count, b.data(), n, again.data(), n);
+  EXPECT_EQ(again, full);
+  cholmod_free_factor(&L, &common);
+  cholmod_finish(&common);
+}
+
 TYPED_TEST(TiledFactorTest, SweepsStoppedInsideASupernode) {
   using Factor = typename TestFixture::Factor;
   const int grid = 6, dofs = 3, n = grid * grid * grid * dofs;

@@ -122,6 +122,7 @@ struct Supernodal {
   TiledFactor<double> full;   // one rank, double precision
   Split split;                // more than one rank
   double stored = 0, nonzeros = 0, flops = 0;
+  std::vector<int> targets;  // PCSupernodalSetSolveTargets (one rank); empty: every row
   // The last set-up met a matrix that is not (numerically) positive definite:
   // decided on all ranks together; the PC then reports PC_FACTOR_NUMERIC_ZEROPIVOT
   // and its applications return NaN, so the KSP stops with DIVERGED_PC_FAILED
@@ -758,7 +759,8 @@ PetscErrorCode PCApply_Supernodal(PC pc, Vec b, Vec x) {
 
 // Y = A^-1 X for the columns of a dense X: on one rank four columns per sweep
 // of the factor (TiledFactor::SolveColumns; each column equal to PCApply's to
-// round-off), on several ranks PCApply column by column.
+// round-off; only the target rows when PCSupernodalSetSolveTargets gave some),
+// on several ranks PCApply column by column.
 PetscErrorCode PCMatApply_Supernodal(PC pc, Mat X, Mat Y) {
   PetscFunctionBeginUser;
   Supernodal *s = static_cast<Supernodal *>(pc->data);
@@ -784,10 +786,13 @@ PetscErrorCode PCMatApply_Supernodal(PC pc, Mat X, Mat Y) {
   PetscCall(MatDenseGetLDA(Y, &ldy));
   PetscCall(MatDenseGetArrayRead(X, &x));
   PetscCall(MatDenseGetArrayWrite(Y, &y));
-  if (s->precision == kSingle)
+  if (s->precision == kSingle) {
+    s->single.SetSolveTargets(s->targets);
     s->single.SolveColumns(static_cast<int>(columns), x, ldx, y, ldy);
-  else
+  } else {
+    s->full.SetSolveTargets(s->targets);
     s->full.SolveColumns(static_cast<int>(columns), x, ldx, y, ldy);
+  }
   PetscCall(MatDenseRestoreArrayWrite(Y, &y));
   PetscCall(MatDenseRestoreArrayRead(X, &x));
   PetscCall(PetscLogFlops(4.0 * s->nonzeros * columns));
@@ -933,6 +938,17 @@ PetscErrorCode PCSupernodalSetSinglePrecision(PC pc, bool single) {
   PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG,
              "not a supernodal PC");
   static_cast<Supernodal *>(pc->data)->precision = single ? kSingle : kDouble;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode PCSupernodalSetSolveTargets(PC pc, PetscInt count, const PetscInt rows[]) {
+  PetscFunctionBeginUser;
+  PetscBool is_supernodal;
+  PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &is_supernodal));
+  PetscCheck(is_supernodal, PetscObjectComm((PetscObject)pc), PETSC_ERR_ARG_WRONG,
+             "not a supernodal PC");
+  Supernodal *s = static_cast<Supernodal *>(pc->data);
+  s->targets.assign(rows, rows + count);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

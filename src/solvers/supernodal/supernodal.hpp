@@ -43,6 +43,13 @@ PetscErrorCode RegisterSupernodalPC();
 // default); -pc_supernodal_precision overrides it at PCSetFromOptions.
 PetscErrorCode PCSupernodalSetSinglePrecision(PC pc, bool single);
 
+// Not collective. Restricts PCMatApply on one rank to the rows `rows` (local
+// indices) of Y, whose values are then the full solve's bit for bit, the other
+// rows left unspecified; the backward sweeps visit only the supernodes those
+// rows depend on (TiledFactor::SetSolveTargets). count 0 restores full
+// solves. PCApply, and PCMatApply on several ranks, are not affected.
+PetscErrorCode PCSupernodalSetSolveTargets(PC pc, PetscInt count, const PetscInt rows[]);
+
 // Collective. Entries of the factor L after the last set-up: stored (CHOLMOD's
 // supernodal blocks with their explicit zeros, a little more than the copy a
 // solve streams) and structural

@@ -304,6 +304,13 @@ void TiledFactor<Real>::Copy(const cholmod_factor *L, int limit, bool release) {
     largest = std::max(largest, height);
   }
   value_start_[supernodes_] = entries;
+  parent_.assign(supernodes_, -1);
+  for (int k = 0; k < supernodes_; ++k) {
+    const int columns = first_column_[k + 1] - first_column_[k];
+    if (row_start_[k] + columns < row_start_[k + 1])
+      parent_[k] = SupernodeOfColumn(rows_[row_start_[k] + columns]);
+  }
+  needed_.clear();
   values_.resize(entries);
   inverse_diagonal_.resize(n_);
   // The stored supernodes read x in increasing order: below source[k + 1] is done.
@@ -316,6 +323,25 @@ void TiledFactor<Real>::Copy(const cholmod_factor *L, int limit, bool release) {
   work_.assign(largest + kPanel, Real(0));
   y4_.resize(0);  // SolveColumns sizes them on its first call
   work4_.resize(0);
+}
+
+template <typename Real>
+int TiledFactor<Real>::SupernodeOfColumn(int column) const {
+  return static_cast<int>(std::upper_bound(first_column_.begin(), first_column_.end(), column) -
+                          first_column_.begin()) -
+         1;
+}
+
+template <typename Real>
+void TiledFactor<Real>::SetSolveTargets(const std::vector<int> &rows) {
+  needed_.clear();
+  if (rows.empty()) return;
+  std::vector<int> position(n_);  // A's row -> its place in the permuted order
+  for (int i = 0; i < n_; ++i) position[permutation_[i]] = i;
+  needed_.assign(supernodes_, 0);
+  for (const int row : rows)
+    for (int k = SupernodeOfColumn(position[row]); k >= 0 && !needed_[k]; k = parent_[k])
+      needed_[k] = 1;
 }
 
 template <typename Real>
@@ -423,7 +449,8 @@ void TiledFactor<Real>::SolveColumns(int count, const double *b, size_t ldb, dou
     Vector4<Real> *y = reinterpret_cast<Vector4<Real> *>(y4_.data());
     Vector4<Real> *z = reinterpret_cast<Vector4<Real> *>(work4_.data());
     for (int k = 0; k < supernodes_; ++k) ForwardSupernode(k, y, z);
-    for (int k = supernodes_ - 1; k >= 0; --k) BackwardSupernode(k, y, z);
+    for (int k = supernodes_ - 1; k >= 0; --k)
+      if (needed_.empty() || needed_[k]) BackwardSupernode(k, y, z);
     for (int i = 0; i < n_; ++i)
       for (int l = 0; l < lanes; ++l) x[(first + l) * ldx + permutation_[i]] = y4_[kPanel * i + l];
   }

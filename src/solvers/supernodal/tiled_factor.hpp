@@ -66,6 +66,12 @@ class TiledFactor {
   // The first call allocates the four columns' vectors (4 n Reals and a
   // supernode's rows, each rounded up to 2 MB).
   void SolveColumns(int count, const double *b, size_t ldb, double *x, size_t ldx);
+  // Restricts SolveColumns to the rows `rows` of x (A's order; empty: every
+  // row, the default): its backward sweep then visits only the supernodes on
+  // those rows' paths up the elimination tree, which is all their values
+  // depend on, and x's other rows are left unspecified. The target rows' values
+  // are the unrestricted solve's, bit for bit. Holds until the next call or From.
+  void SetSolveTargets(const std::vector<int> &rows);
   // On y() (the permuted vector, size n): y <- L^-1 y over the columns
   // j < limit (their updates reach every row), and y <- L^-T y over the
   // columns j < limit with the others' y taken as known; limit must be n or
@@ -86,6 +92,7 @@ class TiledFactor {
   // Entries of the panels of a supernode (columns, height), without its plain columns.
   static size_t PanelEntries(int columns, int height);
   static size_t SupernodeEntries(int columns, int height);
+  int SupernodeOfColumn(int column) const;  // the stored supernode holding a (permuted) column
   void Copy(const cholmod_factor *L, int limit, bool release);
   void CopySupernode(const double *x, int stride, int k);
   // One supernode's part of a sweep on the permuted vector y, gathering its
@@ -99,6 +106,10 @@ class TiledFactor {
   // CHOLMOD's Perm, and its super, pi and s with straddling supernodes split at the limit.
   std::vector<int> permutation_, first_column_, row_start_, rows_;
   std::vector<size_t> value_start_;  // per supernode: its first value, a multiple of kPanel
+  // Per supernode: the supernode of its first row below its columns (its
+  // parent in the elimination tree), -1 for a root.
+  std::vector<int> parent_;
+  std::vector<char> needed_;  // per supernode (SetSolveTargets): on a target's path; empty: all
   LargeArray<Real> values_;
   std::vector<Real> inverse_diagonal_;  // per column: 1 / L_jj
   std::vector<Real> y_;                 // the permuted right-hand side, then solution
