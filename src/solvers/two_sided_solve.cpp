@@ -280,11 +280,14 @@ PetscErrorCode SetRowTargets(KSP solver, const std::vector<Row> &rows, PetscInt 
   PetscBool supernodal;
   PetscCall(PetscObjectTypeCompare((PetscObject)pc, kPCSupernodal, &supernodal));
   if (!supernodal) PetscFunctionReturn(PETSC_SUCCESS);
-  std::vector<PetscInt> dofs;
+  std::vector<PetscInt> dofs;  // every vertex RowDot reads, its weight zero or not
   if (on)
-    for (const PetscInt p : RowVertices(rows))
-      if (p >= begin && p < end)
-        for (int k = 0; k < 3; ++k) dofs.push_back(3 * (p - begin) + k);
+    for (const Row &row : rows)
+      for (const PetscInt p : row.vertex)
+        if (p >= begin && p < end)
+          for (int k = 0; k < 3; ++k) dofs.push_back(3 * (p - begin) + k);
+  std::sort(dofs.begin(), dofs.end());
+  dofs.erase(std::unique(dofs.begin(), dofs.end()), dofs.end());
   PetscCall(PCSupernodalSetSolveTargets(pc, static_cast<PetscInt>(dofs.size()), dofs.data()));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
