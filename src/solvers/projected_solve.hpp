@@ -37,6 +37,13 @@
 // g = J_2 S(b) - c, then v = S(b + J_2^T lambda): m2 + 2 projected solves
 // instead of m1 + m2 + 1 back-solves and a dense problem of size m1 + m2. The
 // same solution, to the inner CG's tolerance.
+// With an iterative unconstrained solver (CG + GAMG, the corotational warp) a
+// column of D costs a whole Krylov solve, so many two-sided rows take the
+// augmented Lagrangian path instead (augmented_solve.cpp): the two-sided rows
+// enter the projected operator as a penalty, P (A + J_S^T R J_S) P, on the
+// rows S that push, and their multipliers are updated between projected
+// solves, lambda <- max(0, lambda + R (c - J v)), until every row holds to a
+// tolerance: about ten projected solves whatever the number of rows.
 #pragma once
 
 #include <petscksp.h>
@@ -50,6 +57,7 @@
 namespace softbody {
 
 class ConstraintCorrection;
+struct RowPenalty;
 
 struct VelocityConstraint {
   PetscInt vertex;         // local vertex index (owned)
@@ -99,7 +107,7 @@ ConstrainedVertex CombineConstraints(PetscInt vertex,
 
 // How Solve treats two-sided constraints: by kProjectedSolveCost (auto), or
 // always by one path (the tests compare them).
-enum class TwoSidedPath { kAuto, kDelassus, kProjected };
+enum class TwoSidedPath { kAuto, kDelassus, kProjected, kAugmented };
 
 class ProjectedSolver {
  public:
@@ -120,6 +128,8 @@ class ProjectedSolver {
   void set_constraint_correction(bool on) { correct_ = on; }
   // Not collective. Applications of M^-1 the correction spent on its columns.
   PetscInt correction_column_solves() const;
+  // Outer iterations of the last solve by the augmented Lagrangian path.
+  int augmented_outer_iterations() const { return augmented_outer_iterations_; }
 
  private:
   static PetscErrorCode ApplyOperator(Mat shell, Vec w, Vec y);
@@ -149,6 +159,12 @@ class ProjectedSolver {
   PetscErrorCode SolveTwoSidedProjected(KSP solver, Vec b,
                                         const std::vector<VelocityConstraint> &constraints, Vec v,
                                         std::vector<PetscReal> *reactions, PetscInt *iterations);
+  // The augmented Lagrangian path (augmented_solve.cpp); collective.
+  PetscErrorCode SolveTwoSidedAugmented(Vec b, const std::vector<VelocityConstraint> &constraints,
+                                        Vec v, std::vector<PetscReal> *reactions,
+                                        PetscInt *iterations);
+  // y = A x, plus the penalty's term while the augmented path solves.
+  PetscErrorCode ApplyA(Vec x, Vec y) const;
 
   KSP inner_ = nullptr;
   Mat shell_ = nullptr;
@@ -157,6 +173,8 @@ class ProjectedSolver {
   std::vector<ConstrainedVertex> vertices_;
   Vec work_ = nullptr, work2_ = nullptr, z_ = nullptr, rhs_ = nullptr, w_ = nullptr;
   Vec column_ = nullptr, column_rhs_ = nullptr;  // the projected Delassus path's
+  const RowPenalty *penalty_ = nullptr;          // the augmented path's, while it solves
+  int augmented_outer_iterations_ = 0;
   TwoSidedPath path_ = TwoSidedPath::kAuto;
   // The constraint correction: requested, and ready for this solve's vertices_.
   bool correct_ = false, corrected_ = false;

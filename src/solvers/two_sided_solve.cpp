@@ -6,7 +6,7 @@
 
 #include <petsc/private/petscimpl.h>  // PetscObjectStateGet: A's values changed
 
-#include "common/exchange.hpp"
+#include "solvers/constraint_rows.hpp"
 #include "solvers/mixed_lcp.hpp"
 #include "solvers/projected_solve.hpp"
 #include "solvers/supernodal/supernodal.hpp"
@@ -24,136 +24,9 @@ constexpr double kLcpRelativeTolerance = 1e-10;
 // it, a back-solve per row.
 constexpr double kDelassusColumnBudgetBytes = 256.0 * 1024 * 1024;
 
-// One row of J: up to four vertices (PETSc numbers, -1: none) with weights,
-// a direction, the right-hand side, and whether it is an inequality; ordered
-// by (key, sub): the vertex's order key (VelocityConstraint::order_key) and
-// the row's place among the vertex's rows; rank and position: where it was made.
-struct Row {
-  PetscInt vertex[4];
-  double weight[4];
-  double direction[3];
-  double value;
-  PetscInt key;
-  int32_t sub;
-  int32_t unilateral;
-  int32_t rank;
-  int32_t position;
-};
-
-// This rank's rows: each constrained vertex's combined directions, then the
-// two-sided constraints in their order; *slot: the row of each two-sided
-// constraint (-1 for the others).
-std::vector<Row> LocalRows(const std::vector<ConstrainedVertex> &vertices,
-                           const std::vector<VelocityConstraint> &constraints, PetscInt first,
-                           int32_t rank, std::vector<PetscInt> *slot) {
-  std::map<PetscInt, PetscInt> key;  // local vertex -> order key
-  std::map<PetscInt, int32_t> subs;  // local vertex -> rows so far
-  for (const VelocityConstraint &c : constraints)
-    key[c.vertex] = c.order_key >= 0 ? c.order_key : first + c.vertex;
-  std::vector<Row> rows;
-  auto add = [&](Row row, PetscInt local) {
-    row.key = key[local];
-    row.sub = subs[local]++;
-    row.rank = rank;
-    row.position = static_cast<int32_t>(rows.size());
-    rows.push_back(row);
-  };
-  for (const ConstrainedVertex &c : vertices)
-    for (int j = 0; j < c.rank; ++j) {
-      const Eigen::Vector3d q = c.basis.col(j);
-      add({{first + c.vertex, -1, -1, -1},
-           {1, 0, 0, 0},
-           {q[0], q[1], q[2]},
-           q.dot(c.prescribed),
-           -1,
-           0,
-           0,
-           0,
-           0},
-          c.vertex);
-    }
-  slot->assign(constraints.size(), -1);
-  for (size_t i = 0; i < constraints.size(); ++i) {
-    const VelocityConstraint &c = constraints[i];
-    if (!c.two_sided) continue;
-    (*slot)[i] = static_cast<PetscInt>(rows.size());
-    add({{first + c.vertex, c.face[0], c.face[1], c.face[2]},
-         {1, -c.weights[0], -c.weights[1], -c.weights[2]},
-         {c.normal[0], c.normal[1], c.normal[2]},
-         c.velocity,
-         -1,
-         0,
-         1,
-         0,
-         0},
-        c.vertex);
-  }
-  return rows;
-}
-
-// Every rank's rows in (key, sub) order; *slot (LocalRows') renumbered to it.
-PetscErrorCode OrderedRows(MPI_Comm comm, const std::vector<Row> &mine, int32_t rank,
-                           std::vector<PetscInt> *slot, std::vector<Row> *rows) {
-  PetscFunctionBeginUser;
-  PetscCall(AllGatherRecords(comm, mine, rows));
-  std::sort(rows->begin(), rows->end(), [](const Row &a, const Row &b) {
-    return a.key != b.key ? a.key < b.key : a.sub < b.sub;
-  });
-  std::vector<PetscInt> row_of_position(mine.size(), -1);
-  for (size_t i = 0; i < rows->size(); ++i)
-    if ((*rows)[i].rank == rank) row_of_position[(*rows)[i].position] = static_cast<PetscInt>(i);
-  for (PetscInt &s : *slot)
-    if (s >= 0) s = row_of_position[s];
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
-// y[owned] += scale J_row^T (entries of owned vertices only); begin, end: the
-// owned PETSc vertex range.
-void AddRowTranspose(const Row &row, double scale, PetscInt begin, PetscInt end, PetscScalar *y) {
-  for (int a = 0; a < 4; ++a) {
-    const PetscInt p = row.vertex[a];
-    if (p < begin || p >= end) continue;
-    for (int k = 0; k < 3; ++k) y[3 * (p - begin) + k] += scale * row.weight[a] * row.direction[k];
-  }
-}
-
-// J_row x over the owned entries.
-double RowDot(const Row &row, PetscInt begin, PetscInt end, const PetscScalar *x) {
-  double sum = 0;
-  for (int a = 0; a < 4; ++a) {
-    const PetscInt p = row.vertex[a];
-    if (p < begin || p >= end) continue;
-    for (int k = 0; k < 3; ++k) sum += row.weight[a] * row.direction[k] * x[3 * (p - begin) + k];
-  }
-  return sum;
-}
-
-// out[i] = J_i x over the owned entries, for every row i.
-PetscErrorCode RowDots(const std::vector<Row> &rows, PetscInt begin, PetscInt end, Vec x,
-                       double *out) {
-  PetscFunctionBeginUser;
-  const PetscScalar *values;
-  PetscCall(VecGetArrayRead(x, &values));
-  for (size_t i = 0; i < rows.size(); ++i) out[i] = RowDot(rows[i], begin, end, values);
-  PetscCall(VecRestoreArrayRead(x, &values));
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 // Rows whose A^-1 J_j^T one application of a factorisation's PCMatApply
 // solves together (on one rank the supernodal factor sweeps once per four).
 constexpr PetscInt kRowsPerBatch = 16;
-
-// Collective. Whether the unconstrained solver is a factorisation applied once
-// (KSPPREONLY), whose PC can solve many right-hand sides at once.
-PetscErrorCode AppliesFactorOnce(KSP solver, bool *once) {
-  PetscFunctionBeginUser;
-  KSPType type;
-  PetscCall(KSPGetType(solver, &type));
-  PetscBool preonly;
-  PetscCall(PetscStrcmp(type, KSPPREONLY, &preonly));
-  *once = preonly;
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
 
 // Collective. partial[j m + i] = J_i A^-1 J_j^T over the owned entries for the
 // rows j of [first, first + count) (count <= kRowsPerBatch), by one PCMatApply of
@@ -465,10 +338,6 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedProjected(
   std::vector<Row> rows;
   PetscCall(OrderedRows(comm, mine, rank, &slot, &rows));
   const Eigen::Index m = static_cast<Eigen::Index>(rows.size());
-  if (!column_) {
-    PetscCall(VecDuplicate(b, &column_));
-    PetscCall(VecDuplicate(b, &column_rhs_));
-  }
   // v0 = S(b) (from the guess v), then the columns G J_2j^T: partial sums of
   // D_2 = J_2 G J_2^T and of J_2 v0 over the owned entries.
   std::vector<double> partial(static_cast<size_t>(m) * (m + 1), 0.0);

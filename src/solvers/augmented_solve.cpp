@@ -1,0 +1,205 @@
+// ProjectedSolver's augmented Lagrangian path for two-sided constraints
+// (projected_solve.hpp). The two-sided rows J_j v >= c_j (all inequalities)
+// with multipliers lambda_j >= 0 and penalties rho_j > 0; each outer iteration
+//
+//     S = { j : lambda_j + rho_j (c_j - J_j v) > 0 }          (rows that push)
+//     (A + J_S^T R J_S) v = b + J_S^T (lambda_S + R c_S)      (projected solve,
+//                                                               one-sided rows in P)
+//     lambda_j <- max(0, lambda_j + rho_j (c_j - J_j v)) for j in S, 0 outside
+//
+// (Hestenes-Powell multipliers with the inequalities' projection, e.g.
+// Nocedal & Wright, "Numerical Optimization", 17.4), until every row holds to
+// a tolerance and no row of S pulls. The multiplier error shrinks per outer
+// iteration like 1 / (1 + rho_j (J A^-1 J^T)_jj) >= about 1 / (1 + kappa):
+// kappa, the penalty's stiffness along a row over A's, trades outer
+// iterations (fewer when large) for the inner CG's (the unconstrained
+// preconditioner does not see the penalty: more when large).
+// Why not PETSc's own: TAO's bound-constrained solvers take bounds on the
+// unknowns, not on J v; its augmented-Lagrangian solver (TAOALMM) needs the
+// constraint Jacobian as a Mat and re-solves its subproblems with its own
+// line-searched quasi-Newton method, where this path keeps softbody's
+// projected CG (the one-sided constraints and the constraint correction)
+// and the unconstrained solver's preconditioner.
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Core>
+
+#include "solvers/constraint_rows.hpp"
+#include "solvers/projected_solve.hpp"
+
+namespace softbody {
+
+namespace {
+
+// The penalty's stiffness along a row over A's diagonal along it (above).
+constexpr double kPenaltyOverStiffness = 10.0;
+// Every row holds to this fraction of the velocity scale (the largest of |v|
+// and |c_j| of the rows that push, m/s): above the inner CG's relative 1e-10, far below a
+// contact gap over a step.
+constexpr double kRelativeTolerance = 1e-8;
+// Contacts found from both sides of a pair of faces give nearly the same row
+// twice with right-hand sides apart by the detection's round-off (1e-5 m/s of
+// a 0.8 m/s contact measured); both push, and the looser one's multiplier
+// drains by only rho_j times that difference per outer iteration. So the
+// iterations also stop once the violation falls by less than kStallRatio in
+// an iteration (from the kStallAfter-th on) and is within this fraction of
+// the velocity scale (1e-6 m of penetration over a step of 0.01 s at 1 m/s).
+constexpr double kStallRelativeTolerance = 1e-4;
+constexpr double kStallRatio = 0.9;
+constexpr int kStallAfter = 3;
+// Outer iterations at most; a row set that cannot hold (rows in conflict with
+// each other or with the one-sided constraints) ends there with the last
+// multipliers.
+constexpr int kMaxOuterIterations = 60;
+// A row whose vertices the one-sided constraints hold whole (|P J_j^T|^2 at
+// most this fraction of |J_j|^2) can only conflict with them: it leaves.
+constexpr double kHeldRow = 1e-12;
+
+// Collective. Per row: q_j = J_j diag(A) J_j^T (the row's stiffness in A's
+// units), n_j = |J_j|^2 and p_j = |P J_j^T|^2, reduced over the ranks, as
+// scales[3 j + 0, 1, 2]; diagonal: A's (owned entries); held: the one-sided
+// constraints' vertices, ascending (ProjectedSolver::vertices_).
+PetscErrorCode RowScales(MPI_Comm comm, const std::vector<Row> &rows, PetscInt begin, PetscInt end,
+                         const PetscScalar *diagonal, const std::vector<ConstrainedVertex> &held,
+                         std::vector<double> *scales) {
+  PetscFunctionBeginUser;
+  const size_t m = rows.size();
+  scales->assign(3 * m, 0.0);
+  for (size_t j = 0; j < m; ++j)
+    for (int a = 0; a < 4; ++a) {
+      const PetscInt p = rows[j].vertex[a];
+      if (p < begin || p >= end) continue;
+      const PetscInt local = p - begin;
+      const Eigen::Vector3d u =
+          rows[j].weight[a] *
+          Eigen::Vector3d(rows[j].direction[0], rows[j].direction[1], rows[j].direction[2]);
+      Eigen::Vector3d projected = u;
+      const auto c = std::lower_bound(
+          held.begin(), held.end(), local,
+          [](const ConstrainedVertex &h, PetscInt vertex) { return h.vertex < vertex; });
+      if (c != held.end() && c->vertex == local)
+        for (int i = 0; i < c->rank; ++i) projected -= c->basis.col(i) * c->basis.col(i).dot(u);
+      for (int k = 0; k < 3; ++k) (*scales)[3 * j] += u[k] * u[k] * diagonal[3 * local + k];
+      (*scales)[3 * j + 1] += u.squaredNorm();
+      (*scales)[3 * j + 2] += projected.squaredNorm();
+    }
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, scales->data(), static_cast<PetscMPIInt>(3 * m),
+                              MPIU_REAL, MPI_SUM, comm));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Collective. g_j = c_j - J_j v for every row.
+PetscErrorCode Gaps(MPI_Comm comm, const std::vector<Row> &rows, PetscInt begin, PetscInt end,
+                    Vec v, std::vector<double> *gaps) {
+  PetscFunctionBeginUser;
+  gaps->assign(rows.size(), 0.0);
+  PetscCall(RowDots(rows, begin, end, v, gaps->data()));
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, gaps->data(), static_cast<PetscMPIInt>(rows.size()),
+                              MPIU_REAL, MPI_SUM, comm));
+  for (size_t j = 0; j < rows.size(); ++j) (*gaps)[j] = rows[j].value - (*gaps)[j];
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// f = b + sum_j J_j^T forces_j.
+PetscErrorCode AddRowForces(const std::vector<Row> &rows, const std::vector<double> &forces,
+                            PetscInt begin, PetscInt end, Vec b, Vec f) {
+  PetscFunctionBeginUser;
+  PetscCall(VecCopy(b, f));
+  PetscScalar *y;
+  PetscCall(VecGetArray(f, &y));
+  for (size_t j = 0; j < rows.size(); ++j)
+    if (forces[j] != 0) AddRowTranspose(rows[j], forces[j], begin, end, y);
+  PetscCall(VecRestoreArray(f, &y));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace
+
+PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
+    Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
+    std::vector<PetscReal> *reactions, PetscInt *iterations) {
+  PetscFunctionBeginUser;
+  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
+  PetscInt begin, end;
+  PetscCall(VecGetOwnershipRange(b, &begin, &end));
+  begin /= 3, end /= 3;
+  PetscMPIInt rank;
+  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  RowPenalty penalty;
+  penalty.begin = begin, penalty.end = end;
+  std::vector<PetscInt> slot;
+  const std::vector<Row> mine = LocalRows({}, constraints, begin, rank, &slot);  // J_2's rows
+  PetscCall(OrderedRows(comm, mine, rank, &slot, &penalty.rows));
+  const std::vector<Row> &rows = penalty.rows;
+  const size_t m = rows.size();
+
+  // rho_j = kappa q_j / n_j^2: the penalty's Rayleigh quotient along J_j^T,
+  // rho_j n_j, is kappa times A's diagonal one, q_j / n_j.
+  std::vector<double> scales;
+  PetscCall(MatGetDiagonal(A_, work_));
+  const PetscScalar *diagonal;
+  PetscCall(VecGetArrayRead(work_, &diagonal));
+  PetscCall(RowScales(comm, rows, begin, end, diagonal, vertices_, &scales));
+  PetscCall(VecRestoreArrayRead(work_, &diagonal));
+  std::vector<double> rho(m, 0.0);
+  for (size_t j = 0; j < m; ++j) {
+    const double q = scales[3 * j], n = scales[3 * j + 1], p = scales[3 * j + 2];
+    if (p > kHeldRow * n) rho[j] = kPenaltyOverStiffness * q / (n * n);
+  }
+
+  std::vector<double> lambda(m, 0.0), gaps, forces(m, 0.0);
+  PetscCall(Gaps(comm, rows, begin, end, v, &gaps));
+  int outer = 0, active = 0;
+  double violation = 0, last_violation = 1e300;
+  penalty.rho.assign(m, 0.0);
+  for (bool converged = false; !converged && outer < kMaxOuterIterations; ++outer) {
+    active = 0;
+    double pushing_value = 0;  // the largest |c_j| of S
+    for (size_t j = 0; j < m; ++j) {
+      const bool pushes = rho[j] > 0 && lambda[j] + rho[j] * gaps[j] > 0;
+      penalty.rho[j] = pushes ? rho[j] : 0.0;
+      forces[j] = pushes ? lambda[j] + rho[j] * rows[j].value : 0.0;
+      active += pushes;
+      if (pushes) pushing_value = std::max(pushing_value, std::abs(rows[j].value));
+    }
+    PetscCall(AddRowForces(rows, forces, begin, end, b, column_rhs_));
+    penalty_ = &penalty;
+    const PetscErrorCode solved = SolveConstrained(column_rhs_, true, v, iterations);
+    penalty_ = nullptr;
+    PetscCall(solved);
+    PetscCall(Gaps(comm, rows, begin, end, v, &gaps));
+    PetscReal speed;
+    PetscCall(VecNorm(v, NORM_INFINITY, &speed));
+    const double velocity_scale = std::max(pushing_value, speed);
+    violation = 0;
+    for (size_t j = 0; j < m; ++j) {
+      if (rho[j] == 0) continue;
+      // A row outside S had no force in this solve: its gap is the free
+      // motion's, and lambda_j + rho_j g_j would overshoot by far where the
+      // penalty is stiff (rho_j D_jj >> 1); it enters S next with lambda_j = 0.
+      const double applied = penalty.rho[j] > 0 ? lambda[j] + rho[j] * gaps[j] : 0.0;
+      lambda[j] = std::max(0.0, applied);
+      violation = std::max(violation, lambda[j] > 0 ? std::abs(gaps[j]) : gaps[j]);
+      // a row of S that ended up pulling: its force was not lambda_j's
+      if (applied < 0) violation = std::max(violation, -applied / rho[j]);
+    }
+    const bool stalled = outer >= kStallAfter && violation > kStallRatio * last_violation &&
+                         violation <= kStallRelativeTolerance * velocity_scale;
+    converged = violation <= kRelativeTolerance * velocity_scale || stalled;
+    last_violation = violation;
+  }
+  augmented_outer_iterations_ = outer;
+  PetscCall(PetscInfo(nullptr,
+                      "two-sided contact, augmented Lagrangian path: %zu rows, %d pushing, %d "
+                      "outer iterations, largest violation %g m/s\n",
+                      m, active, outer, violation));
+  // The one-sided reactions from A v - (b + J_2^T lambda).
+  PetscCall(AddRowForces(rows, lambda, begin, end, b, column_rhs_));
+  PetscCall(Reactions(column_rhs_, v, constraints, reactions));
+  for (size_t i = 0; i < constraints.size(); ++i)
+    if (slot[i] >= 0) (*reactions)[i] = lambda[slot[i]];
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody

@@ -1,0 +1,77 @@
+// The rows of J, the constraint matrix of a contact step with two-sided
+// (free-free) constraints (projected_solve.hpp): each row couples up to four
+// vertices (a vertex and the face it touches) along one direction,
+//
+//     J_j v = n_j . (v_a - sum_k w_k v_{f_k}),
+//
+// with a right-hand side c_j (m/s) and whether it is an inequality
+// (J_j v >= c_j, two-sided contacts) or an equation (a vertex's combined
+// one-sided directions). Every rank holds every row (they are few next to the
+// vertices) in an order that does not depend on the rank count; products with
+// the rows sum over the owned entries and are reduced by the caller. Internal
+// to src/solvers (two_sided_solve.cpp, augmented_solve.cpp).
+#pragma once
+
+#include <petscksp.h>
+
+#include <cstdint>
+#include <vector>
+
+#include "solvers/projected_solve.hpp"
+
+namespace softbody {
+
+// One row of J: up to four vertices (PETSc numbers, -1: none) with weights,
+// a direction, the right-hand side, and whether it is an inequality; ordered
+// by (key, sub): the vertex's order key (VelocityConstraint::order_key) and
+// the row's place among the vertex's rows; rank and position: where it was made.
+struct Row {
+  PetscInt vertex[4];
+  double weight[4];
+  double direction[3];
+  double value;
+  PetscInt key;
+  int32_t sub;
+  int32_t unilateral;
+  int32_t rank;
+  int32_t position;
+};
+
+// This rank's rows: each constrained vertex's combined directions, then the
+// two-sided constraints in their order; *slot: the row of each two-sided
+// constraint (-1 for the others). first: the first owned vertex's PETSc number.
+std::vector<Row> LocalRows(const std::vector<ConstrainedVertex> &vertices,
+                           const std::vector<VelocityConstraint> &constraints, PetscInt first,
+                           int32_t rank, std::vector<PetscInt> *slot);
+
+// Collective. Every rank's rows in (key, sub) order; *slot (LocalRows') renumbered to it.
+PetscErrorCode OrderedRows(MPI_Comm comm, const std::vector<Row> &mine, int32_t rank,
+                           std::vector<PetscInt> *slot, std::vector<Row> *rows);
+
+// y[owned] += scale J_row^T (entries of owned vertices only); begin, end: the
+// owned PETSc vertex range.
+void AddRowTranspose(const Row &row, double scale, PetscInt begin, PetscInt end, PetscScalar *y);
+
+// J_row x over the owned entries.
+double RowDot(const Row &row, PetscInt begin, PetscInt end, const PetscScalar *x);
+
+// Not collective. out[i] = J_i x over the owned entries, for every row i.
+PetscErrorCode RowDots(const std::vector<Row> &rows, PetscInt begin, PetscInt end, Vec x,
+                       double *out);
+
+// Collective. Whether the unconstrained solver is a factorisation applied once
+// (KSPPREONLY), whose PC can solve many right-hand sides at once.
+PetscErrorCode AppliesFactorOnce(KSP solver, bool *once);
+
+// The augmented Lagrangian path's penalty on rows of J (augmented_solve.cpp):
+// the operator term sum_j rho_j J_j^T J_j (rho_j in kg, A's units: A v is a
+// momentum; 0: the row is not penalised).
+struct RowPenalty {
+  std::vector<Row> rows;
+  std::vector<double> rho;
+  PetscInt begin = 0, end = 0;  // the owned PETSc vertex range
+  // Collective. y += sum_j rho_j J_j^T (J_j x).
+  PetscErrorCode AddTo(Vec x, Vec y) const;
+};
+
+}  // namespace softbody
