@@ -34,9 +34,10 @@ namespace {
 
 // The penalty's stiffness along a row over A's diagonal along it (above).
 constexpr double kPenaltyOverStiffness = 10.0;
-// Every row holds to this fraction of the velocity scale (the largest of |v|
-// and |c_j| of the rows that push, m/s): above the inner CG's relative 1e-10, far below a
-// contact gap over a step.
+// Every row holds to this fraction of the velocity scale (the largest of |v|,
+// |c_j| of the rows that push and the rows' largest violation at the guess,
+// m/s: bodies at rest have a small v, not a small violation to remove): above the inner CG's
+// relative 1e-10, far below a contact gap over a step.
 constexpr double kRelativeTolerance = 1e-8;
 // Contacts found from both sides of a pair of faces give nearly the same row
 // twice with right-hand sides apart by the detection's round-off (1e-5 m/s of
@@ -150,6 +151,9 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
 
   std::vector<double> lambda(m, 0.0), gaps, forces(m, 0.0);
   PetscCall(Gaps(comm, rows, begin, end, v, &gaps));
+  double first_gap = 0;  // the largest violation at the guess
+  for (size_t j = 0; j < m; ++j)
+    if (rho[j] > 0) first_gap = std::max(first_gap, gaps[j]);
   int outer = 0, active = 0;
   double violation = 0, last_violation = 1e300;
   penalty.rho.assign(m, 0.0);
@@ -171,7 +175,7 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
     PetscCall(Gaps(comm, rows, begin, end, v, &gaps));
     PetscReal speed;
     PetscCall(VecNorm(v, NORM_INFINITY, &speed));
-    const double velocity_scale = std::max(pushing_value, speed);
+    const double velocity_scale = std::max({pushing_value, speed, first_gap});
     violation = 0;
     for (size_t j = 0; j < m; ++j) {
       if (rho[j] == 0) continue;

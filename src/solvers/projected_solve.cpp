@@ -38,12 +38,17 @@ constexpr PetscInt kInnerMaxIterations = 10000;
 // the ground; 2 ranks, direct preset: 700-900 one-sided rows, 1-3 two-sided):
 // 13 iterations per projected solve on average, at most 34.
 constexpr PetscInt kProjectedSolveCost = 16;
-// With an iterative unconstrained solver, the augmented Lagrangian path costs
-// about this many projected solves (its outer iterations), against m2 + 2 for
-// the projected Delassus path and m1 + m2 + 1 Krylov solves for the Delassus
-// path: it is taken when m2 + 2 is larger. Measured on two stacked boxes of
-// 1e4 tets (CG + GAMG, 1 rank; see augmented_solve.cpp).
-constexpr PetscInt kAugmentedProjectedSolves = 10;
+// With an iterative unconstrained solver the Delassus path costs m1 + m2 + 1
+// Krylov solves, the augmented Lagrangian path a few projected solves (its
+// outer iterations, each slower than an unconstrained solve: the penalty is
+// not in the preconditioner) while its rows hold, up to its 60 where rows
+// conflict with the one-sided constraints. Measured: with CG + GAMG, 1 rank,
+// two stacked boxes of 422 and 1 302 rows, 17 to 25 unconstrained solves'
+// iterations; with the corotational warp, three stacked blocks at rest (50 to
+// 110 rows, the guard's zones among them) 150 against 56 ms per step, the
+// zones' conflicts taking 60 outer iterations. So it is taken from this many
+// rows on, where the Delassus path's cost is out of reach.
+constexpr PetscInt kAugmentedSolveCost = 300;
 
 // A candidate set of imposed constraints, ranked by CombineConstraints' order.
 struct Candidate {
@@ -295,8 +300,8 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   bool factor_once;
   PetscCall(AppliesFactorOnce(solver, &factor_once));
   const bool augmented =
-      path_ == TwoSidedPath::kAugmented ||
-      (path_ == TwoSidedPath::kAuto && !factor_once && counts[0] + 2 > kAugmentedProjectedSolves);
+      path_ == TwoSidedPath::kAugmented || (path_ == TwoSidedPath::kAuto && !factor_once &&
+                                            counts[0] + counts[1] + 1 > kAugmentedSolveCost);
   if (counts[0] == 0) {
     PetscCall(SetupCorrection());
     PetscCall(SolveProjected(b, constraints, v, reactions, iterations));

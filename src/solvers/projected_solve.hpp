@@ -38,12 +38,12 @@
 // instead of m1 + m2 + 1 back-solves and a dense problem of size m1 + m2. The
 // same solution, to the inner CG's tolerance.
 // With an iterative unconstrained solver (CG + GAMG, the corotational warp) a
-// column of D costs a whole Krylov solve, so many two-sided rows take the
-// augmented Lagrangian path instead (augmented_solve.cpp): the two-sided rows
-// enter the projected operator as a penalty, P (A + J_S^T R J_S) P, on the
-// rows S that push, and their multipliers are updated between projected
-// solves, lambda <- max(0, lambda + R (c - J v)), until every row holds to a
-// tolerance: about ten projected solves whatever the number of rows.
+// column of D costs a whole Krylov solve, so many rows (more than
+// kAugmentedSolveCost, projected_solve.cpp) take the augmented Lagrangian
+// path instead (augmented_solve.cpp): the two-sided rows enter the projected
+// operator as a penalty, P (A + J_S^T R J_S) P, on the rows S that push, and
+// their multipliers are updated between projected solves until every row
+// holds to a tolerance: a few projected solves whatever the number of rows.
 #pragma once
 
 #include <petscksp.h>
