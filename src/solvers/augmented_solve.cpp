@@ -24,6 +24,7 @@
 #include <cmath>
 
 #include <Eigen/Core>
+#include <vector>
 
 #include "solvers/constraint_rows.hpp"
 #include "solvers/projected_solve.hpp"
@@ -57,61 +58,54 @@ constexpr int kMaxOuterIterations = 60;
 // most this fraction of |J_j|^2) can only conflict with them: it leaves.
 constexpr double kHeldRow = 1e-12;
 
-// Collective. Per row: q_j = J_j diag(A) J_j^T (the row's stiffness in A's
-// units), n_j = |J_j|^2 and p_j = |P J_j^T|^2, reduced over the ranks, as
+// Collective. Per row of `rows`: q_j = J_j diag(A) J_j^T (the row's
+// stiffness in A's units), n_j = |J_j|^2 and p_j = |P J_j^T|^2, as
 // scales[3 j + 0, 1, 2]; diagonal: A's (owned entries); held: the one-sided
-// constraints' vertices, ascending (ProjectedSolver::vertices_).
-PetscErrorCode RowScales(MPI_Comm comm, const std::vector<Row> &rows, PetscInt begin, PetscInt end,
-                         const PetscScalar *diagonal, const std::vector<ConstrainedVertex> &held,
-                         std::vector<double> *scales) {
+// constraints' vertices (ProjectedSolver::vertices_), whose projection P
+// removes the span of their basis.
+PetscErrorCode RowScales(const LocalRowSet &rows, const PetscScalar *diagonal, PetscInt owned,
+                         const std::vector<ConstrainedVertex> &held, std::vector<double> *scales) {
   PetscFunctionBeginUser;
-  const size_t m = rows.size();
+  std::vector<double> diagonal_owned(diagonal, diagonal + 3 * owned), removed_owned(9 * owned, 0.0);
+  for (const ConstrainedVertex &c : held)  // the span P removes: sum_i q_i q_i^T
+    for (int i = 0; i < c.rank; ++i)
+      for (int r = 0; r < 3; ++r)
+        for (int k = 0; k < 3; ++k)
+          removed_owned[9 * c.vertex + 3 * r + k] += c.basis(r, i) * c.basis(k, i);
+  std::vector<double> diagonal_at, removed_at;
+  PetscCall(rows.AtRowVertices(diagonal_owned, 3, &diagonal_at));
+  PetscCall(rows.AtRowVertices(removed_owned, 9, &removed_at));
+  const size_t m = rows.rows().size();
   scales->assign(3 * m, 0.0);
   for (size_t j = 0; j < m; ++j)
     for (int a = 0; a < 4; ++a) {
-      const PetscInt p = rows[j].vertex[a];
-      if (p < begin || p >= end) continue;
-      const PetscInt local = p - begin;
+      const Row &row = rows.rows()[j];
       const Eigen::Vector3d u =
-          rows[j].weight[a] *
-          Eigen::Vector3d(rows[j].direction[0], rows[j].direction[1], rows[j].direction[2]);
-      Eigen::Vector3d projected = u;
-      const auto c = std::lower_bound(
-          held.begin(), held.end(), local,
-          [](const ConstrainedVertex &h, PetscInt vertex) { return h.vertex < vertex; });
-      if (c != held.end() && c->vertex == local)
-        for (int i = 0; i < c->rank; ++i) projected -= c->basis.col(i) * c->basis.col(i).dot(u);
-      for (int k = 0; k < 3; ++k) (*scales)[3 * j] += u[k] * u[k] * diagonal[3 * local + k];
+          row.weight[a] * Eigen::Vector3d(row.direction[0], row.direction[1], row.direction[2]);
+      const size_t e = 4 * j + a;
+      const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> removed(
+          &removed_at[9 * e]);
+      for (int k = 0; k < 3; ++k) (*scales)[3 * j] += u[k] * u[k] * diagonal_at[3 * e + k];
       (*scales)[3 * j + 1] += u.squaredNorm();
-      (*scales)[3 * j + 2] += projected.squaredNorm();
+      (*scales)[3 * j + 2] += (u - removed * u).squaredNorm();
     }
-  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, scales->data(), static_cast<PetscMPIInt>(3 * m),
-                              MPIU_REAL, MPI_SUM, comm));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Collective. g_j = c_j - J_j v for every row.
-PetscErrorCode Gaps(MPI_Comm comm, const std::vector<Row> &rows, PetscInt begin, PetscInt end,
-                    Vec v, std::vector<double> *gaps) {
+// Collective. g_j = c_j - J_j v for this rank's rows.
+PetscErrorCode Gaps(const LocalRowSet &rows, Vec v, std::vector<double> *gaps) {
   PetscFunctionBeginUser;
-  gaps->assign(rows.size(), 0.0);
-  PetscCall(RowDots(rows, begin, end, v, gaps->data()));
-  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, gaps->data(), static_cast<PetscMPIInt>(rows.size()),
-                              MPIU_REAL, MPI_SUM, comm));
-  for (size_t j = 0; j < rows.size(); ++j) (*gaps)[j] = rows[j].value - (*gaps)[j];
+  PetscCall(rows.Dots(v, gaps));
+  for (size_t j = 0; j < gaps->size(); ++j) (*gaps)[j] = rows.rows()[j].value - (*gaps)[j];
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// f = b + sum_j J_j^T forces_j.
-PetscErrorCode AddRowForces(const std::vector<Row> &rows, const std::vector<double> &forces,
-                            PetscInt begin, PetscInt end, Vec b, Vec f) {
+// Collective. f = b + sum_j J_j^T forces_j.
+PetscErrorCode AddRowForces(const LocalRowSet &rows, const std::vector<double> &forces, Vec b,
+                            Vec f) {
   PetscFunctionBeginUser;
   PetscCall(VecCopy(b, f));
-  PetscScalar *y;
-  PetscCall(VecGetArray(f, &y));
-  for (size_t j = 0; j < rows.size(); ++j)
-    if (forces[j] != 0) AddRowTranspose(rows[j], forces[j], begin, end, y);
-  PetscCall(VecRestoreArray(f, &y));
+  PetscCall(rows.AddTranspose(forces, f));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -127,12 +121,10 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
   begin /= 3, end /= 3;
   PetscMPIInt rank;
   PetscCallMPI(MPI_Comm_rank(comm, &rank));
-  RowPenalty penalty;
-  penalty.begin = begin, penalty.end = end;
   std::vector<PetscInt> slot;
-  const std::vector<Row> mine = LocalRows({}, constraints, begin, rank, &slot);  // J_2's rows
-  PetscCall(OrderedRows(comm, mine, rank, &slot, &penalty.rows));
-  const std::vector<Row> &rows = penalty.rows;
+  LocalRowSet set;  // this rank's two-sided rows
+  PetscCall(set.Setup(b, LocalRows({}, constraints, begin, rank, &slot)));
+  const std::vector<Row> &rows = set.rows();
   const size_t m = rows.size();
 
   // rho_j = kappa q_j / n_j^2: the penalty's Rayleigh quotient along J_j^T,
@@ -141,8 +133,9 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
   PetscCall(MatGetDiagonal(A_, work_));
   const PetscScalar *diagonal;
   PetscCall(VecGetArrayRead(work_, &diagonal));
-  PetscCall(RowScales(comm, rows, begin, end, diagonal, vertices_, &scales));
+  const PetscErrorCode scaled = RowScales(set, diagonal, end - begin, vertices_, &scales);
   PetscCall(VecRestoreArrayRead(work_, &diagonal));
+  PetscCall(scaled);
   std::vector<double> rho(m, 0.0);
   for (size_t j = 0; j < m; ++j) {
     const double q = scales[3 * j], n = scales[3 * j + 1], p = scales[3 * j + 2];
@@ -150,33 +143,31 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
   }
 
   std::vector<double> lambda(m, 0.0), gaps, forces(m, 0.0);
-  PetscCall(Gaps(comm, rows, begin, end, v, &gaps));
+  PetscCall(Gaps(set, v, &gaps));
   double first_gap = 0;  // the largest violation at the guess
   for (size_t j = 0; j < m; ++j)
     if (rho[j] > 0) first_gap = std::max(first_gap, gaps[j]);
-  int outer = 0, active = 0;
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &first_gap, 1, MPIU_REAL, MPI_MAX, comm));
+  RowPenalty penalty{&set, std::vector<double>(m, 0.0)};
+  int outer = 0;
+  PetscInt active = 0;
   double violation = 0, last_violation = 1e300;
-  penalty.rho.assign(m, 0.0);
   for (bool converged = false; !converged && outer < kMaxOuterIterations; ++outer) {
     active = 0;
-    double pushing_value = 0;  // the largest |c_j| of S
+    double largest[2] = {0, 0};  // the violation, the largest |c_j| of S
     for (size_t j = 0; j < m; ++j) {
       const bool pushes = rho[j] > 0 && lambda[j] + rho[j] * gaps[j] > 0;
       penalty.rho[j] = pushes ? rho[j] : 0.0;
       forces[j] = pushes ? lambda[j] + rho[j] * rows[j].value : 0.0;
       active += pushes;
-      if (pushes) pushing_value = std::max(pushing_value, std::abs(rows[j].value));
+      if (pushes) largest[1] = std::max(largest[1], std::abs(rows[j].value));
     }
-    PetscCall(AddRowForces(rows, forces, begin, end, b, column_rhs_));
+    PetscCall(AddRowForces(set, forces, b, column_rhs_));
     penalty_ = &penalty;
     const PetscErrorCode solved = SolveConstrained(column_rhs_, true, v, iterations);
     penalty_ = nullptr;
     PetscCall(solved);
-    PetscCall(Gaps(comm, rows, begin, end, v, &gaps));
-    PetscReal speed;
-    PetscCall(VecNorm(v, NORM_INFINITY, &speed));
-    const double velocity_scale = std::max({pushing_value, speed, first_gap});
-    violation = 0;
+    PetscCall(Gaps(set, v, &gaps));
     for (size_t j = 0; j < m; ++j) {
       if (rho[j] == 0) continue;
       // A row outside S had no force in this solve: its gap is the free
@@ -184,22 +175,30 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
       // penalty is stiff (rho_j D_jj >> 1); it enters S next with lambda_j = 0.
       const double applied = penalty.rho[j] > 0 ? lambda[j] + rho[j] * gaps[j] : 0.0;
       lambda[j] = std::max(0.0, applied);
-      violation = std::max(violation, lambda[j] > 0 ? std::abs(gaps[j]) : gaps[j]);
+      largest[0] = std::max(largest[0], lambda[j] > 0 ? std::abs(gaps[j]) : gaps[j]);
       // a row of S that ended up pulling: its force was not lambda_j's
-      if (applied < 0) violation = std::max(violation, -applied / rho[j]);
+      if (applied < 0) largest[0] = std::max(largest[0], -applied / rho[j]);
     }
+    PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, largest, 2, MPIU_REAL, MPI_MAX, comm));
+    PetscReal speed;
+    PetscCall(VecNorm(v, NORM_INFINITY, &speed));
+    const double velocity_scale = std::max({largest[1], speed, first_gap});
+    violation = largest[0];
     const bool stalled = outer >= kStallAfter && violation > kStallRatio * last_violation &&
                          violation <= kStallRelativeTolerance * velocity_scale;
     converged = violation <= kRelativeTolerance * velocity_scale || stalled;
     last_violation = violation;
   }
   augmented_outer_iterations_ = outer;
+  PetscInt counts[2] = {static_cast<PetscInt>(m), active};
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_SUM, comm));
   PetscCall(PetscInfo(nullptr,
-                      "two-sided contact, augmented Lagrangian path: %zu rows, %d pushing, %d "
-                      "outer iterations, largest violation %g m/s\n",
-                      m, active, outer, violation));
+                      "two-sided contact, augmented Lagrangian path: %" PetscInt_FMT
+                      " rows, %" PetscInt_FMT " pushing, %d outer iterations, largest violation "
+                      "%g m/s\n",
+                      counts[0], counts[1], outer, violation));
   // The one-sided reactions from A v - (b + J_2^T lambda).
-  PetscCall(AddRowForces(rows, lambda, begin, end, b, column_rhs_));
+  PetscCall(AddRowForces(set, lambda, b, column_rhs_));
   PetscCall(Reactions(column_rhs_, v, constraints, reactions));
   for (size_t i = 0; i < constraints.size(); ++i)
     if (slot[i] >= 0) (*reactions)[i] = lambda[slot[i]];

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <petscksp.h>
+#include <petscsf.h>
 
 #include <cstdint>
 #include <vector>
@@ -63,13 +64,48 @@ PetscErrorCode RowDots(const std::vector<Row> &rows, PetscInt begin, PetscInt en
 // (KSPPREONLY), whose PC can solve many right-hand sides at once.
 PetscErrorCode AppliesFactorOnce(KSP solver, bool *once);
 
-// The augmented Lagrangian path's penalty on rows of J (augmented_solve.cpp):
-// the operator term sum_j rho_j J_j^T J_j (rho_j in kg, A's units: A v is a
-// momentum; 0: the row is not penalised).
+// This rank's rows (LocalRows) with what products with J and J^T need of
+// their vertices owned by other ranks: a PetscSF from those vertices (leaves)
+// to their owners (roots), so nothing is gathered on every rank and a rank
+// exchanges only with the owners of its rows' face vertices. The augmented
+// Lagrangian path's (augmented_solve.cpp); vectors laid out as A's (3 DOFs per
+// vertex, PETSc numbering).
+class LocalRowSet {
+ public:
+  LocalRowSet() = default;
+  LocalRowSet(const LocalRowSet &) = delete;
+  LocalRowSet &operator=(const LocalRowSet &) = delete;
+  ~LocalRowSet();
+  // Collective. layout: a vector laid out as A's.
+  PetscErrorCode Setup(Vec layout, std::vector<Row> rows);
+  const std::vector<Row> &rows() const { return rows_; }
+  // Collective. out[j] = J_j x for this rank's rows.
+  PetscErrorCode Dots(Vec x, std::vector<double> *out) const;
+  // Collective. y += sum_j coefficients_j J_j^T.
+  PetscErrorCode AddTranspose(const std::vector<double> &coefficients, Vec y) const;
+  // Collective. `unit` numbers per vertex, owned[unit * local vertex + i], at
+  // every vertex of every row: out[(4 j + a) unit + i] (zeros where none).
+  PetscErrorCode AtRowVertices(const std::vector<double> &owned, int unit,
+                               std::vector<double> *out) const;
+
+ private:
+  // Fetches the remote vertices' `unit` numbers per vertex into halo.
+  PetscErrorCode FetchRemote(const double *owned, int unit, std::vector<double> *halo) const;
+  std::vector<Row> rows_;
+  PetscInt begin_ = 0, end_ = 0;  // the owned vertex range
+  // Per (row, a): the owned local vertex (>= 0), the halo entry -(1 + h), or
+  // kNoVertex (no vertex or weight zero).
+  std::vector<PetscInt> where_;
+  PetscInt remote_count_ = 0;
+  PetscSF sf_ = nullptr;  // leaves: the remote vertices; roots: owned vertices
+};
+
+// The augmented Lagrangian path's penalty on this rank's rows: the operator
+// term sum_j rho_j J_j^T J_j (rho_j in kg, A's units: A v is a momentum; 0:
+// the row is not penalised).
 struct RowPenalty {
-  std::vector<Row> rows;
+  const LocalRowSet *rows = nullptr;
   std::vector<double> rho;
-  PetscInt begin = 0, end = 0;  // the owned PETSc vertex range
   // Collective. y += sum_j rho_j J_j^T (J_j x).
   PetscErrorCode AddTo(Vec x, Vec y) const;
 };
