@@ -115,12 +115,9 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
     Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
     std::vector<PetscReal> *reactions, PetscInt *iterations) {
   PetscFunctionBeginUser;
-  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
-  PetscInt begin, end;
-  PetscCall(VecGetOwnershipRange(b, &begin, &end));
-  begin /= 3, end /= 3;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  RowSite site;
+  PetscCall(GetRowSite(b, &site));
+  const auto [comm, rank, begin, end] = site;
   std::vector<PetscInt> slot;
   LocalRowSet set;  // this rank's two-sided rows
   PetscCall(set.Setup(b, LocalRows({}, constraints, begin, rank, &slot)));

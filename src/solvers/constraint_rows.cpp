@@ -100,6 +100,15 @@ PetscErrorCode RowDots(const std::vector<Row> &rows, PetscInt begin, PetscInt en
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+PetscErrorCode GetRowSite(Vec layout, RowSite *site) {
+  PetscFunctionBeginUser;
+  site->comm = PetscObjectComm((PetscObject)layout);
+  PetscCallMPI(MPI_Comm_rank(site->comm, &site->rank));
+  PetscCall(VecGetOwnershipRange(layout, &site->begin, &site->end));
+  site->begin /= 3, site->end /= 3;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 PetscErrorCode AppliesFactorOnce(KSP solver, bool *once) {
   PetscFunctionBeginUser;
   KSPType type;

@@ -38,6 +38,15 @@ struct Row {
   int32_t position;
 };
 
+// Where a rank's rows are made: the communicator, this rank and its owned
+// vertex range [begin, end) of a vector laid out as A's (3 DOFs per vertex).
+struct RowSite {
+  MPI_Comm comm;
+  PetscMPIInt rank;
+  PetscInt begin, end;
+};
+PetscErrorCode GetRowSite(Vec layout, RowSite *site);
+
 // This rank's rows: each constrained vertex's combined directions, then the
 // two-sided constraints in their order; *slot: the row of each two-sided
 // constraint (-1 for the others). first: the first owned vertex's PETSc number.

@@ -249,12 +249,9 @@ PetscErrorCode ProjectedSolver::SolveTwoSided(KSP solver, Vec b,
                                               Vec v, std::vector<PetscReal> *reactions,
                                               PetscInt *iterations) {
   PetscFunctionBeginUser;
-  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
-  PetscInt begin, end;
-  PetscCall(VecGetOwnershipRange(b, &begin, &end));
-  begin /= 3, end /= 3;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  RowSite site;
+  PetscCall(GetRowSite(b, &site));
+  const auto [comm, rank, begin, end] = site;
   std::vector<PetscInt> slot;
   const std::vector<Row> mine = LocalRows(vertices_, constraints, begin, rank, &slot);
   std::vector<Row> rows;
@@ -327,12 +324,9 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedProjected(
     KSP solver, Vec b, const std::vector<VelocityConstraint> &constraints, Vec v,
     std::vector<PetscReal> *reactions, PetscInt *iterations) {
   PetscFunctionBeginUser;
-  const MPI_Comm comm = PetscObjectComm((PetscObject)b);
-  PetscInt begin, end;
-  PetscCall(VecGetOwnershipRange(b, &begin, &end));
-  begin /= 3, end /= 3;
-  PetscMPIInt rank;
-  PetscCallMPI(MPI_Comm_rank(comm, &rank));
+  RowSite site;
+  PetscCall(GetRowSite(b, &site));
+  const auto [comm, rank, begin, end] = site;
   std::vector<PetscInt> slot;
   const std::vector<Row> mine = LocalRows({}, constraints, begin, rank, &slot);  // J_2's rows
   std::vector<Row> rows;
