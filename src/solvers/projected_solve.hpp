@@ -38,8 +38,8 @@
 // instead of m1 + m2 + 1 back-solves and a dense problem of size m1 + m2. The
 // same solution, to the inner CG's tolerance.
 // With an iterative unconstrained solver (CG + GAMG, the corotational warp) a
-// column of D costs a whole Krylov solve, so many rows (more than
-// kAugmentedSolveCost, projected_solve.cpp) take the augmented Lagrangian
+// column of D costs a whole Krylov solve, so many rows (one- and two-sided:
+// more than kAugmentedSolveCost, projected_solve.cpp) take the augmented Lagrangian
 // path instead (augmented_solve.cpp): the two-sided rows enter the projected
 // operator as a penalty, P (A + J_S^T R J_S) P, on the rows S that push, and
 // their multipliers are updated between projected solves until every row
@@ -105,8 +105,8 @@ constexpr double kMinSeparation = 0.1;
 ConstrainedVertex CombineConstraints(PetscInt vertex,
                                      const std::vector<VelocityConstraint> &constraints);
 
-// How Solve treats two-sided constraints: by kProjectedSolveCost (auto), or
-// always by one path (the tests compare them).
+// How Solve treats two-sided constraints: by kAugmentedSolveCost and
+// kProjectedSolveCost (auto), or always by one path (the tests compare them).
 enum class TwoSidedPath { kAuto, kDelassus, kProjected, kAugmented };
 
 class ProjectedSolver {
