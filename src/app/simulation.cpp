@@ -289,7 +289,7 @@ PetscErrorCode Simulation::Resume() {
   }
   for (size_t i = 0; i < deformations_.size(); ++i)
     deformations_[i].applied = start_.deformations_applied[i] != 0;
-  contact_.RestoreRestingContacts(start_.resting_contacts);
+  contact_.RestoreRestingContacts(start_.resting_contacts, start_.resting_reactions);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -385,7 +385,7 @@ PetscErrorCode Simulation::Checkpoint(PetscInt step) {
   loop.time = time_;
   loop.frames = writer_->frames();
   for (const Deformation &d : deformations_) loop.deformations_applied.push_back(d.applied ? 1 : 0);
-  PetscCall(contact_.GatherRestingContacts(&loop.resting_contacts));
+  PetscCall(contact_.GatherRestingContacts(&loop.resting_contacts, &loop.resting_reactions));
   SchemeHistory history;
   if (has_unknowns()) PetscCall(integrator_.GetHistory(&history));
   PetscCall(WriteCheckpoint(writer_, loop, state_.positions, state_.velocities,

@@ -354,7 +354,7 @@ void ContactSolver::ReaimVertexContact(PetscInt local, const Contact &contact,
   if (!obstacles_.ContactOnBody(position + dt * velocity, contact.natural, contact.body, &hit))
     return;
   constraints_.Constrain(local, contact.natural, position, position + dt * velocity, velocity, dt,
-                         hit, false);
+                         hit, false, contact.reaction);
   if (options_.friction > 0)
     friction_.Stick(local, velocity, hit, constraints_.contacts().size() - 1);
 }
@@ -644,15 +644,17 @@ PetscErrorCode ContactSolver::ResolveDistanceConstraints(Vec x, Vec v,
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode ContactSolver::GatherRestingContacts(
-    std::vector<std::array<int32_t, 2>> *all) const {
+PetscErrorCode ContactSolver::GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all,
+                                                    std::vector<double> *reactions) const {
   PetscFunctionBeginUser;
-  PetscCall(resting_.Gather(comm_, all));
+  PetscCall(resting_.Gather(comm_, all, reactions));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-void ContactSolver::RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all) {
-  resting_.Restore(all, *layout_, features_, {ground_, body_obstacles_, scene_->bodies.size()});
+void ContactSolver::RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all,
+                                           const std::vector<double> &reactions) {
+  resting_.Restore(all, reactions, *layout_, features_,
+                   {ground_, body_obstacles_, scene_->bodies.size()});
 }
 
 }  // namespace softbody

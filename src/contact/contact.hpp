@@ -163,12 +163,14 @@ class ContactSolver {
                          const std::vector<PetscReal> &reactions, bool *changed);
 
   // Checkpoints: the resting contacts carried into the next step, as (natural
-  // vertex, obstacle: body, -1 the ground, -2 - f sharp-edge point f). Gather: collective, every
-  // rank's in rank order, on rank 0 (empty elsewhere). Restore: not collective, each rank keeps its
-  // own vertices' entries in the list's order (entries this run's obstacles do not have are
-  // dropped).
-  PetscErrorCode GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all) const;
-  void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all);
+  // vertex, obstacle: body, -1 the ground, -2 - f sharp-edge point f) and their reactions
+  // (resting_contacts.hpp). Gather: collective, every rank's in rank order, on rank 0 (empty
+  // elsewhere). Restore: not collective, each rank keeps its own vertices' entries in the list's
+  // order (entries this run's obstacles do not have are dropped); reactions may be empty.
+  PetscErrorCode GatherRestingContacts(std::vector<std::array<int32_t, 2>> *all,
+                                       std::vector<double> *reactions) const;
+  void RestoreRestingContacts(const std::vector<std::array<int32_t, 2>> &all,
+                              const std::vector<double> &reactions);
 
   // Repeating a step (-dt_adapt's rejected substeps): everything a step hands
   // to the next is the resting contacts (BeginStep clears the rest), so a step

@@ -86,7 +86,7 @@ void ContactConstraints::PreferEntry(const Point &x0, const Point &predicted,
 
 void ContactConstraints::Constrain(PetscInt local, int32_t natural, const Point &x0,
                                    const Point &predicted, const Point &velocity, PetscReal dt,
-                                   const SurfaceHit &hit, bool fresh) {
+                                   const SurfaceHit &hit, bool fresh, double guess) {
   const Point &n = hit.normal;
   const double w = state_->inverse_mass(natural), w_obstacle = hit.inverse_mass;
   const double share = w / (w + w_obstacle);  // 1 against a fixed obstacle
@@ -100,8 +100,10 @@ void ContactConstraints::Constrain(PetscInt local, int32_t natural, const Point 
   const double common = (w_obstacle * n.dot(velocity) + w * n.dot(hit.velocity)) / (w + w_obstacle);
   const double normal_velocity = RecoveryVelocity(natural, x0, target, dt, hit);
   normals_.push_back({local, n, normal_velocity, w_obstacle == 0});
-  if (hit.body >= 0 && !scene_->bodies[hit.body].fixed && hit.triangle >= 0)
+  if (hit.body >= 0 && !scene_->bodies[hit.body].fixed && hit.triangle >= 0) {
     MakeTwoSided(natural, x0, dt, hit, &normals_.back());
+    normals_.back().guess = guess;
+  }
   contacts_.push_back(
       {natural, hit.body, common, fresh && approach < -bounce_speed_, -1, hit.velocity});
   VertexObstacles &obstacles = constrained_[local];

@@ -60,6 +60,9 @@ struct Contact {
   bool impact;             // new this step and closing faster than the bounce speed
   int32_t feature = -1;    // a fixed body's feature point pressing on the vertex's face
   Point obstacle_velocity = Point::Zero();  // the obstacle's surface velocity there (m/s)
+  // A resting contact's reaction in the step that found it resting (N s): the
+  // next step's two-sided row starts its multiplier there (VelocityConstraint::guess).
+  double reaction = 0;
 };
 
 class ContactConstraints {
@@ -79,8 +82,10 @@ class ContactConstraints {
                             PetscReal dt);
   // Constrains owned vertex `local` (at x0, heading for `predicted`) against the
   // hit (see the file comment); `fresh`: a new contact, which may bounce.
+  // guess: the contact's reaction estimate (VelocityConstraint::guess).
   void Constrain(PetscInt local, int32_t natural, const Point &x0, const Point &predicted,
-                 const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh);
+                 const Point &velocity, PetscReal dt, const SurfaceHit &hit, bool fresh,
+                 double guess = 0);
   // After a solve: the feature points each free body's predicted surface passes
   // over (the free state gathered at x0 + dt v); returns the constraints added
   // or changed on this rank.

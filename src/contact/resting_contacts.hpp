@@ -2,7 +2,8 @@
 // constrained while the obstacle pushes it (normal impulse lambda >= 0) and does
 // not bounce; it is released when it would pull. Checkpoints store them as
 // (natural vertex, obstacle), the obstacle a body index, -1 the ground, or
-// -2 - f for sharp-edge feature point f.
+// -2 - f for sharp-edge feature point f, with each one's reaction (N s: the
+// next step's two-sided row starts its multiplier there).
 #pragma once
 
 #include <petscsys.h>
@@ -34,11 +35,14 @@ class RestingContacts {
   // Not collective. Whether this rank rests a sharp-edge feature contact.
   bool any_feature() const;
 
-  // Collective: every rank's entries in rank order, on rank 0 (empty elsewhere).
-  PetscErrorCode Gather(MPI_Comm comm, std::vector<std::array<int32_t, 2>> *all) const;
+  // Collective: every rank's entries in rank order, on rank 0 (empty elsewhere),
+  // and their reactions.
+  PetscErrorCode Gather(MPI_Comm comm, std::vector<std::array<int32_t, 2>> *all,
+                        std::vector<double> *reactions) const;
   // Not collective: keeps this rank's own vertices' entries in the list's order.
-  void Restore(const std::vector<std::array<int32_t, 2>> &all, const DofLayout &layout,
-               const SharpFeatures &features, const Known &known);
+  // reactions: one per entry of `all`, or empty (none known: zero).
+  void Restore(const std::vector<std::array<int32_t, 2>> &all, const std::vector<double> &reactions,
+               const DofLayout &layout, const SharpFeatures &features, const Known &known);
 
  private:
   std::vector<Entry> entries_;

@@ -61,8 +61,11 @@ std::vector<Collision> VelocityResponse::Respond(const ContactConstraints &const
     const bool pushes = constraint.two_sided
                             ? reactions[i] * state_->inverse_mass(contact.natural) > kRestingSpeed
                             : reactions[i] >= 0;
-    if (pushes && !(options_.restitution > 0 && contact.impact))
-      resting->Add(constraint.vertex, contact);
+    if (pushes && !(options_.restitution > 0 && contact.impact)) {
+      Contact carried = contact;
+      carried.reaction = reactions[i];
+      resting->Add(constraint.vertex, carried);
+    }
   }
   return collisions;
 }

@@ -231,6 +231,7 @@ std::string ReadSlot(hid_t file, int slot_index, int32_t num_vertices, RowSlab s
   if (slot < 0) return "cannot open " + std::string(kSlots[slot_index]);
   int64_t step = 0, frames = 0;
   std::vector<int32_t> applied, resting;
+  std::vector<double> reactions;
   std::vector<hsize_t> resting_dims;
   const std::vector<hsize_t> expected{static_cast<hsize_t>(num_vertices), 3};
   const auto read_state = [&](const char *name, double *values) {
@@ -245,6 +246,10 @@ std::string ReadSlot(hid_t file, int slot_index, int32_t num_vertices, RowSlab s
             read_state("velocities", velocities) &&
             ReadArray(slot, "deformations_applied", H5T_NATIVE_INT32, &applied) &&
             ReadArray(slot, "resting_contacts", H5T_NATIVE_INT32, &resting, &resting_dims);
+  // Files from before the reactions were stored: none (zero).
+  if (ok && LinkExists(slot, "resting_reactions"))
+    ok = ReadArray(slot, "resting_reactions", H5T_NATIVE_DOUBLE, &reactions) &&
+         reactions.size() == resting.size() / 2;
   H5Gclose(slot);
   if (!ok || (resting_dims.size() == 2 && resting_dims[1] != 2))
     return "its checkpoint " + std::string(kSlots[slot_index]) +
@@ -255,6 +260,7 @@ std::string ReadSlot(hid_t file, int slot_index, int32_t num_vertices, RowSlab s
   state->resting_contacts.resize(resting.size() / 2);
   for (size_t i = 0; i < state->resting_contacts.size(); ++i)
     state->resting_contacts[i] = {resting[2 * i], resting[2 * i + 1]};
+  state->resting_reactions = reactions;
   return "";
 }
 
@@ -358,7 +364,7 @@ bool WriteTable(hid_t location, const char *name, hid_t type, hsize_t rows, hsiz
 }
 
 // Collective. Writes the slot's datasets: x and v (natural slabs), the
-// deformations applied and rank 0's resting contacts.
+// deformations applied and rank 0's resting contacts with their reactions.
 PetscErrorCode WriteSlotData(MPI_Comm comm, hid_t slot, const NaturalSlab &natural,
                              const LoopState &state, Vec natural_x, Vec natural_v, bool *ok) {
   PetscFunctionBeginUser;
@@ -379,7 +385,9 @@ PetscErrorCode WriteSlotData(MPI_Comm comm, hid_t slot, const NaturalSlab &natur
         WriteTable(slot, "deformations_applied", H5T_NATIVE_INT32, D, 1, {0, rank == 0 ? D : 0},
                    state.deformations_applied.data()) &&
         WriteTable(slot, "resting_contacts", H5T_NATIVE_INT32, contacts, 2,
-                   {0, rank == 0 ? contacts : 0}, resting.data());
+                   {0, rank == 0 ? contacts : 0}, resting.data()) &&
+        WriteTable(slot, "resting_reactions", H5T_NATIVE_DOUBLE, contacts, 1,
+                   {0, rank == 0 ? contacts : 0}, state.resting_reactions.data());
   PetscCall(VecRestoreArrayRead(natural_x, &nx));
   PetscCall(VecRestoreArrayRead(natural_v, &nv));
   PetscFunctionReturn(PETSC_SUCCESS);

@@ -17,7 +17,9 @@
 // Layout: two slots, /checkpoint/0 and /checkpoint/1, written alternately, each
 // with attributes valid, step, time, frames, ranks and datasets positions
 // [V][3], velocities [V][3], deformations_applied [D][1], resting_contacts
-// [n][2] (natural vertex, obstacle body; -1 the ground), and the time scheme's
+// [n][2] (natural vertex, obstacle body; -1 the ground), resting_reactions
+// [n][1] (their reactions, N s: the two-sided solve's starting multipliers;
+// absent in older files, read as zero), and the time scheme's
 // history (solvers/time_scheme.hpp): attribute integrator (its -integrator
 // name), integrator_scalars [k][1] and its vectors [V][3] (bdf2:
 // previous_positions, previous_velocities; alpha: accelerations). A slot is marked
@@ -67,6 +69,7 @@ struct LoopState {
   PetscInt frames = 0;                        // frames in the result file up to this step
   std::vector<int32_t> deformations_applied;  // per -deform event, 0 or 1
   std::vector<std::array<int32_t, 2>> resting_contacts;  // (natural vertex, obstacle; -1 ground)
+  std::vector<double> resting_reactions;  // per resting contact: its reaction (N s), or empty
 };
 
 // Collective. Fails early (before the scene is read) unless `path` is an HDF5
@@ -84,7 +87,7 @@ PetscErrorCode ReadCheckpoint(MPI_Comm comm, const std::string &path, const Scen
 // Collective. Writes `state` with x and v (PETSc order) and the time scheme's
 // history (may be null) into the writer's file, in the slot not holding the
 // newest checkpoint, and flushes the file. Only rank 0's state.resting_contacts
-// is used.
+// and resting_reactions are used.
 PetscErrorCode WriteCheckpoint(ResultWriter *writer, const LoopState &state, Vec x, Vec v,
                                const SchemeHistory *history = nullptr);
 

@@ -139,7 +139,11 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
     if (p > kHeldRow * n) rho[j] = kPenaltyOverStiffness * q / (n * n);
   }
 
+  // The multipliers start at the rows' guesses (a resting contact's last
+  // reaction): a contact at rest then needs few outer iterations.
   std::vector<double> lambda(m, 0.0), gaps, forces(m, 0.0);
+  for (size_t i = 0; i < constraints.size(); ++i)
+    if (slot[i] >= 0 && rho[slot[i]] > 0) lambda[slot[i]] = std::max(0.0, constraints[i].guess);
   PetscCall(Gaps(set, v, &gaps));
   double first_gap = 0;  // the largest violation at the guess
   for (size_t j = 0; j < m; ++j)

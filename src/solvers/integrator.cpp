@@ -156,6 +156,13 @@ PetscErrorCode ReadSolveOptions(PetscOptionItems *PetscOptionsObject, Integrator
       "newly constrained vertex): the projected CG's preconditioner gets the constraints' Schur "
       "complement (one CG iteration), the two-sided solve needs no back-solve per row",
       nullptr, o->constraint_correction, &o->constraint_correction, nullptr));
+  PetscCall(PetscOptionsEnum(
+      "-contact_solve",
+      "How contact solves treat free bodies' two-sided rows: auto (by their count and the "
+      "solver), delassus (the dense m x m problem), projected, augmented (augmented Lagrangian: "
+      "a few projected solves; docs/contact.md)",
+      nullptr, kTwoSidedPaths, (PetscEnum)o->two_sided_path, (PetscEnum *)&o->two_sided_path,
+      nullptr));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -178,7 +185,8 @@ PetscErrorCode ProcessIntegratorOptions(MPI_Comm comm, IntegratorOptions *o) {
                                      {OptionSyntax::kInteger, "-newton_max_it"},
                                      {OptionSyntax::kBool, "-newton_always"},
                                      {OptionSyntax::kBool, "-fallback_direct"},
-                                     {OptionSyntax::kBool, "-constraint_correction"}}));
+                                     {OptionSyntax::kBool, "-constraint_correction"},
+                                     {OptionSyntax::kChoice, "-contact_solve", kTwoSidedPaths}}));
   char schedule[PETSC_MAX_PATH_LEN] = "";
   PetscReal gravity[3] = {o->gravity[0], o->gravity[1], o->gravity[2]};
   PetscInt gravity_count = 3;
@@ -407,6 +415,7 @@ PetscErrorCode ImplicitEuler::CreateLinearSolver(const DofLayout &layout) {
   PetscCall(PetscStrcmp(type, KSPPREONLY, &preonly));
   projected_.set_constraint_correction(options_.mode == MODE_LINEAR && preonly &&
                                        options_.constraint_correction);
+  projected_.set_two_sided_path(options_.two_sided_path);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -121,6 +121,9 @@ struct IntegratorOptions {
   // Linear mode with a factorisation: the contact solves' preconditioner with
   // the constraint correction (solvers/constraint_correction.hpp).
   PetscBool constraint_correction = PETSC_TRUE;
+  // How contact solves treat two-sided rows (free bodies against each other):
+  // chosen by their count and the solver (projected_solve.hpp), or forced.
+  TwoSidedPath two_sided_path = TwoSidedPath::kAuto;
 };
 
 // The time step at time t (s): -dt until the first -dt_schedule entry applies.

@@ -49,6 +49,17 @@ constexpr PetscInt kProjectedSolveCost = 16;
 // zones' conflicts taking 60 outer iterations. So it is taken from this many
 // rows on, where the Delassus path's cost is out of reach.
 constexpr PetscInt kAugmentedSolveCost = 300;
+// With a factorisation the Delassus path keeps columns of A^-1 while they fit
+// (two_sided_solve.cpp), else takes a back-solve per row (four per sweep of the
+// factor on one rank), and reduces an m x m matrix over the ranks; the
+// augmented path takes a few projected solves of one back-solve per CG
+// iteration, its multipliers starting from the resting contacts' last
+// reactions. Measured (1 rank, linear, two boxes stacked on the ground):
+// 2 x 10 080 tets, about 770 rows, columns kept: Delassus 244 ms per contact
+// step, augmented 576 ms; 2 x 50 700 tets, 2 006 rows, columns too big: first
+// contact 6.5 s against 2.7 s CPU, at rest 7.5 s against 6.0 s. So it is taken
+// from this many rows on, between the two.
+constexpr PetscInt kAugmentedFactorCost = 1500;
 
 // A candidate set of imposed constraints, ranked by CombineConstraints' order.
 struct Candidate {
@@ -76,6 +87,9 @@ double Violation(const std::vector<VelocityConstraint> &constraints, int k,
 }
 
 }  // namespace
+
+const char *const kTwoSidedPaths[] = {"auto",         "delassus", "projected", "augmented",
+                                      "TwoSidedPath", "",         nullptr};
 
 PetscInt ProjectedSolver::correction_column_solves() const {
   return correction_ ? correction_->column_solves() : 0;
@@ -299,9 +313,10 @@ PetscErrorCode ProjectedSolver::Solve(KSP solver, Vec b,
   *iterations = 0;
   bool factor_once;
   PetscCall(AppliesFactorOnce(solver, &factor_once));
+  const PetscInt augmented_from = factor_once ? kAugmentedFactorCost : kAugmentedSolveCost;
   const bool augmented =
-      path_ == TwoSidedPath::kAugmented || (path_ == TwoSidedPath::kAuto && !factor_once &&
-                                            counts[0] + counts[1] + 1 > kAugmentedSolveCost);
+      path_ == TwoSidedPath::kAugmented ||
+      (path_ == TwoSidedPath::kAuto && counts[0] + counts[1] + 1 > augmented_from);
   if (counts[0] == 0) {
     PetscCall(SetupCorrection());
     PetscCall(SolveProjected(b, constraints, v, reactions, iterations));

@@ -79,6 +79,10 @@ struct VelocityConstraint {
   // the rows of the two-sided solve, so that they come in the same order on
   // any rank count; -1: the vertex's PETSc number (rank-dependent).
   PetscInt order_key = -1;
+  // Two-sided: an estimate of its reaction lambda (N s), the last step's for a
+  // resting contact; the augmented Lagrangian path starts its multiplier there
+  // (the other paths do not read it).
+  PetscReal guess = 0;
 };
 // The constraints of one vertex: an orthonormal basis of their directions and
 // the velocity component in its span that satisfies them all.
@@ -105,9 +109,12 @@ constexpr double kMinSeparation = 0.1;
 ConstrainedVertex CombineConstraints(PetscInt vertex,
                                      const std::vector<VelocityConstraint> &constraints);
 
-// How Solve treats two-sided constraints: by kAugmentedSolveCost and
-// kProjectedSolveCost (auto), or always by one path (the tests compare them).
+// How Solve treats two-sided constraints: by kAugmentedSolveCost,
+// kAugmentedFactorCost and kProjectedSolveCost (auto), or always by one path
+// (-contact_solve; the tests compare them).
 enum class TwoSidedPath { kAuto, kDelassus, kProjected, kAugmented };
+// Names for -contact_solve, in TwoSidedPath's order (PetscOptionsEnum's list).
+extern const char *const kTwoSidedPaths[];
 
 class ProjectedSolver {
  public:

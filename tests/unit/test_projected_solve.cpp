@@ -270,23 +270,50 @@ double LargestDifference(const Solution &a, const Solution &b, double *scale) {
   return difference;
 }
 
-TEST(ProjectedSolver, EveryTwoSidedPathMeetsTheConditionsAndTheyAgree) {
-  Problem p;
-  Assemble(&p);
-  Constrain(&p, 20);
-  const Solution delassus = SolveBy(&p, TwoSidedPath::kDelassus);
-  ExpectSolves(&p, delassus, "Delassus path");
+// The unconstrained solver becomes an exact factorisation of A (LU of the
+// whole matrix on every rank): M^-1 = A^-1.
+void UseFactorisation(Problem *p) {
+  PetscCallAbort(PETSC_COMM_WORLD, KSPSetType(p->ksp, KSPPREONLY));
+  PC pc;
+  PetscCallAbort(PETSC_COMM_WORLD, KSPGetPC(p->ksp, &pc));
+  PetscCallAbort(PETSC_COMM_WORLD, PCSetType(pc, PCREDUNDANT));
+  PetscCallAbort(PETSC_COMM_WORLD, KSPSetUp(p->ksp));
+}
+
+// Every path for two-sided rows meets the conditions, and its velocities are
+// the Delassus path's to kTolerance of their scale.
+void ExpectEveryPathAgrees(Problem *p) {
+  const Solution delassus = SolveBy(p, TwoSidedPath::kDelassus);
+  ExpectSolves(p, delassus, "Delassus path");
   const std::pair<TwoSidedPath, const char *> others[] = {
       {TwoSidedPath::kProjected, "projected Delassus path"},
       {TwoSidedPath::kAugmented, "augmented Lagrangian path"}};
   for (const auto &[path, name] : others) {
-    const Solution other = SolveBy(&p, path);
-    ExpectSolves(&p, other, name);
+    const Solution other = SolveBy(p, path);
+    ExpectSolves(p, other, name);
     double scale;
     const double difference = LargestDifference(delassus, other, &scale);
     EXPECT_LE(difference, kTolerance * scale)
         << name << ": the velocities against the Delassus path's";
   }
+}
+
+TEST(ProjectedSolver, EveryTwoSidedPathMeetsTheConditionsAndTheyAgree) {
+  Problem p;
+  Assemble(&p);
+  Constrain(&p, 20);
+  ExpectEveryPathAgrees(&p);
+}
+
+// The same with a factorisation as the unconstrained solver, which the
+// augmented path also takes from kAugmentedFactorCost rows on: its projected
+// solves then precondition with A^-1.
+TEST(ProjectedSolver, EveryTwoSidedPathAgreesWithAFactorisation) {
+  Problem p;
+  Assemble(&p);
+  UseFactorisation(&p);
+  Constrain(&p, 20);
+  ExpectEveryPathAgrees(&p);
 }
 
 // Contacts found from both sides (a vertex of one body on the other's face,
@@ -313,16 +340,6 @@ TEST(ProjectedSolver, AugmentedPathStopsOnRowsFoundFromBothSides) {
   const double difference = LargestDifference(delassus, augmented, &scale);
   EXPECT_LE(difference, 1e-4 * scale);
   EXPECT_LT(solver.augmented_outer_iterations(), 10) << "the outer iterations stopped at the stall";
-}
-
-// The unconstrained solver becomes an exact factorisation of A (LU of the
-// whole matrix on every rank): M^-1 = A^-1.
-void UseFactorisation(Problem *p) {
-  PetscCallAbort(PETSC_COMM_WORLD, KSPSetType(p->ksp, KSPPREONLY));
-  PC pc;
-  PetscCallAbort(PETSC_COMM_WORLD, KSPGetPC(p->ksp, &pc));
-  PetscCallAbort(PETSC_COMM_WORLD, PCSetType(pc, PCREDUNDANT));
-  PetscCallAbort(PETSC_COMM_WORLD, KSPSetUp(p->ksp));
 }
 
 // The constraint correction (constraint_correction.hpp) with M^-1 = A^-1 is
