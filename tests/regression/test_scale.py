@@ -11,7 +11,9 @@ it does not compute itself.
 3. Counts: the strong series keeps one mesh (same tets at every P); the weak series
    holds 3e3 tets per rank within 15 % (the box mesher rounds to whole cells).
 4. Memory: every rank's peak resident set is measured and at least MIN_PROCESS_MB
-   (a process that has started Open MPI and PETSc holds several times more).
+   (a process that has started Open MPI and PETSc holds several times more);
+   the shared file pages (shared libraries) sampled per rank, where a sample
+   caught the run, are at least 1 MB and less than the smallest peak.
 5. Messages: at one rank a step sends nothing (no other rank to send to); at 2 and
    3 ranks every rank sends something every step.
 6. Weak series without contact: a rank's part is a unit cube of the same cells and
@@ -178,6 +180,9 @@ def main():
         ranks = int(row["ranks"])
         checks.check(row["solver_options"] == "config/cg-gamg.opts", f"{label}: solver options recorded")
         checks.check(float(row["mem_min_mb"]) >= MIN_PROCESS_MB, f"{label}: smallest rank peak {row['mem_min_mb']} MB")
+        if row["mem_file_mb"]:  # sampled every 0.5 s: a run may end before the first sample
+            checks.check(1 <= float(row["mem_file_mb"]) < float(row["mem_min_mb"]),
+                         f"{label}: shared file pages {row['mem_file_mb']} MB per rank, part of its peak")
         if ranks == 1:
             checks.check(float(row["step_bytes_max"]) == 0 and float(row["setup_bytes_mean"]) == 0,
                          f"{label}: nothing sent")
