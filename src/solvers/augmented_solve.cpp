@@ -50,6 +50,19 @@ constexpr double kRelativeTolerance = 1e-8;
 constexpr double kStallRelativeTolerance = 1e-4;
 constexpr double kStallRatio = 0.9;
 constexpr int kStallAfter = 3;
+// Rows in conflict (with each other, or with the one-sided constraints and the
+// guard's held zones) cannot all hold: their multipliers grow by rho_j g_j at
+// every outer iteration and the violation does not move. Measured on a
+// corotational flat contact (2 x 50 700 tets, warp CG): violations constant to
+// 0.4 % for 5 to 20 outer iterations at 2.5e-4, 1.1e-4 and 6.2e-5 m/s (1.9e-4
+// to 7.4e-4 of the speeds), most solves running to the limit. So the
+// iterations also stop once the violation has fallen by less than
+// kNoProgressRatio in kNoProgressOuters iterations in a row and lies within
+// this fraction of the velocity scale (1e-5 m of penetration over a step of
+// 0.01 s at 1 m/s, against contact gaps of 1e-4 m and more).
+constexpr double kConflictRelativeTolerance = 1e-3;
+constexpr double kNoProgressRatio = 0.99;
+constexpr int kNoProgressOuters = 3;
 // Outer iterations at most; a row set that cannot hold (rows in conflict with
 // each other or with the one-sided constraints) ends there with the last
 // multipliers.
@@ -150,7 +163,7 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
     if (rho[j] > 0) first_gap = std::max(first_gap, gaps[j]);
   PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &first_gap, 1, MPIU_REAL, MPI_MAX, comm));
   RowPenalty penalty{&set, std::vector<double>(m, 0.0)};
-  int outer = 0;
+  int outer = 0, no_progress = 0;
   PetscInt active = 0;
   double violation = 0, last_violation = 1e300;
   for (bool converged = false; !converged && outer < kMaxOuterIterations; ++outer) {
@@ -185,9 +198,12 @@ PetscErrorCode ProjectedSolver::SolveTwoSidedAugmented(
     PetscCall(VecNorm(v, NORM_INFINITY, &speed));
     const double velocity_scale = std::max({largest[1], speed, first_gap});
     violation = largest[0];
+    no_progress = violation > kNoProgressRatio * last_violation ? no_progress + 1 : 0;
     const bool stalled = outer >= kStallAfter && violation > kStallRatio * last_violation &&
                          violation <= kStallRelativeTolerance * velocity_scale;
-    converged = violation <= kRelativeTolerance * velocity_scale || stalled;
+    const bool in_conflict = no_progress >= kNoProgressOuters &&
+                             violation <= kConflictRelativeTolerance * velocity_scale;
+    converged = violation <= kRelativeTolerance * velocity_scale || stalled || in_conflict;
     last_violation = violation;
   }
   augmented_outer_iterations_ = outer;

@@ -342,6 +342,37 @@ TEST(ProjectedSolver, AugmentedPathStopsOnRowsFoundFromBothSides) {
   EXPECT_LT(solver.augmented_outer_iterations(), 10) << "the outer iterations stopped at the stall";
 }
 
+// Two rows in conflict: the row that binds and its mirror (the opposite
+// normal), asking for a relative velocity kConflict above what the first
+// allows. Both push, their multipliers grow at every outer iteration and the
+// compromise between them does not move: the augmented path stops once the
+// violation stays put (within 1e-3 of the speeds), in a few outer
+// iterations rather than its limit of 60, with each row violated by about
+// half the conflict and the one-sided constraints held.
+TEST(ProjectedSolver, AugmentedPathStopsOnRowsInConflict) {
+  Problem p;
+  Assemble(&p);
+  Constrain(&p, 20);
+  const VelocityConstraint binding = p.global[p.global.size() - 2];
+  constexpr double kConflict = 4e-3;  // m/s: between 1e-4 and 1e-3 of the speeds (about 5)
+  VelocityConstraint mirror = binding;
+  mirror.normal = -binding.normal;
+  mirror.velocity = -binding.velocity + kConflict;
+  p.global.push_back(mirror);
+  ProjectedSolver solver;
+  const Solution s = SolveBy(&p, TwoSidedPath::kAugmented, &solver);
+  EXPECT_LT(solver.augmented_outer_iterations(), 10) << "stopped on the conflict";
+  for (const VelocityConstraint &c : {binding, mirror}) {
+    const Eigen::Vector3d relative = At(s.v, c.vertex) - c.weights[0] * At(s.v, c.face[0]) -
+                                     c.weights[1] * At(s.v, c.face[1]) -
+                                     c.weights[2] * At(s.v, c.face[2]);
+    EXPECT_GE(c.normal.dot(relative) - c.velocity, -kConflict) << "violated by about half";
+  }
+  for (const VelocityConstraint &c : p.global)
+    if (!c.two_sided)
+      EXPECT_NEAR(c.normal.dot(At(s.v, c.vertex)), c.velocity, kTolerance) << "one-sided held";
+}
+
 // The constraint correction (constraint_correction.hpp) with M^-1 = A^-1 is
 // the exact inverse of the projected operator: the inner CG ends in one
 // iteration, where the plain preconditioner needs about one per constraint
