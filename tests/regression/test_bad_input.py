@@ -197,6 +197,7 @@ def main():
         option("-mode", "foo", ["not one of", "foo"]),
         option("-vertex_order", "foo", ["not one of", "foo"]),
         option("-partitioner", "foo", ["not one of", "foo"]),
+        option("-contact_solve", "foo", ["not one of", "foo"]),
         # (PETSc's own parse of these ended in a traceback and exit 139)
         option("-sharp_edges", "maybe", ["true or false", "maybe"]),
         option("-impulse_spreading", "2", ["true or false"]),
