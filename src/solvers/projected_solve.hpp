@@ -44,6 +44,10 @@
 // operator as a penalty, P (A + J_S^T R J_S) P, on the rows S that push, and
 // their multipliers are updated between projected solves until every row
 // holds to a tolerance: a few projected solves whatever the number of rows.
+// With a factorisation it is taken from kAugmentedFactorCost rows on, where
+// the Delassus path's back-solves per row and m x m problem cost more. The
+// multipliers start from VelocityConstraint::guess (a resting contact's last
+// reaction).
 #pragma once
 
 #include <petscksp.h>
