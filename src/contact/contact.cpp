@@ -80,7 +80,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
   obstacles_.SetupGround(scene, state_, ground_, options.ground_y,
                          kGroundMarginOfGap * options.gap);
   if (body_obstacles_) SetupBodyObstacles(candidates);
-  if (free_obstacles_) PetscCall(state_.SetupRingSet(lumped_mass, RingNeighbours()));
+  if (free_obstacles_) PetscCall(state_.SetupRingSet(lumped_mass, RingNeighbours(meshes)));
   meshes.ReleaseFreeTets();  // the free items have taken theirs
   CollectCheckedVertices();
   constraints_.Setup(scene, layout, state_, obstacles_, features_, options.gap);
@@ -111,12 +111,17 @@ std::vector<int32_t> ContactSolver::RestVerticesNeeded(const ContactMeshes &mesh
 }
 
 // The key vertices whose free tets this rank may keep (FreeState::SetupItems):
-// its own, the distance constraints' and the other corners of the free
-// boundary triangles at its own vertices (the ring set, RingNeighbours).
+// its own, the distance constraints' and the ring set (RingNeighbours).
 std::vector<int32_t> ContactSolver::KeysNeeded(const ContactMeshes &meshes) const {
-  std::vector<int32_t> owned(layout_->natural_of_owned.begin(), layout_->natural_of_owned.end());
-  std::vector<int32_t> keys = distance_.vertices();
-  keys.insert(keys.end(), owned.begin(), owned.end());
+  std::vector<int32_t> keys = distance_.vertices(), ring = RingNeighbours(meshes);
+  keys.insert(keys.end(), layout_->natural_of_owned.begin(), layout_->natural_of_owned.end());
+  keys.insert(keys.end(), ring.begin(), ring.end());
+  return keys;
+}
+
+std::vector<int32_t> ContactSolver::RingNeighbours(const ContactMeshes &meshes) const {
+  std::vector<int32_t> owned(layout_->natural_of_owned.begin(), layout_->natural_of_owned.end()),
+      ring;
   std::sort(owned.begin(), owned.end());
   auto own = [&](int32_t n) { return std::binary_search(owned.begin(), owned.end(), n); };
   for (size_t b = 0; b < scene_->bodies.size(); ++b) {
@@ -127,21 +132,10 @@ std::vector<int32_t> ContactSolver::KeysNeeded(const ContactMeshes &meshes) cons
       const int32_t corners[3] = {body.first_vertex + boundary(f, 0),
                                   body.first_vertex + boundary(f, 1),
                                   body.first_vertex + boundary(f, 2)};
-      if (std::any_of(corners, corners + 3, own)) keys.insert(keys.end(), corners, corners + 3);
+      if (std::none_of(corners, corners + 3, own)) continue;
+      for (const int32_t c : corners)
+        if (!own(c)) ring.push_back(c);
     }
-  }
-  return keys;
-}
-
-std::vector<int32_t> ContactSolver::RingNeighbours() const {
-  std::vector<int32_t> owned = state_.owned_natural(), ring;
-  std::sort(owned.begin(), owned.end());
-  auto own = [&](int32_t n) { return std::binary_search(owned.begin(), owned.end(), n); };
-  for (size_t t = 0; t < obstacles_.num_free_triangles(); ++t) {
-    const auto &triangle = obstacles_.free_triangle(static_cast<int32_t>(t));
-    if (std::none_of(triangle.begin(), triangle.begin() + 3, own)) continue;
-    for (int k = 0; k < 3; ++k)
-      if (!own(triangle[k])) ring.push_back(triangle[k]);
   }
   return ring;
 }
@@ -334,7 +328,7 @@ void ContactSolver::ReaimFeatureContact(int32_t feature, int32_t natural, PetscI
   if (constraints_.feature_held(feature) ||
       !obstacles_.ClosestOnBody(features_.point(feature), state_.body_of(natural), &hit))
     return;
-  const auto &triangle = obstacles_.free_triangle(hit.triangle);
+  const auto &triangle = hit.face;
   if (std::find(triangle.begin(), triangle.begin() + 3, natural) == triangle.begin() + 3) return;
   constraints_.hold_feature(feature);
   const bool unconstrained = local >= 0 && constraints_.feature_contact(local) < 0;

@@ -264,8 +264,9 @@ class ContactSolver {
   // mean velocity (x1 - x_n) / dt (the guard writes it for those it moves).
   PetscErrorCode EndHeldWithMeanVelocity(const StepMotion &motion, Vec x, Vec v);
   // Not collective. The other ranks' corners (natural) of the free boundary
-  // triangles at this rank's own vertices (FreeState::SetupRingSet).
-  std::vector<int32_t> RingNeighbours() const;
+  // triangles at this rank's own vertices (FreeState::SetupRingSet), from the
+  // meshes of the set-up.
+  std::vector<int32_t> RingNeighbours(const ContactMeshes &meshes) const;
 
   // Times a public method: the "Contact" event of -log_view and stats_.seconds.
   class Timing {

@@ -124,7 +124,7 @@ void ContactConstraints::MakeTwoSided(int32_t natural, const Point &x0, PetscRea
   if (height < 0)
     velocity = std::min(
         velocity, -height > kMaxRecoveryPerStep * edge ? 0.0 : kMaxRecoveryPerStep * edge / dt);
-  const auto &triangle = obstacles_->free_triangle(hit.triangle);
+  const auto &triangle = hit.face;
   constraint->velocity = velocity;
   constraint->two_sided = true;
   constraint->weights = hit.weights;
@@ -170,7 +170,7 @@ std::array<bool, 3> ContactConstraints::MovingVertices(const std::array<int32_t,
 PetscInt ContactConstraints::ConstrainFeature(int32_t feature, const SurfaceHit &hit, PetscReal dt,
                                               bool fresh, bool limit) {
   const Point m = -hit.normal;
-  const auto &triangle = obstacles_->free_triangle(hit.triangle);
+  const auto &triangle = hit.face;
   const int32_t obstacle = features_->body_of(feature);
   double depth = m.dot(features_->point(feature) - hit.point) + gap_ * state_->edge(triangle[3]);
   if (limit) depth = std::min(depth, kMaxRecoveryPerStep * state_->edge(triangle[3]));

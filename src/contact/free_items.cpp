@@ -1,5 +1,7 @@
 #include "contact/free_items.hpp"
 
+#include <type_traits>
+
 #include "common/held_bytes.hpp"
 #include "contact/contact_meshes.hpp"
 
@@ -22,9 +24,12 @@ void Fit(std::vector<T> *v) {
 
 }  // namespace
 
-// A tet travelling with its key vertex.
+// A tet or a triangle travelling with its key vertex (a triangle's fourth
+// corner is kNoCorner).
 struct FreeItems::Record {
+  static constexpr int32_t kNoCorner = -1;
   int32_t key, id, corner[4], body;
+  bool triangle() const { return corner[3] == kNoCorner; }
 };
 
 void FreeItems::Setup(const Scene &scene, const ContactMeshes &meshes,
@@ -58,27 +63,25 @@ void FreeItems::Setup(const Scene &scene, const ContactMeshes &meshes,
     for (Eigen::Index f = 0; f < boundary.rows(); ++f) {
       const FreeTriangle item{first + boundary(f, 0), first + boundary(f, 1),
                               first + boundary(f, 2), body_id};
-      const int32_t key = KeyOf(item, is_free);
-      (key < 0 ? static_triangles_ : triangles_).push_back({key, triangle_id++, item});
+      const int32_t key = KeyOf(item, is_free), id = triangle_id++;
+      if (key < 0)
+        static_triangles_.push_back({key, id, item});
+      else if (kept(key))
+        own_triangles_.push_back({key, id, item});
     }
   }
   num_tets_ = meshes.num_free_tets();
   std::sort(own_tets_.begin(), own_tets_.end());
   std::sort(static_tets_.begin(), static_tets_.end());
-  std::sort(triangles_.begin(), triangles_.end());
-  Fit(&triangles_);
+  std::sort(own_triangles_.begin(), own_triangles_.end());
+  Fit(&own_triangles_);
   Fit(&static_triangles_);
-  triangle_at_.assign(triangle_id, 0);
-  for (size_t k = 0; k < triangles_.size(); ++k)
-    triangle_at_[triangles_[k].id] = static_cast<int32_t>(k);
-  for (size_t k = 0; k < static_triangles_.size(); ++k)
-    triangle_at_[static_triangles_[k].id] = -static_cast<int32_t>(k) - 1;
 }
 
 int64_t FreeItems::HeldBytes() const {
   using softbody::HeldBytes;
-  return HeldBytes(own_tets_) + HeldBytes(halo_tets_) + HeldBytes(triangles_) +
-         HeldBytes(triangle_at_) + HeldBytes(static_tets_) + HeldBytes(static_triangles_) +
+  return HeldBytes(own_tets_) + HeldBytes(halo_tets_) + HeldBytes(own_triangles_) +
+         HeldBytes(halo_triangles_) + HeldBytes(static_tets_) + HeldBytes(static_triangles_) +
          HeldBytes(sent_) + HeldBytes(received_);
 }
 
@@ -97,6 +100,10 @@ void FreeItems::Pack(const std::vector<PetscMPIInt> &to_ranks,
         const FreeTet &t = i.item;
         records->push_back({sent[k], i.id, {t[0], t[1], t[2], t[3]}, t[4]});
       });
+      ForEachOf(own_triangles_, sent[k], [&](const IndexedItem<FreeTriangle> &i) {
+        const FreeTriangle &t = i.item;
+        records->push_back({sent[k], i.id, {t[0], t[1], t[2], Record::kNoCorner}, t[3]});
+      });
     }
     counts->push_back(static_cast<PetscMPIInt>(records->size() - before));
   }
@@ -104,25 +111,40 @@ void FreeItems::Pack(const std::vector<PetscMPIInt> &to_ranks,
   sent_ = std::move(now);
 }
 
+template <class Item, class Make>
+void FreeItems::RebuildHalo(const std::vector<int32_t> &now, const std::vector<Record> &records,
+                            Make make, List<Item> *list) const {
+  auto kept = [&](int32_t n) { return std::binary_search(received_.begin(), received_.end(), n); };
+  // Counted first, so that the list is allocated once at its size.
+  size_t count = 0;
+  for (const Record &r : records) count += r.triangle() == std::is_same_v<Item, FreeTriangle>;
+  for (const int32_t n : now)
+    if (kept(n)) ForEachOf(*list, n, [&](const IndexedItem<Item> &) { ++count; });
+  List<Item> halo;
+  halo.reserve(count);
+  for (const int32_t n : now)
+    if (kept(n)) ForEachOf(*list, n, [&](const IndexedItem<Item> &i) { halo.push_back(i); });
+  for (const Record &r : records)
+    if (r.triangle() == std::is_same_v<Item, FreeTriangle>) halo.push_back({r.key, r.id, make(r)});
+  std::sort(halo.begin(), halo.end());
+  *list = std::move(halo);
+}
+
 void FreeItems::Unpack(const std::vector<int32_t> &received, const std::vector<Record> &records) {
   std::vector<int32_t> now(received);
   std::sort(now.begin(), now.end());
-  // Counted first, so that the lists are allocated once at their size.
-  size_t num_tets = records.size();
-  for (const int32_t n : now)
-    if (std::binary_search(received_.begin(), received_.end(), n)) {
-      ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &) { ++num_tets; });
-    }
-  List<FreeTet> tets;
-  tets.reserve(num_tets);
-  for (const int32_t n : now) {
-    if (!std::binary_search(received_.begin(), received_.end(), n)) continue;
-    ForEachOf(halo_tets_, n, [&](const IndexedItem<FreeTet> &i) { tets.push_back(i); });
-  }
-  for (const Record &r : records)
-    tets.push_back({r.key, r.id, {r.corner[0], r.corner[1], r.corner[2], r.corner[3], r.body}});
-  std::sort(tets.begin(), tets.end());
-  halo_tets_ = std::move(tets);
+  RebuildHalo(
+      now, records,
+      [](const Record &r) {
+        return FreeTet{r.corner[0], r.corner[1], r.corner[2], r.corner[3], r.body};
+      },
+      &halo_tets_);
+  RebuildHalo(
+      now, records,
+      [](const Record &r) {
+        return FreeTriangle{r.corner[0], r.corner[1], r.corner[2], r.body};
+      },
+      &halo_triangles_);
   received_ = std::move(now);
   ++generation_;
 }

@@ -9,11 +9,12 @@
 // vertex sends the tets listed under it to a rank whose halo the vertex enters
 // (it was not sent there at the previous halo exchange), and a rank keeps a
 // received vertex's tets until a halo exchange no longer brings the vertex.
-// The boundary triangles (O(surface)) are kept whole on every rank: the ring
-// set is found from them at set-up. The free grids bin the items whose corners
-// are all current, found under the current vertices: an item whose corners are
-// all current has its key current, so every rank finds the same items as if it
-// held the whole scene's.
+// The boundary triangles travel the same way, so no rank holds the scene's
+// surface. The free grids bin the items whose corners are all current, found
+// under the current vertices: an item whose corners are all current has its
+// key current, so every rank finds the same items as if it held the whole
+// scene's. An item may be held twice (kept for good under a ring-set vertex
+// and received with it in the halo); the grids list each id once.
 //
 // Items are named by their index in the scene's list (bodies in order, each
 // body's tets or boundary triangles in mesh order), the same on every rank, so
@@ -54,10 +55,10 @@ struct IndexedItem {
 class FreeItems {
  public:
   // Not collective. From what contact's set-up fetched of the meshes (set-up
-  // only; again replaces all): of meshes.free_tets(), those listed under the
-  // vertices for which kept(natural) holds (this rank's own, the fixed and ring
-  // sets') and the static ones; every free body's boundary triangle;
-  // is_free(natural): the vertex has unknowns.
+  // only; again replaces all): of meshes.free_tets() and the free bodies'
+  // boundary triangles, those listed under the vertices for which
+  // kept(natural) holds (this rank's own, the fixed and ring sets') and the
+  // static ones; is_free(natural): the vertex has unknowns.
   void Setup(const Scene &scene, const ContactMeshes &meshes,
              const std::function<bool(int32_t)> &is_free, const std::function<bool(int32_t)> &kept);
 
@@ -82,13 +83,8 @@ class FreeItems {
   }
   template <class Visit>
   void ForEachTriangleOf(int32_t n, Visit visit) const {
-    ForEachOf(triangles_, n, visit);
-  }
-  // The scene's free boundary triangles (every rank holds them) and one by index.
-  int64_t num_triangles() const { return static_cast<int64_t>(triangle_at_.size()); }
-  const FreeTriangle &triangle(int32_t id) const {
-    const int32_t at = triangle_at_[id];
-    return at >= 0 ? triangles_[at].item : static_triangles_[-at - 1].item;
+    ForEachOf(own_triangles_, n, visit);
+    ForEachOf(halo_triangles_, n, visit);
   }
   const std::vector<IndexedItem<FreeTet>> &static_tets() const { return static_tets_; }
   const std::vector<IndexedItem<FreeTriangle>> &static_triangles() const {
@@ -120,12 +116,16 @@ class FreeItems {
             std::vector<PetscMPIInt> *counts);
   // The halo lists: the received vertices' items, kept ones and new ones.
   void Unpack(const std::vector<int32_t> &received, const std::vector<Record> &records);
+  // One halo list: of *list, the items of the vertices received before and
+  // now (sorted `now`), and the new records' items (make(record)).
+  template <class Item, class Make>
+  void RebuildHalo(const std::vector<int32_t> &now, const std::vector<Record> &records, Make make,
+                   List<Item> *list) const;
 
   int64_t num_tets_ = 0;
   List<FreeTet> own_tets_, halo_tets_;
-  List<FreeTriangle> triangles_;      // every keyed one
-  std::vector<int32_t> triangle_at_;  // id -> index in triangles_, or -1 - index in static
-  List<FreeTet> static_tets_;         // key -1, id increasing
+  List<FreeTriangle> own_triangles_, halo_triangles_;
+  List<FreeTet> static_tets_;  // key -1, id increasing
   List<FreeTriangle> static_triangles_;
   uint64_t generation_ = 0;
   // The previous halo exchange: (rank, vertex) sent, and the vertices received; sorted.

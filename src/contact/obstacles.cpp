@@ -180,6 +180,7 @@ void Obstacles::SetHit(const Point &point, const Point &normal, const Eigen::Vec
   hit->body = tri[3];
   hit->triangle = t;
   hit->weights = w;
+  hit->face = tri;
 }
 
 bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit) const {
@@ -326,15 +327,19 @@ Point Obstacles::AngleWeightedNormal(int32_t natural, Keep keep) const {
   Point sum = Point::Zero();
   if (!state_->current(natural)) return sum;
   EnsureFreeTriangles();
-  std::vector<int32_t> ring;
+  std::vector<std::pair<int32_t, const FreeTriangle *>> ring;  // (index, triangle)
   free_triangles_bin_.ForEachNear(
       WorldPoint(natural), 0, [&](int32_t t, const FreeTriangle &tri, const Box &) {
-        if (std::find(tri.begin(), tri.begin() + 3, natural) != tri.begin() + 3) ring.push_back(t);
+        if (std::find(tri.begin(), tri.begin() + 3, natural) != tri.begin() + 3)
+          ring.push_back({t, &tri});
       });
-  std::sort(ring.begin(), ring.end());
-  ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
-  for (const int32_t t : ring) {
-    const auto &tri = free_triangle(t);
+  std::sort(ring.begin(), ring.end(),
+            [](const auto &a, const auto &b) { return a.first < b.first; });
+  ring.erase(std::unique(ring.begin(), ring.end(),
+                         [](const auto &a, const auto &b) { return a.first == b.first; }),
+             ring.end());
+  for (const auto &[t, triangle] : ring) {
+    const FreeTriangle &tri = *triangle;
     const int k = tri[0] == natural ? 0 : tri[1] == natural ? 1 : 2;
     const Point a = WorldPoint(tri[k]), b = WorldPoint(tri[(k + 1) % 3]),
                 c = WorldPoint(tri[(k + 2) % 3]);
@@ -355,7 +360,7 @@ Point Obstacles::VertexNormal(int32_t natural) const {
 // surface, and the same whichever of the faces at a vertex or edge the hit
 // took); the face's normal when that vanishes.
 void Obstacles::BlendFacingNormal(const Point &own, SurfaceHit *hit) const {
-  const auto &tri = free_triangle(hit->triangle);
+  const FreeTriangle &tri = hit->face;
   Point blend = Point::Zero();
   for (int k = 0; k < 3; ++k) {
     if (!(hit->weights[k] > 0)) continue;

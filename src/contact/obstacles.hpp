@@ -40,6 +40,7 @@ struct SurfaceHit {
   int32_t body;
   int32_t triangle = -1;  // index into the obstacle's triangle list (-1: the ground)
   Eigen::Vector3d weights = Eigen::Vector3d::Zero();  // barycentric coordinates of point in it
+  FreeTriangle face = {-1, -1, -1, -1};               // the triangle's natural vertices and body
 };
 
 // A vertex against a free body meets the closest of the body's faces that
@@ -119,15 +120,11 @@ class Obstacles {
   bool ground() const { return ground_; }
   double ground_y() const { return ground_y_; }
   const Box &body_box(size_t body) const { return body_box_[body]; }
-  // A free body's boundary triangle: natural vertices and body (t: its index,
-  // 0 .. num_free_triangles() - 1).
-  const FreeTriangle &free_triangle(int32_t t) const { return free_items_.triangle(t); }
   size_t num_fixed_tets() const { return fixed_tets_.size(); }
   size_t num_free_tets() const { return static_cast<size_t>(free_items_.num_tets()); }
-  size_t num_free_triangles() const { return static_cast<size_t>(free_items_.num_triangles()); }
-  // Bytes of the bodies' item lists: the fixed bodies' and the free bodies'
-  // triangles (O(scene) on every rank) and the free tets this rank holds
-  // (O(local + halo)); the grids and their items' boxes are not counted.
+  // Bytes of the bodies' item lists: the fixed bodies' tets and triangles
+  // (O(fixed scene) on every rank) and the free tets and triangles this rank
+  // holds (O(local + halo)); the grids and their items' boxes are not counted.
   int64_t SceneBytes() const;
   // How often this rank built the free bodies' grids.
   PetscInt free_grid_builds() const { return free_grid_builds_; }
