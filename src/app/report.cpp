@@ -196,8 +196,10 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
 }
 
 // Collective. "  whole scene ..." line, with contact: the largest rank's bytes
-// of each O(scene) structure it holds at the end of the run (replicated on
-// every rank, unlike its own and halo shares), and their sum per scene vertex.
+// of each structure contact keeps over the scene (the numbering and the free
+// state's slot map are O(scene) on every rank; the obstacles' and the guard's
+// lists hold the fixed bodies whole and of the free ones the rank's own part
+// and its halo), and their sum per scene vertex.
 PetscErrorCode PrintSceneBytes(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                const ContactSolver &contact) {
   PetscFunctionBeginUser;

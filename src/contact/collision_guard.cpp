@@ -5,7 +5,6 @@
 
 #include "common/exchange.hpp"
 #include "contact/contact_meshes.hpp"
-#include "contact/halo.hpp"
 
 namespace softbody {
 
@@ -32,43 +31,127 @@ PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const Co
                                      double min_edge, const std::vector<double> &reach) {
   PetscFunctionBeginUser;
   comm_ = comm;
+  scene_ = &scene;
+  layout_ = &layout;
   PetscMPIInt size;
   PetscCallMPI(MPI_Comm_size(comm, &size));
   parallel_ = size > 1;
   reach_ = reach;
   reuse_ = options.guard_reuse;
-  surface_.Build(scene, meshes);
-  const int32_t n = surface_.num_vertices();
-  moving_.assign(n, 0);
-  owned_mask_.assign(n, 0);
-  rest_.resize(n);
-  for (int32_t v = 0; v < n; ++v) {
-    const int32_t natural = surface_.natural[v];
-    rest_[v] = meshes.rest(natural);
-    if (layout.PetscVertexOfNatural(natural) < 0) continue;
-    moving_[v] = 1;
-    free_vertices_.push_back(v);
-    const PetscInt local = layout.LocalOfNatural(natural);
-    if (local >= 0) owned_.push_back({v, local}), owned_mask_[v] = 1;
-  }
-  PetscCall(FetchMasses(lumped_mass));
-  if (parallel_) PetscCall(neighbours_.Setup(comm));
-  start_ = end_ = rest_;
-  usable_.assign(n, 1);
-  query_ = {&surface_,        &start_, &end_, &moving_, {}, self_contact, bool(options.ground),
-            options.ground_y, nullptr};
+  query_.self_contact = self_contact;
+  query_.ground = options.ground;
+  query_.ground_y = options.ground_y;
   query_.tolerance.separation = kSeparationOfGap * options.gap * min_edge;
   query_.tolerance.band = kBand * query_.tolerance.separation;
-  finder_.Setup(query_);
-  CollisionCount count;
-  finder_.Find(query_, &count);  // start = end = rest: which pairs start too close
-  stats_.initial_close_pairs = static_cast<PetscInt>(count.close);
+  // The whole surface, for the set-up only.
+  ContactSurface whole;
+  whole.Build(scene, meshes);
+  const int32_t n = whole.num_vertices();
+  std::vector<Point> rest(n);
+  std::vector<char> moving(n, 0), owned(n, 0);
+  for (int32_t v = 0; v < n; ++v) {
+    const int32_t natural = whole.natural[v];
+    rest[v] = meshes.rest(natural);
+    if (layout.PetscVertexOfNatural(natural) < 0) continue;
+    moving[v] = 1;
+    ++whole_free_vertices_;
+    owned[v] = layout.LocalOfNatural(natural) >= 0;
+  }
+  whole_triangles_ = whole.triangles.size();
+  whole_edges_ = whole.edges.size();
+  PetscCall(CountInitialClosePairs(whole, rest, moving, owned));
+  Reassemble(whole, owned, moving, {});
+  for (int32_t v = 0; v < surface_.num_vertices(); ++v)
+    start_[v] = end_[v] = rest[surface_.global[v]];
+  usable_.assign(surface_.num_vertices(), 1);
+  PetscCall(FetchMasses(lumped_mass));
+  if (parallel_) PetscCall(neighbours_.Setup(comm));
+  query_.surface = &surface_;
+  query_.start = &start_;
+  query_.end = &end_;
+  query_.moving = &moving_;
+  finder_.Setup(query_, &half_skin_);
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Each rank counts the pairs whose lowest moving vertex it owns (the whole
+// surface is on every rank during the set-up), and the counts are summed.
+PetscErrorCode CollisionGuard::CountInitialClosePairs(const ContactSurface &whole,
+                                                      const std::vector<Point> &rest,
+                                                      const std::vector<char> &moving,
+                                                      const std::vector<char> &owned) {
+  PetscFunctionBeginUser;
+  CollisionQuery q = query_;
+  q.surface = &whole;
+  q.start = q.end = &rest;
+  q.moving = &moving;
+  q.owned = parallel_ ? &owned : nullptr;
+  SurfaceCollisionFinder finder;
+  finder.Setup(q);
+  half_skin_ = finder.half_skin();
+  CollisionCount count;
+  finder.Find(q, &count);  // start = end = rest: which pairs start too close
+  PetscInt close = static_cast<PetscInt>(count.close);
+  if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &close, 1, MPIU_INT, MPI_SUM, comm_));
+  stats_.initial_close_pairs = close;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void CollisionGuard::Reassemble(const ContactSurface &before, const std::vector<char> &own,
+                                const std::vector<char> &moving,
+                                const std::vector<SurfacePrimitive> &primitives) {
+  const std::vector<Point> start = std::move(start_), end = std::move(end_);
+  const std::vector<double> mass = std::move(mass_);
+  const std::vector<char> usable = std::move(usable_);
+  const bool carry = start.size() == static_cast<size_t>(before.num_vertices());
+  ContactSurface held;
+  AssembleHeldSurface(before, own, moving, received_, primitives, &held);
+  surface_ = std::move(held);
+  const int32_t n = surface_.num_vertices();
+  start_.assign(n, Point::Zero());
+  end_.assign(n, Point::Zero());
+  mass_.assign(n, 0.0);
+  usable_.assign(n, 0);
+  for (int32_t v = 0, w = 0; v < n && carry; ++v) {  // both in whole order
+    while (w < before.num_vertices() && before.global[w] < surface_.global[v]) ++w;
+    if (w == before.num_vertices() || before.global[w] != surface_.global[v]) continue;
+    start_[v] = start[w];
+    end_[v] = end[w];
+    mass_[v] = mass[w];
+    usable_[v] = usable[w];
+  }
+  moving_.assign(n, 0);
+  owned_mask_.assign(n, 0);
+  owned_.clear();
+  for (int32_t v = 0; v < n; ++v) {
+    const int32_t natural = surface_.natural[v];
+    if (layout_->PetscVertexOfNatural(natural) < 0) continue;
+    moving_[v] = 1;
+    const PetscInt local = layout_->LocalOfNatural(natural);
+    if (local >= 0) owned_.push_back({v, local}), owned_mask_[v] = 1;
+  }
+  owned_.shrink_to_fit();
+  moved_.assign(n, 0);
+  frozen_.assign(n, 0);
+}
+
+int32_t CollisionGuard::HeldIndex(int32_t whole) const {
+  const auto at = std::lower_bound(surface_.global.begin(), surface_.global.end(), whole);
+  return at != surface_.global.end() && *at == whole
+             ? static_cast<int32_t>(at - surface_.global.begin())
+             : -1;
+}
+
+int64_t CollisionGuard::SceneBytes() const {
+  return HeldBytes(surface_.natural) + HeldBytes(surface_.body) + HeldBytes(surface_.global) +
+         HeldBytes(surface_.triangles) + HeldBytes(surface_.triangle_id) +
+         HeldBytes(surface_.edges) + HeldBytes(received_) + HeldBytes(owned_) +
+         HeldBytes(owned_mask_) + HeldBytes(usable_) + HeldBytes(moving_) + HeldBytes(mass_) +
+         HeldBytes(start_) + HeldBytes(end_) + HeldBytes(moved_) + HeldBytes(frozen_);
 }
 
 PetscErrorCode CollisionGuard::FetchMasses(Vec lumped_mass) {
   PetscFunctionBeginUser;
-  mass_.assign(surface_.num_vertices(), 0.0);
   const PetscScalar *mass;
   PetscCall(VecGetArrayRead(lumped_mass, &mass));
   for (const auto &[v, local] : owned_) mass_[v] = mass[3 * local];
@@ -92,10 +175,11 @@ PetscErrorCode CollisionGuard::WriteOwnedPositions(Vec x0, Vec x) {
 
 // Usable: the static vertices, this rank's and the halo's. A vertex goes to a
 // rank when its motion's box meets one of that rank's boxes grown by the reach
-// of the vertex's body.
+// of the vertex's body; the triangles and edges keyed at it go with it.
 PetscErrorCode CollisionGuard::ExchangeHalo() {
   PetscFunctionBeginUser;
-  for (const int32_t v : free_vertices_) usable_[v] = 0;
+  for (int32_t v = 0; v < surface_.num_vertices(); ++v)
+    if (moving_[v]) usable_[v] = 0;
   std::vector<Box> boxes(surface_.num_bodies());
   for (const auto &[v, local] : owned_) {
     usable_[v] = 1;
@@ -119,20 +203,75 @@ PetscErrorCode CollisionGuard::ExchangeHalo() {
   std::vector<HaloVertex> records, received;
   for (const int32_t i : plan.items) {
     const int32_t v = owned_[i].first;
-    HaloVertex h{v, {}, {}, mass_[v]};
-    for (int c = 0; c < 3; ++c) h.start[c] = start_[v][c], h.end[c] = end_[v][c];
+    HaloVertex h{surface_.global[v], surface_.natural[v], surface_.body[v], {}, {}, mass_[v]};
+    for (int d = 0; d < 3; ++d) h.start[d] = start_[v][d], h.end[d] = end_[v][d];
     records.push_back(h);
   }
+  std::vector<SurfacePrimitive> primitives, received_primitives;
+  std::vector<PetscMPIInt> primitive_ranks, primitive_counts;
+  KeyedPrimitives(plan, &primitives, &primitive_ranks, &primitive_counts);
   PetscInt64 bytes;
   PetscCall(neighbours_.Exchange(plan.ranks, plan.counts, records, &received, &bytes));
   bytes_sent_ += bytes;
+  PetscCall(neighbours_.Exchange(primitive_ranks, primitive_counts, primitives,
+                                 &received_primitives, &bytes));
+  bytes_sent_ += bytes;
+  std::sort(received.begin(), received.end(),
+            [](const HaloVertex &a, const HaloVertex &b) { return a.whole < b.whole; });
+  const bool same =
+      received.size() == received_.size() &&
+      std::equal(received.begin(), received.end(), received_.begin(),
+                 [](const HaloVertex &h, const SurfaceVertex &v) { return h.whole == v.whole; });
+  if (!same) {
+    received_.clear();
+    for (const HaloVertex &h : received) received_.push_back({h.whole, h.natural, h.body});
+    const ContactSurface before = std::move(surface_);
+    const std::vector<char> own = owned_mask_, moving = moving_;
+    Reassemble(before, own, moving, received_primitives);
+    finder_.Renumber(query_);
+  }
   for (const HaloVertex &h : received) {
-    start_[h.vertex] = Point(h.start);
-    end_[h.vertex] = Point(h.end);
-    mass_[h.vertex] = h.mass;
-    usable_[h.vertex] = 1;
+    const int32_t v = HeldIndex(h.whole);
+    start_[v] = Point(h.start);
+    end_[v] = Point(h.end);
+    mass_[v] = h.mass;
+    usable_[v] = 1;
   }
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void CollisionGuard::KeyedPrimitives(const HaloPlan &plan,
+                                     std::vector<SurfacePrimitive> *primitives,
+                                     std::vector<PetscMPIInt> *ranks,
+                                     std::vector<PetscMPIInt> *counts) const {
+  std::vector<std::pair<int32_t, size_t>> sends;  // (held vertex, index in plan.ranks)
+  for (size_t r = 0, k = 0; r < plan.ranks.size(); ++r)
+    for (PetscMPIInt c = 0; c < plan.counts[r]; ++c, ++k)
+      sends.push_back({owned_[plan.items[k]].first, r});
+  std::sort(sends.begin(), sends.end());
+  std::vector<std::vector<SurfacePrimitive>> by_rank(plan.ranks.size());
+  // Held indices are in whole order: the lowest held vertex is the key.
+  auto route = [&](const auto &item, int32_t id) {
+    const int32_t key = *std::min_element(item.begin(), item.end());
+    if (!owned_mask_[key]) return;
+    auto at = std::lower_bound(sends.begin(), sends.end(), std::make_pair(key, size_t{0}));
+    for (; at != sends.end() && at->first == key; ++at) {
+      SurfacePrimitive p{id, {kNoSurfaceVertex, kNoSurfaceVertex, kNoSurfaceVertex}};
+      for (size_t k = 0; k < item.size(); ++k) p.vertices[k] = surface_.global[item[k]];
+      by_rank[at->second].push_back(p);
+    }
+  };
+  if (!sends.empty()) {
+    for (size_t t = 0; t < surface_.triangles.size(); ++t)
+      route(surface_.triangles[t], surface_.triangle_id[t]);
+    for (const auto &edge : surface_.edges) route(edge, kNoSurfaceVertex);
+  }
+  for (size_t r = 0; r < by_rank.size(); ++r) {
+    if (by_rank[r].empty()) continue;
+    ranks->push_back(plan.ranks[r]);
+    counts->push_back(static_cast<PetscMPIInt>(by_rank[r].size()));
+    primitives->insert(primitives->end(), by_rank[r].begin(), by_rank[r].end());
+  }
 }
 
 PetscErrorCode CollisionGuard::Probe(Vec x0, Vec x, bool *moved) {
@@ -149,7 +288,7 @@ PetscErrorCode CollisionGuard::Probe(Vec x0, Vec x, bool *moved) {
   } else {
     if (parallel_) PetscCall(ExchangeHalo());
     PetscCall(Resolve(&moved_));
-    *moved = std::find(moved_.begin(), moved_.end(), 1) != moved_.end();
+    *moved = moved_any_;
     last_clean_ = !*moved;
     if (last_clean_) RememberCleanProbe();
   }
@@ -197,60 +336,89 @@ PetscErrorCode CollisionGuard::Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *c
 }
 
 void CollisionGuard::MarkMoved(std::vector<char> *marked) const {
-  for (size_t s = 0; s < moved_.size(); ++s)
-    if (moved_[s]) (*marked)[surface_.natural[s]] = 1;
+  if (stopped_all_)
+    for (const Body &body : scene_->bodies)
+      if (!body.fixed)
+        std::fill(marked->begin() + body.first_vertex,
+                  marked->begin() + body.first_vertex + body.num_vertices(), 1);
+  for (const ZoneVertex &z : zone_vertices_)
+    if (z.moved) (*marked)[z.natural] = 1;
 }
 
 // Which pairs freeze is decided on the zones as the last round left them: pairs
 // of one round share vertices, and merging one must not make the next look like
 // a zone colliding with itself.
-void CollisionGuard::MergeZones(const std::vector<SurfaceCollision> &collisions) {
-  std::vector<char> immobile(collisions.size(), 0);
-  for (size_t i = 0; i < collisions.size(); ++i) {
-    const SurfaceCollision &c = collisions[i];
+void CollisionGuard::MergeZones(const std::vector<SurfaceCollision> &pairs) {
+  std::vector<char> immobile(pairs.size(), 0);
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const SurfaceCollision &c = pairs[i];
     immobile[i] = c.count == 1 || zones_.InOneMobileZone(c.vertices.data(), c.count);
-    for (int k = 0; k < c.count; ++k) immobile[i] = immobile[i] || !moving_[c.vertices[k]];
+    for (int k = 0; k < c.count; ++k)
+      immobile[i] = immobile[i] || !zone_vertices_[c.vertices[k]].moving;
   }
-  for (size_t i = 0; i < collisions.size(); ++i)
-    zones_.Merge(collisions[i].vertices.data(), collisions[i].count, immobile[i]);
+  for (size_t i = 0; i < pairs.size(); ++i)
+    zones_.Merge(pairs[i].vertices.data(), pairs[i].count, immobile[i]);
 }
 
-// In a fixed order (ground pairs first, then by vertices), so that zones merge
-// alike on every rank and at every rank count.
-PetscErrorCode CollisionGuard::ShareCollisions(std::vector<SurfaceCollision> *collisions) {
+int32_t CollisionGuard::ZoneVertexOf(const SharedCollision &c, int k) {
+  const auto [at, added] =
+      zone_of_.emplace(c.vertices[k], static_cast<int32_t>(zone_vertices_.size()));
+  if (added) {
+    zones_.Add();
+    zone_vertices_.push_back({c.vertices[k], c.natural[k], c.moving[k] != 0, false});
+    zone_start_.push_back(Point(c.start[k]));
+    zone_end_.push_back(Point(c.end[k]));
+    zone_mass_.push_back(c.mass[k]);
+  }
+  return at->second;
+}
+
+// In a fixed order (ground pairs first, then by whole vertices), so that zones
+// merge alike on every rank and at every rank count.
+PetscErrorCode CollisionGuard::ShareCollisions(const std::vector<SurfaceCollision> &found,
+                                               std::vector<SurfaceCollision> *pairs) {
   PetscFunctionBeginUser;
-  if (parallel_) {
-    std::vector<SharedCollision> mine, all;
-    for (const SurfaceCollision &c : *collisions) {
-      SharedCollision shared{{}, c.count, {}, {}, {}};
-      for (int k = 0; k < 4; ++k) {
-        shared.vertices[k] = c.vertices[k];
-        shared.mass[k] = mass_[c.vertices[k]];
-        for (int d = 0; d < 3; ++d) {
-          shared.start[k][d] = start_[c.vertices[k]][d];
-          shared.end[k][d] = end_[c.vertices[k]][d];
-        }
+  std::vector<SharedCollision> mine, all;
+  for (const SurfaceCollision &c : found) {
+    SharedCollision shared{{}, {}, {}, c.count, {}, {}, {}};
+    for (int k = 0; k < 4; ++k) {
+      const int32_t v = c.vertices[k];
+      shared.vertices[k] = surface_.global[v];
+      shared.natural[k] = surface_.natural[v];
+      shared.moving[k] = moving_[v];
+      shared.mass[k] = mass_[v];
+      for (int d = 0; d < 3; ++d) {
+        shared.start[k][d] = start_[v][d];
+        shared.end[k][d] = end_[v][d];
       }
-      mine.push_back(shared);
     }
+    mine.push_back(shared);
+  }
+  if (parallel_) {
     PetscCall(AllGatherRecords(comm_, mine, &all));
     bytes_sent_ += static_cast<PetscInt64>(mine.size() * sizeof(SharedCollision));
-    collisions->clear();
-    for (const SharedCollision &c : all) {
-      collisions->push_back(
-          {{c.vertices[0], c.vertices[1], c.vertices[2], c.vertices[3]}, c.count});
-      for (int k = 0; k < 4; ++k) {
-        start_[c.vertices[k]] = Point(c.start[k]);
-        end_[c.vertices[k]] = Point(c.end[k]);
-        mass_[c.vertices[k]] = c.mass[k];
-        usable_[c.vertices[k]] = 1;  // zones move it: later rounds test it wherever it goes
-      }
-    }
+  } else {
+    all = std::move(mine);
   }
-  std::sort(collisions->begin(), collisions->end(),
-            [](const SurfaceCollision &a, const SurfaceCollision &b) {
-              return a.count != b.count ? a.count < b.count : a.vertices < b.vertices;
-            });
+  std::sort(all.begin(), all.end(), [](const SharedCollision &a, const SharedCollision &b) {
+    return a.count != b.count ? a.count < b.count
+                              : std::lexicographical_compare(a.vertices, a.vertices + 4, b.vertices,
+                                                             b.vertices + 4);
+  });
+  pairs->clear();
+  for (const SharedCollision &c : all) {
+    SurfaceCollision pair{{}, c.count};
+    for (int k = 0; k < 4; ++k) {
+      pair.vertices[k] = ZoneVertexOf(c, k);
+      const int32_t v = HeldIndex(c.vertices[k]);
+      if (v < 0) continue;
+      start_[v] = Point(c.start[k]);
+      end_[v] = Point(c.end[k]);
+      mass_[v] = c.mass[k];
+      usable_[v] = 1;  // zones move it: later rounds test it wherever it goes
+    }
+    pairs->push_back(pair);
+  }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -259,7 +427,12 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
   const int32_t n = surface_.num_vertices();
   std::vector<char> changed;
   moved->assign(n, 0);
-  zones_.Reset(n);
+  zones_.Reset(0);
+  zone_vertices_.clear();
+  zone_of_.clear();
+  zone_start_.clear();
+  zone_end_.clear();
+  zone_mass_.clear();
   query_.changed = nullptr;
   query_.usable = parallel_ ? &usable_ : nullptr;
   query_.owned = parallel_ ? &owned_mask_ : nullptr;
@@ -268,22 +441,30 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
   bool stopped_all = false;  // every free vertex stays where it started (no zone settled)
   for (;; ++rounds) {
     CollisionCount count;
-    std::vector<SurfaceCollision> collisions = finder_.Find(query_, &count);
+    const std::vector<SurfaceCollision> found = finder_.Find(query_, &count);
     counts[0] += count.candidates;
     if (rounds == 0) counts[1] += count.close;
     counts[2] += count.rebuilds;
     counts[3] += count.static_rebuilds;
-    PetscCall(ShareCollisions(&collisions));
-    if (collisions.empty()) break;
-    stats_.collisions += static_cast<PetscInt>(collisions.size());
+    std::vector<SurfaceCollision> pairs;
+    PetscCall(ShareCollisions(found, &pairs));
+    if (pairs.empty()) break;
+    stats_.collisions += static_cast<PetscInt>(pairs.size());
     if (rounds == kMaxRounds) {
-      for (const int32_t v : free_vertices_) end_[v] = start_[v], (*moved)[v] = 1;
+      for (int32_t v = 0; v < n; ++v)
+        if (moving_[v]) end_[v] = start_[v], (*moved)[v] = 1;
       stopped_all = true;
       break;
     }
-    MergeZones(collisions);
+    MergeZones(pairs);
     changed.assign(n, 0);
-    for (const int32_t v : zones_.Move(start_, mass_, &end_)) changed[v] = (*moved)[v] = 1;
+    for (const int32_t z : zones_.Move(zone_start_, zone_mass_, &zone_end_)) {
+      zone_vertices_[z].moved = true;
+      const int32_t v = HeldIndex(zone_vertices_[z].whole);
+      if (v < 0) continue;
+      end_[v] = zone_end_[z];
+      changed[v] = (*moved)[v] = 1;
+    }
     query_.changed = &changed;
   }
   query_.changed = nullptr;
@@ -295,14 +476,31 @@ PetscErrorCode CollisionGuard::Resolve(std::vector<char> *moved) {
   if (rounds > 0) ++stats_.passes_guarded;
   stats_.rounds += rounds;
   stats_.max_rounds = std::max(stats_.max_rounds, rounds);
+  CountZoneVertices(stopped_all);
   frozen_.assign(n, 0);
   for (int32_t v = 0; v < n; ++v)
-    if ((*moved)[v] && moving_[v]) {
-      ++stats_.zone_vertices;
-      frozen_[v] = stopped_all || zones_.immobile(v);
-      if (frozen_[v]) ++stats_.frozen_vertices;
-    }
+    if ((*moved)[v] && moving_[v])
+      frozen_[v] = stopped_all || zones_.immobile(zone_of_.at(surface_.global[v]));
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// From the zones' vertices, which every rank has alike; when the safety net
+// stopped every free vertex, all of them moved and froze.
+void CollisionGuard::CountZoneVertices(bool stopped_all) {
+  stopped_all_ = stopped_all;
+  moved_any_ = stopped_all;
+  if (stopped_all) {
+    stats_.zone_vertices += whole_free_vertices_;
+    stats_.frozen_vertices += whole_free_vertices_;
+    return;
+  }
+  for (size_t z = 0; z < zone_vertices_.size(); ++z) {
+    if (!zone_vertices_[z].moved) continue;
+    moved_any_ = true;
+    if (!zone_vertices_[z].moving) continue;
+    ++stats_.zone_vertices;
+    if (zones_.immobile(static_cast<int32_t>(z))) ++stats_.frozen_vertices;
+  }
 }
 
 // This rank's moved vertices: x = the zone's end position, v = (x - x0) / dt.
@@ -325,7 +523,7 @@ std::string CollisionGuard::Description() const {
   char text[160];
   std::snprintf(text, sizeof(text),
                 "collision guard (%zu surface triangles, %zu edges, separation %.3g m%s)",
-                surface_.triangles.size(), surface_.edges.size(), query_.tolerance.separation,
+                whole_triangles_, whole_edges_, query_.tolerance.separation,
                 query_.self_contact ? ", self-contact" : "");
   return text;
 }

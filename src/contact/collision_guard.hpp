@@ -18,19 +18,23 @@
 // mean boundary edge: contact constraints end contacts a full gap apart, so
 // resting contacts sit outside the guard's reach.
 //
-// Parallel model: each rank holds its own surface vertices' start and end
-// positions and a halo of the other ranks' within reach of its boxes
-// (halo.hpp: -contact_halo_reach longest tet edges), and tests the pairs whose
-// lowest moving surface vertex it owns. Each round's colliding pairs, with
-// their vertices' positions, are gathered on every rank (few: the pairs, not
-// the surface) and sorted, so every rank merges and moves the same zones in
-// the same order whatever the rank count; each writes its own vertices: a
-// vertex a zone moved gets x = its zone position and v = (x - x0) / dt.
+// Parallel model: each rank holds a part of the surfaces (held_surface.hpp:
+// the fixed bodies', its own surface vertices with the triangles and edges at
+// them, and a halo of the other ranks' vertices within reach of its boxes,
+// halo.hpp: -contact_halo_reach longest tet edges, with the primitives keyed
+// at them), and tests the pairs whose lowest moving surface vertex it owns.
+// Each round's colliding pairs, with their vertices' positions, are gathered
+// on every rank (few: the pairs, not the surface) and sorted; the zones are
+// built over the vertices of the pairs shared so far, so every rank merges
+// and moves the same zones in the same order whatever the rank count and
+// whatever it holds; each writes its own vertices: a vertex a zone moved gets
+// x = its zone position and v = (x - x0) / dt.
 #pragma once
 
 #include <petscvec.h>
 
 #include <string>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -38,6 +42,8 @@
 #include "common/neighbour_exchange.hpp"
 #include "contact/contact_options.hpp"
 #include "contact/contact_surface.hpp"
+#include "contact/halo.hpp"
+#include "contact/held_surface.hpp"
 #include "contact/impact_zones.hpp"
 #include "contact/surface_collisions.hpp"
 #include "fem/partition.hpp"
@@ -96,50 +102,82 @@ class CollisionGuard {
   // position, v = (x - x0) / dt; *changed as Probe's *moved.
   PetscErrorCode Apply(Vec x0, Vec x, Vec v, PetscReal dt, bool *changed);
 
-  // Not collective. Marks (natural vertex) the vertices the last Apply moved.
+  // Not collective. Marks (natural vertex) the vertices the last Apply moved,
+  // the same on every rank (the zones' vertices; when the safety net stopped
+  // every free vertex, every vertex of the free bodies).
   void MarkMoved(std::vector<char> *marked) const;
 
   const GuardStatistics &statistics() const { return stats_; }
   // Not collective. Bytes this rank sent (halo, boxes, its colliding pairs), all probes.
   PetscInt64 bytes_sent() const { return bytes_sent_; }
-  // Bytes of the per-surface-vertex arrays (every body's surface, on every rank).
-  int64_t SceneBytes() const {
-    return HeldBytes(surface_.natural) + HeldBytes(surface_.body) + HeldBytes(surface_.triangles) +
-           HeldBytes(surface_.edges) + HeldBytes(owned_mask_) + HeldBytes(usable_) +
-           HeldBytes(moving_) + HeldBytes(mass_) + HeldBytes(rest_) + HeldBytes(start_) +
-           HeldBytes(end_) + HeldBytes(moved_) + HeldBytes(frozen_);
-  }
+  // Bytes of what this rank holds of the surfaces and its arrays per held
+  // surface vertex (O(fixed surface + own part + halo)).
+  int64_t SceneBytes() const;
   double separation() const { return query_.tolerance.separation; }
   std::string Description() const;
 
  private:
-  // A surface vertex in the halo.
+  // A surface vertex in the halo (whole surface index).
   struct HaloVertex {
-    int32_t vertex;
+    int32_t whole, natural, body;
     double start[3], end[3], mass;
   };
-  // A colliding pair as every rank receives it: its vertices and their positions.
+  // A colliding pair as every rank receives it: its whole surface vertices,
+  // their natural vertices and whether each moves (1) or not (0), and their
+  // positions and masses.
   struct SharedCollision {
-    int32_t vertices[4];
+    int32_t vertices[4], natural[4], moving[4];
     int32_t count;
     double start[4][3], end[4][3], mass[4];
   };
+  // A vertex of the zones (every rank has the same, in the same order).
+  struct ZoneVertex {
+    int32_t whole, natural;
+    bool moving, moved;
+  };
+  // The initial close pairs (stats_) and half_skin_, on the whole surface at
+  // its rest positions (set-up only).
+  PetscErrorCode CountInitialClosePairs(const ContactSurface &whole, const std::vector<Point> &rest,
+                                        const std::vector<char> &moving,
+                                        const std::vector<char> &owned);
   // This rank's surface vertices' masses (the others' come with the halo and the pairs).
   PetscErrorCode FetchMasses(Vec lumped_mass);
   // This rank's surface vertices' start and end positions.
   PetscErrorCode WriteOwnedPositions(Vec x0, Vec x);
-  // Collective. The other ranks' surface vertices near this rank's.
+  // Collective. The other ranks' surface vertices near this rank's, with the
+  // triangles and edges keyed at them; reassembles the held surface when they
+  // changed.
   PetscErrorCode ExchangeHalo();
-  // Collective. Every rank's colliding pairs of a round, sorted; their
-  // vertices' positions and masses written into start_, end_ and mass_.
-  PetscErrorCode ShareCollisions(std::vector<SurfaceCollision> *collisions);
-  // Collective. Detection and zones until no pair collides; *moved: per
+  // The held surface: of `before` (the whole surface at the set-up, else the
+  // held one), the kept part, and received_ with the primitives keyed at
+  // them; positions, masses and usability carried over by whole index from
+  // the held surface it replaces (zero and unusable for new vertices); the
+  // per-vertex flags and owned_ redone.
+  void Reassemble(const ContactSurface &before, const std::vector<char> &own,
+                  const std::vector<char> &moving, const std::vector<SurfacePrimitive> &primitives);
+  // This rank's primitives keyed at the halo's vertices it sends (plan: the
+  // halo's ranks and owned_ items), by rank: *ranks and *counts as
+  // NeighbourExchange takes them.
+  void KeyedPrimitives(const HaloPlan &plan, std::vector<SurfacePrimitive> *primitives,
+                       std::vector<PetscMPIInt> *ranks, std::vector<PetscMPIInt> *counts) const;
+  // The held index of whole surface vertex `whole` (-1: not held).
+  int32_t HeldIndex(int32_t whole) const;
+  // Collective. Every rank's colliding pairs of a round (`found`, held
+  // indices), sorted by whole vertices, as *pairs of zone vertices; the held
+  // ones' positions and masses written into start_, end_ and mass_.
+  PetscErrorCode ShareCollisions(const std::vector<SurfaceCollision> &found,
+                                 std::vector<SurfaceCollision> *pairs);
+  // The zone vertex of a shared pair's k-th vertex, added when new.
+  int32_t ZoneVertexOf(const SharedCollision &c, int k);
+  // Collective. Detection and zones until no pair collides; *moved: per held
   // surface vertex, moved by the zones.
   PetscErrorCode Resolve(std::vector<char> *moved);
-  // One round's colliding pairs into the zones (immobile: the ground, a vertex
-  // that does not move, or a mobile zone colliding with itself).
-  void MergeZones(const std::vector<SurfaceCollision> &collisions);
-  // This rank's vertices the last Probe moved: (local vertex, surface vertex).
+  // One round's colliding pairs (zone vertices) into the zones (immobile: the
+  // ground, a vertex that does not move, or a mobile zone colliding with itself).
+  void MergeZones(const std::vector<SurfaceCollision> &pairs);
+  // The zones' vertices and the statistics of a Resolve.
+  void CountZoneVertices(bool stopped_all);
+  // This rank's vertices the last Probe moved: (local vertex, held surface vertex).
   std::vector<std::pair<PetscInt, int32_t>> OwnedMoved() const;
   PetscErrorCode WriteBack(Vec x, Vec v, PetscReal dt);
   // Not collective. This rank's surface vertices start and end where they did
@@ -148,23 +186,35 @@ class CollisionGuard {
   void RememberCleanProbe();
 
   MPI_Comm comm_ = MPI_COMM_NULL;
+  const Scene *scene_ = nullptr;
+  const DofLayout *layout_ = nullptr;
   bool parallel_ = false;  // more than one rank
   // The last probe moved nothing; its start and end positions of owned_.
   bool last_clean_ = false;
   bool reuse_ = true;  // ContactOptions::guard_reuse
   std::vector<Point> clean_start_, clean_end_;
-  ContactSurface surface_;
-  std::vector<std::pair<int32_t, PetscInt>> owned_;  // (surface vertex, local vertex), this rank's
-  std::vector<char> owned_mask_, usable_;            // per surface vertex
+  // The whole surface's counts and its moving vertices' (Description, statistics).
+  int32_t whole_free_vertices_ = 0;
+  size_t whole_triangles_ = 0, whole_edges_ = 0;
+  ContactSurface surface_;               // what this rank holds (held_surface.hpp)
+  std::vector<SurfaceVertex> received_;  // the halo's vertices in surface_, whole increasing
+  std::vector<std::pair<int32_t, PetscInt>> owned_;  // (held vertex, local vertex), held order
+  std::vector<char> owned_mask_, usable_;            // per held surface vertex
   std::vector<double> reach_;                        // per body (m)
+  std::vector<double> half_skin_;  // per body (m): the finder's, from the whole surface
   NeighbourExchange neighbours_;
   PetscInt64 bytes_sent_ = 0;
-  std::vector<int32_t> free_vertices_;  // surface vertices that move, surface order
-  std::vector<char> moving_;            // per surface vertex
-  std::vector<double> mass_;            // per surface vertex (kg; 0 when it does not move)
-  std::vector<Point> rest_, start_, end_;
-  std::vector<char> moved_;   // per surface vertex: moved by the last Apply
-  std::vector<char> frozen_;  // per surface vertex: moved, in an immobile zone
+  std::vector<char> moving_;        // per held surface vertex
+  std::vector<double> mass_;        // per held surface vertex (kg; 0 when it does not move)
+  std::vector<Point> start_, end_;  // per held surface vertex
+  std::vector<char> moved_;         // per held surface vertex: moved by the last Apply
+  std::vector<char> frozen_;        // per held surface vertex: moved, in an immobile zone
+  // The last Resolve: a vertex moved (the same on every rank); every free vertex stopped.
+  bool moved_any_ = false, stopped_all_ = false;
+  std::vector<ZoneVertex> zone_vertices_;
+  std::unordered_map<int32_t, int32_t> zone_of_;  // whole surface vertex -> zone vertex
+  std::vector<Point> zone_start_, zone_end_;      // per zone vertex
+  std::vector<double> zone_mass_;
   CollisionQuery query_;
   SurfaceCollisionFinder finder_;
   ImpactZones zones_;

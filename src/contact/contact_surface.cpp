@@ -15,6 +15,7 @@ void ContactSurface::Build(const Scene &scene, const ContactMeshes &meshes) {
     auto surface_vertex = [&](int32_t local) {
       const auto [at, added] = surface_of.emplace(local, num_vertices());
       if (added) {
+        global.push_back(num_vertices());
         natural.push_back(body.first_vertex + local);
         this->body.push_back(static_cast<int32_t>(b));
       }
@@ -24,6 +25,7 @@ void ContactSurface::Build(const Scene &scene, const ContactMeshes &meshes) {
     for (Eigen::Index f = 0; f < faces.rows(); ++f) {
       const std::array<int32_t, 3> t = {surface_vertex(faces(f, 0)), surface_vertex(faces(f, 1)),
                                         surface_vertex(faces(f, 2))};
+      triangle_id.push_back(static_cast<int32_t>(triangles.size()));
       triangles.push_back(t);
       for (int k = 0; k < 3; ++k)
         body_edges.push_back({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});

@@ -15,10 +15,16 @@ namespace softbody {
 class ContactMeshes;
 
 struct ContactSurface {
-  std::vector<int32_t> natural;                   // surface vertex -> natural vertex
-  std::vector<int32_t> body;                      // surface vertex -> body
+  std::vector<int32_t> natural;  // surface vertex -> natural vertex
+  std::vector<int32_t> body;     // surface vertex -> body
+  // surface vertex -> its index in the whole surface (increasing; the identity
+  // on the whole surface, held_surface.hpp's part of it otherwise)
+  std::vector<int32_t> global;
   std::vector<std::array<int32_t, 3>> triangles;  // surface vertices, outward orientation
   std::vector<std::array<int32_t, 2>> edges;      // surface vertices, each edge once
+  // Each triangle's index in the whole surface's list (as global; the edges
+  // are sorted by their vertices, each body's after the previous body's).
+  std::vector<int32_t> triangle_id;
   // Per body b, its vertices, triangles and edges are the ranges
   // [x_start[b], x_start[b + 1]) of the lists above (size bodies + 1).
   std::vector<int32_t> vertex_start = {0}, triangle_start = {0}, edge_start = {0};

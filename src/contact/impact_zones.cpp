@@ -35,6 +35,14 @@ void ImpactZones::Reset(int32_t num_vertices) {
   touched_.clear();
 }
 
+int32_t ImpactZones::Add() {
+  const auto vertex = static_cast<int32_t>(parent_.size());
+  parent_.push_back(vertex);
+  immobile_.push_back(0);
+  members_.emplace_back();
+  return vertex;
+}
+
 int32_t ImpactZones::Find(int32_t vertex) {
   while (parent_[vertex] != vertex) vertex = parent_[vertex] = parent_[parent_[vertex]];
   return vertex;

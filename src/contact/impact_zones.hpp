@@ -30,6 +30,8 @@ class ImpactZones {
  public:
   // Every vertex its own zone, mobile.
   void Reset(int32_t num_vertices);
+  // One more vertex, its own zone, mobile; returns its index.
+  int32_t Add();
   // Whether the vertices share one mobile zone: a pair found colliding while
   // it moves rigidly (only round-off can do that); the caller freezes it.
   bool InOneMobileZone(const int32_t *vertices, int count);

@@ -1,6 +1,7 @@
 #include "contact/surface_collisions.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 
 namespace softbody {
@@ -240,8 +241,12 @@ std::vector<std::array<int32_t, 1>> Singles(int32_t count) {
 
 }  // namespace
 
-void SurfaceCollisionFinder::Setup(const CollisionQuery &q) {
+void SurfaceCollisionFinder::ListPrimitives(const CollisionQuery &q) {
   const ContactSurface &s = *q.surface;
+  for (auto *list : {&moving_vertices_, &moving_triangles_, &moving_edges_, &static_.vertices,
+                     &static_.triangles, &static_.edges})
+    list->clear();
+  moving_bodies_.clear();
   for (int32_t v = 0; v < s.num_vertices(); ++v)
     ((*q.moving)[v] ? moving_vertices_ : static_.vertices).push_back(v);
   for (int32_t t = 0; t < static_cast<int32_t>(s.triangles.size()); ++t)
@@ -251,6 +256,22 @@ void SurfaceCollisionFinder::Setup(const CollisionQuery &q) {
   for (size_t b = 0; b < s.num_bodies(); ++b)
     if (s.vertex_start[b] < s.vertex_start[b + 1] && (*q.moving)[s.vertex_start[b]])
       moving_bodies_.push_back(b);
+}
+
+void SurfaceCollisionFinder::Renumber(const CollisionQuery &q) {
+  const size_t counts[] = {static_.vertices.size(), static_.triangles.size(), static_.edges.size()};
+  ListPrimitives(q);
+  assert(counts[0] == static_.vertices.size() && counts[1] == static_.triangles.size() &&
+         counts[2] == static_.edges.size());
+  (void)counts;
+  self_.assign(q.surface->num_bodies(), SelfCandidates());
+  static_candidates_ = StaticCandidates();
+  vertex_box_.assign(q.surface->num_vertices(), Box());
+}
+
+void SurfaceCollisionFinder::Setup(const CollisionQuery &q, const std::vector<double> *half_skin) {
+  const ContactSurface &s = *q.surface;
+  ListPrimitives(q);
   const Boxes boxes = BoxesOf(q, static_.vertices, static_.triangles, static_.edges, Point::Zero());
   static_.vertex_boxes = boxes.vertices;
   static_.triangle_boxes = boxes.triangles;
@@ -259,7 +280,8 @@ void SurfaceCollisionFinder::Setup(const CollisionQuery &q) {
   static_.triangle_grid.Build(static_.triangle_boxes);
   static_.edge_grid.Build(static_.edge_boxes);
   half_skin_.assign(s.num_bodies(), 0.0);
-  for (size_t b = 0; b < s.num_bodies(); ++b) {
+  if (half_skin) half_skin_ = *half_skin;
+  for (size_t b = 0; b < s.num_bodies() && !half_skin; ++b) {
     double length = 0;
     for (int32_t e = s.edge_start[b]; e < s.edge_start[b + 1]; ++e)
       length += ((*q.start)[s.edges[e][0]] - (*q.start)[s.edges[e][1]]).norm();

@@ -99,8 +99,16 @@ class VisitMarks {
 // (a body resting on a fixed one keeps it; a falling one rebuilds it).
 class SurfaceCollisionFinder {
  public:
-  // query.start must hold the static vertices' positions.
-  void Setup(const CollisionQuery &query);
+  // query.start must hold the static vertices' positions. half_skin: per
+  // body, half its skin (m; null: from the mean length of query's edges at
+  // query.start).
+  void Setup(const CollisionQuery &query, const std::vector<double> *half_skin = nullptr);
+  // The query's surface was replaced by another part of the same whole
+  // surface (held_surface.hpp) holding the same static primitives in the same
+  // order: the lists are renumbered, the static grids kept, the candidates
+  // dropped.
+  void Renumber(const CollisionQuery &query);
+  const std::vector<double> &half_skin() const { return half_skin_; }
   // The colliding pairs (in an order that depends on the grids: callers that
   // need one sort them).
   std::vector<SurfaceCollision> Find(const CollisionQuery &query, CollisionCount *count) const;
@@ -158,6 +166,10 @@ class SurfaceCollisionFinder {
   void BuildSelfCandidates(const CollisionQuery &query, size_t body,
                            const std::vector<int32_t> &vertices, const Point &shift,
                            const Point &mean) const;
+
+  // The moving and the static primitives, and the bodies with a moving one,
+  // from the query's surface.
+  void ListPrimitives(const CollisionQuery &query);
 
   std::vector<int32_t> moving_vertices_, moving_triangles_, moving_edges_;
   std::vector<size_t> moving_bodies_;

@@ -33,7 +33,15 @@ triangles per box counted here as the faces that one tet only names):
     the numbering), within 1 %; the numbering: 4 B per scene vertex (its PETSc
     vertex; 32-bit PetscInt, Debian's build);
 (d) overlap separation holds nothing at the end: no pair starts overlapping, and
-    its surfaces are released after the first check.
+    its surfaces are released after the first check;
+(e) the collision guard's part of the surfaces (src/contact/held_surface.hpp): on
+    1 rank the whole surface, 81 B per surface vertex (natural vertex, body and
+    whole index 12 B; start and end positions 48 B, mass 8 B, owned and local
+    vertex 8 B, five flags 5 B), 16 B per boundary triangle (its vertices and
+    index) and 8 B per boundary edge, within 1 %; on 4 ranks the largest rank
+    holds less than 3/4 of that (its own vertices' triangles and edges, and the
+    halo's). A surface replicated on every rank would hold the same on any rank
+    count.
 """
 import os
 import re
@@ -50,7 +58,7 @@ from softbody_tools import read_medit  # noqa: E402
 
 BOX = ((4.0, 0.5, 0.5), (32, 4, 4))
 RANKS = (1, 4)
-HELD_FRACTION = 0.75  # the largest rank's tets on 4 ranks over the scene's, at most
+HELD_FRACTION = 0.75  # the largest rank's lists on 4 ranks over the scene's, at most
 TOLERANCE = 0.01  # relative: the summary prints 3 significant digits
 IN_SLABS = "meshes read on rank 0, then held in slabs"
 FIXED_ALSO = " (the fixed bodies' also whole on every rank until contact's set-up)"
@@ -66,6 +74,16 @@ def boundary_triangles(tets):
     return int(np.count_nonzero(counts == 1))
 
 
+def boundary_edges(tets):
+    """The edges of the faces that one tet only names."""
+    faces = np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]],
+                                    tets[:, [0, 1, 2]]]), axis=1)
+    unique, counts = np.unique(faces, axis=0, return_counts=True)
+    boundary = unique[counts == 1]
+    edges = np.sort(np.concatenate([boundary[:, [0, 1]], boundary[:, [1, 2]], boundary[:, [0, 2]]]), axis=1)
+    return np.unique(edges, axis=0)
+
+
 def line(stdout, start):
     return next((l.strip() for l in stdout.splitlines() if l.strip().startswith(start)), "")
 
@@ -74,7 +92,7 @@ def scene_bytes(text):
     """The "whole scene" line's parts (bytes), or {} when it is missing."""
     parts = {}
     for label, key in (("meshes", "meshes"), ("numbering", "numbering"), ("free state", "free_state"),
-                       ("obstacles", "obstacles"), ("overlap separation", "separation")):
+                       ("obstacles", "obstacles"), ("guard", "guard"), ("overlap separation", "separation")):
         match = re.search(PART.format(label, key), text)
         if match:
             parts[key] = float(match.group(key)) * 1e6
@@ -94,6 +112,9 @@ def main():
     mesh = harness.box_mesh(args, "box.mesh", *BOX)
     vertices, _, _, tets = read_medit(mesh)
     T, F, V = 2 * len(tets), 2 * boundary_triangles(tets), 2 * len(vertices)
+    edges = boundary_edges(tets)
+    E, S = 2 * len(edges), 2 * len(np.unique(edges))
+    guard = 81 * S + 16 * F + 8 * E
     scene = os.path.join(args.work, "two-boxes.txt")
     with open(scene, "w") as f:
         f.write("2\n")
@@ -105,8 +126,8 @@ def main():
         stdout = harness.run(args, ranks, ["-scene", scene] + run).stdout
         whole = line(stdout, "whole scene")
         parts = scene_bytes(whole)
-        checks.check(len(parts) == 6, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
-        if len(parts) != 6:
+        checks.check(len(parts) == 7, f"{ranks} ranks: the summary counts the whole-scene arrays: {whole!r}")
+        if len(parts) != 7:
             continue
         if ranks > 1:
             checks.check(IN_SLABS in line(stdout, "scene "), f"{ranks} ranks: {line(stdout, 'scene ')!r}")
@@ -114,15 +135,10 @@ def main():
         checks.check(parts["setup"] == 0,
                      f"{ranks} ranks: no rank holds a free body's mesh whole during contact's set-up "
                      f"({parts['setup']:.0f} B)")
-        if ranks == 1:
-            checks.check(close(parts["obstacles"], expected),
-                         f"{ranks} rank: obstacles {parts['obstacles']:.0f} B, expected 28 T + 24 F = "
-                         f"{expected} B (T {T}, F {F})")
-        else:
-            held = parts["obstacles"] / expected
-            checks.check(held <= HELD_FRACTION,
-                         f"{ranks} ranks: obstacles {parts['obstacles']:.0f} B on the largest rank, "
-                         f"{held:.2f} of the scene's 28 T + 24 F (at most {HELD_FRACTION})")
+        check_held(checks, ranks, "obstacles", parts["obstacles"], expected, "the scene's 28 T + 24 F",
+                   f"T {T}, F {F}")
+        check_held(checks, ranks, "guard", parts["guard"], guard, "the whole surface's 81 S + 16 F + 8 E",
+                   f"S {S}, F {F}, E {E}")
         checks.check(close(parts["free_state"], 4 * V),
                      f"{ranks} ranks: free state {parts['free_state']:.0f} B, expected 4 V = {4 * V} B")
         checks.check(close(parts.get("numbering", -1), 4 * V),
@@ -131,6 +147,16 @@ def main():
                      f"{ranks} ranks: overlap separation {parts['separation']:.0f} B, expected 0 (released)")
     check_setup_meshes(args, checks, scene, run, V, T)
     checks.exit()
+
+
+def check_held(checks, ranks, label, held, whole, formula, counts):
+    """(b), (e): the lists of a part on 1 rank hold the whole, on more ranks less than HELD_FRACTION."""
+    if ranks == 1:
+        checks.check(close(held, whole), f"1 rank: {label} {held:.0f} B, expected {formula} = {whole} B ({counts})")
+    else:
+        checks.check(held <= HELD_FRACTION * whole,
+                     f"{ranks} ranks: {label} {held:.0f} B on the largest rank, {held / whole:.2f} of {formula} "
+                     f"(at most {HELD_FRACTION})")
 
 
 def check_setup_meshes(args, checks, scene, run, V, T):

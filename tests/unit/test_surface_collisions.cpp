@@ -16,6 +16,7 @@
 #include <set>
 #include <vector>
 
+#include "contact/held_surface.hpp"
 #include "contact/surface_collisions.hpp"
 
 namespace softbody {
@@ -29,6 +30,7 @@ constexpr int kSteps = 60;
 void AddSheet(ContactSurface *s, int32_t body) {
   const int32_t first = s->num_vertices();
   for (int i = 0; i < kSide * kSide; ++i) {
+    s->global.push_back(first + i);
     s->natural.push_back(first + i);
     s->body.push_back(body);
   }
@@ -37,6 +39,7 @@ void AddSheet(ContactSurface *s, int32_t body) {
     for (int i = 0; i + 1 < kSide; ++i) {
       const int32_t a = first + i + kSide * j, b = a + 1, c = a + kSide, d = c + 1;
       for (const auto &t : {std::array<int32_t, 3>{a, b, d}, std::array<int32_t, 3>{a, d, c}}) {
+        s->triangle_id.push_back(static_cast<int32_t>(s->triangles.size()));
         s->triangles.push_back(t);
         for (int k = 0; k < 3; ++k)
           edges.insert({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
@@ -101,6 +104,20 @@ PairSet BruteForce(const ContactSurface &s, const std::vector<Point> &start,
   return found;
 }
 
+// The query the tests run: separation 1 cm, band 1 mm, self-contact.
+CollisionQuery Query(const ContactSurface &s, const std::vector<Point> &start,
+                     const std::vector<Point> &end, const std::vector<char> &moving) {
+  CollisionQuery q;
+  q.surface = &s;
+  q.start = &start;
+  q.end = &end;
+  q.moving = &moving;
+  q.tolerance.separation = 0.01;
+  q.tolerance.band = 0.001;
+  q.self_contact = true;
+  return q;
+}
+
 struct Totals {
   int64_t rebuilds = 0, static_rebuilds = 0, reported = 0, reported_static = 0;
 };
@@ -114,14 +131,7 @@ Totals CheckSteps(Positions positions) {
   std::vector<Point> start = positions(s, 0), end = start;
   std::vector<char> moving(s.num_vertices(), 1);
   for (int32_t v = s.vertex_start[2]; v < s.num_vertices(); ++v) moving[v] = 0;
-  CollisionQuery q;
-  q.surface = &s;
-  q.start = &start;
-  q.end = &end;
-  q.moving = &moving;
-  q.tolerance.separation = 0.01;
-  q.tolerance.band = 0.001;
-  q.self_contact = true;
+  const CollisionQuery q = Query(s, start, end, moving);
   SurfaceCollisionFinder finder;
   finder.Setup(q);
   Totals totals;
@@ -171,6 +181,115 @@ TEST(SurfaceCollisionFinder, KeepsStaticCandidatesOverSmallSteps) {
   EXPECT_GT(totals.reported_static, 5);
   EXPECT_GT(totals.static_rebuilds, 0);
   EXPECT_LT(totals.static_rebuilds, kSteps / 2);
+}
+
+// A rank's part of the surfaces, as its halo changes from step to step
+// (held_surface.hpp): sheet 0's near columns are its own, sheet 2 is static,
+// and the halo brings rows of sheets 0 and 1 with the primitives keyed at
+// them. The held surface keeps the whole surface's order and exactly the
+// static primitives, those at an own vertex and the halo's whose vertices are
+// all held; the finder, renumbered on each new part (its static grids kept),
+// reports exactly the pairs that CCD reports among the held primitives.
+TEST(SurfaceCollisionFinder, FindsEveryPairOnARenumberedHeldPart) {
+  ContactSurface whole;
+  for (int32_t body = 0; body < 3; ++body) AddSheet(&whole, body);
+  const int32_t n = whole.num_vertices();
+  std::vector<char> moving(n, 1), own(n, 0);
+  for (int32_t v = whole.vertex_start[2]; v < n; ++v) moving[v] = 0;
+  for (int32_t v = 0; v < whole.vertex_start[1]; ++v) own[v] = v % kSide < 3;
+  std::mt19937 rng(13);
+  // Step k's halo: rows of sheets 0 and 1 that move along with k.
+  auto halo = [&](int k) {
+    std::vector<char> in(n, 0);
+    for (int32_t v = 0; v < whole.vertex_start[2]; ++v)
+      in[v] = !own[v] && std::abs((v % (kSide * kSide)) / kSide - k % kSide) <= 2;
+    return in;
+  };
+  ContactSurface held;
+  AssembleHeldSurface(whole, own, moving, {}, {}, &held);
+  std::vector<Point> start, end;
+  std::vector<char> held_moving;
+  auto localise = [&](const std::vector<char> &a) {
+    std::vector<char> b(held.num_vertices());
+    for (int32_t v = 0; v < held.num_vertices(); ++v) b[v] = a[held.global[v]];
+    return b;
+  };
+  auto positions = [&](const std::vector<Point> &x) {
+    std::vector<Point> y(held.num_vertices());
+    for (int32_t v = 0; v < held.num_vertices(); ++v) y[v] = x[held.global[v]];
+    return y;
+  };
+  std::vector<Point> x0 = Positions(whole, 0, rng);
+  start = end = positions(x0);
+  held_moving = localise(moving);
+  const CollisionQuery q = Query(held, start, end, held_moving);
+  SurfaceCollisionFinder finder;
+  finder.Setup(q);
+  int64_t reported = 0;
+  for (int k = 1; k <= kSteps; ++k) {
+    const std::vector<char> in = halo(k);
+    std::vector<SurfaceVertex> received;
+    for (int32_t v = 0; v < n; ++v)
+      if (in[v]) received.push_back({v, whole.natural[v], whole.body[v]});
+    std::vector<SurfacePrimitive> primitives;
+    for (size_t t = 0; t < whole.triangles.size(); ++t) {
+      const auto &w = whole.triangles[t];
+      if (in[*std::min_element(w.begin(), w.end())])
+        primitives.push_back({static_cast<int32_t>(t), {w[0], w[1], w[2]}});
+    }
+    for (const auto &e : whole.edges)
+      if (in[e[0]]) primitives.push_back({kNoSurfaceVertex, {e[0], e[1], kNoSurfaceVertex}});
+    const ContactSurface before = held;
+    AssembleHeldSurface(before, localise(own), localise(moving), received, primitives, &held);
+    // What must be held: the static and own vertices, the vertices of the
+    // primitives at an own vertex, the halo's; the primitives whose vertices
+    // are all static or one own, and the halo's whose vertices are all held.
+    std::vector<char> kept(n, 0);
+    for (int32_t v = 0; v < n; ++v) kept[v] = !moving[v] || own[v] || in[v];
+    auto at_own = [&](const auto &w) {
+      return std::any_of(w.begin(), w.end(), [&](int32_t v) { return own[v]; });
+    };
+    for (const auto &w : whole.triangles)
+      if (at_own(w))
+        for (const int32_t v : w) kept[v] = 1;
+    for (const auto &e : whole.edges)
+      if (at_own(e)) kept[e[0]] = kept[e[1]] = 1;
+    std::vector<int32_t> expected_vertices, expected_triangles;
+    for (int32_t v = 0; v < n; ++v)
+      if (kept[v]) expected_vertices.push_back(v);
+    EXPECT_EQ(held.global, expected_vertices) << "step " << k;
+    auto wanted = [&](const auto &w) {
+      const bool all_static =
+          std::none_of(w.begin(), w.end(), [&](int32_t v) { return moving[v]; });
+      const bool all_held = std::all_of(w.begin(), w.end(), [&](int32_t v) { return kept[v]; });
+      return all_static || at_own(w) || (in[*std::min_element(w.begin(), w.end())] && all_held);
+    };
+    for (size_t t = 0; t < whole.triangles.size(); ++t)
+      if (wanted(whole.triangles[t])) expected_triangles.push_back(static_cast<int32_t>(t));
+    EXPECT_EQ(held.triangle_id, expected_triangles) << "step " << k;
+    for (size_t t = 0; t < held.triangles.size(); ++t)
+      for (int c = 0; c < 3; ++c)
+        EXPECT_EQ(held.global[held.triangles[t][c]], whole.triangles[held.triangle_id[t]][c]);
+    size_t expected_edges = 0;
+    for (const auto &e : whole.edges) expected_edges += wanted(e);
+    EXPECT_EQ(held.edges.size(), expected_edges) << "step " << k;
+    // Detection on the held part, renumbered.
+    const std::vector<Point> x1 = Positions(whole, k, rng);
+    start = positions(x0);
+    end = positions(x1);
+    held_moving = localise(moving);
+    finder.Renumber(q);
+    CollisionCount count;
+    PairSet found;
+    for (const SurfaceCollision &c : finder.Find(q, &count)) found.insert(c.vertices);
+    int64_t close = 0;
+    const PairSet expected = BruteForce(held, start, end, q.tolerance, &close);
+    EXPECT_EQ(found, expected) << "step " << k;
+    EXPECT_EQ(count.close, close) << "step " << k;
+    reported += static_cast<int64_t>(expected.size());
+    x0 = x1;
+  }
+  EXPECT_GT(reported, 10);
 }
 
 }  // namespace
