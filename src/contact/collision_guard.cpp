@@ -59,7 +59,7 @@ PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const Co
   }
   whole_triangles_ = whole.triangles.size();
   whole_edges_ = whole.edges.size();
-  PetscCall(CountInitialClosePairs(whole, rest, moving, owned));
+  half_skin_ = SurfaceCollisionFinder::HalfSkins(whole, rest);
   Reassemble(whole, owned, moving, {});
   for (int32_t v = 0; v < surface_.num_vertices(); ++v)
     start_[v] = end_[v] = rest[surface_.global[v]];
@@ -71,26 +71,21 @@ PetscErrorCode CollisionGuard::Setup(MPI_Comm comm, const Scene &scene, const Co
   query_.end = &end_;
   query_.moving = &moving_;
   finder_.Setup(query_, &half_skin_);
+  PetscCall(CountInitialClosePairs());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// Each rank counts the pairs whose lowest moving vertex it owns (the whole
-// surface is on every rank during the set-up), and the counts are summed.
-PetscErrorCode CollisionGuard::CountInitialClosePairs(const ContactSurface &whole,
-                                                      const std::vector<Point> &rest,
-                                                      const std::vector<char> &moving,
-                                                      const std::vector<char> &owned) {
+// At the rest positions, after a halo exchange there: each rank counts the
+// pairs whose lowest moving vertex it owns (a pair that close lies well within
+// the halo's reach), and the counts are summed. On one rank the candidate
+// lists built here serve the first step.
+PetscErrorCode CollisionGuard::CountInitialClosePairs() {
   PetscFunctionBeginUser;
-  CollisionQuery q = query_;
-  q.surface = &whole;
-  q.start = q.end = &rest;
-  q.moving = &moving;
-  q.owned = parallel_ ? &owned : nullptr;
-  SurfaceCollisionFinder finder;
-  finder.Setup(q);
-  half_skin_ = finder.half_skin();
+  if (parallel_) PetscCall(ExchangeHalo());
+  query_.usable = parallel_ ? &usable_ : nullptr;
+  query_.owned = parallel_ ? &owned_mask_ : nullptr;
   CollisionCount count;
-  finder.Find(q, &count);  // start = end = rest: which pairs start too close
+  finder_.Find(query_, &count);  // start = end = rest: which pairs start too close
   PetscInt close = static_cast<PetscInt>(count.close);
   if (parallel_) PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, &close, 1, MPIU_INT, MPI_SUM, comm_));
   stats_.initial_close_pairs = close;

@@ -135,11 +135,9 @@ class CollisionGuard {
     int32_t whole, natural;
     bool moving, moved;
   };
-  // The initial close pairs (stats_) and half_skin_, on the whole surface at
-  // its rest positions (set-up only).
-  PetscErrorCode CountInitialClosePairs(const ContactSurface &whole, const std::vector<Point> &rest,
-                                        const std::vector<char> &moving,
-                                        const std::vector<char> &owned);
+  // Collective, set-up only. The pairs closer than the separation at the
+  // rest positions (stats_.initial_close_pairs).
+  PetscErrorCode CountInitialClosePairs();
   // This rank's surface vertices' masses (the others' come with the halo and the pairs).
   PetscErrorCode FetchMasses(Vec lumped_mass);
   // This rank's surface vertices' start and end positions.

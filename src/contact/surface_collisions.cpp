@@ -269,6 +269,19 @@ void SurfaceCollisionFinder::Renumber(const CollisionQuery &q) {
   vertex_box_.assign(q.surface->num_vertices(), Box());
 }
 
+std::vector<double> SurfaceCollisionFinder::HalfSkins(const ContactSurface &s,
+                                                      const std::vector<Point> &x) {
+  std::vector<double> half_skin(s.num_bodies(), 0.0);
+  for (size_t b = 0; b < s.num_bodies(); ++b) {
+    double length = 0;
+    for (int32_t e = s.edge_start[b]; e < s.edge_start[b + 1]; ++e)
+      length += (x[s.edges[e][0]] - x[s.edges[e][1]]).norm();
+    const int32_t edges = s.edge_start[b + 1] - s.edge_start[b];
+    half_skin[b] = edges > 0 ? 0.5 * kSkinOfEdge * length / edges : 0.0;
+  }
+  return half_skin;
+}
+
 void SurfaceCollisionFinder::Setup(const CollisionQuery &q, const std::vector<double> *half_skin) {
   const ContactSurface &s = *q.surface;
   ListPrimitives(q);
@@ -279,15 +292,7 @@ void SurfaceCollisionFinder::Setup(const CollisionQuery &q, const std::vector<do
   static_.vertex_grid.Build(static_.vertex_boxes);
   static_.triangle_grid.Build(static_.triangle_boxes);
   static_.edge_grid.Build(static_.edge_boxes);
-  half_skin_.assign(s.num_bodies(), 0.0);
-  if (half_skin) half_skin_ = *half_skin;
-  for (size_t b = 0; b < s.num_bodies() && !half_skin; ++b) {
-    double length = 0;
-    for (int32_t e = s.edge_start[b]; e < s.edge_start[b + 1]; ++e)
-      length += ((*q.start)[s.edges[e][0]] - (*q.start)[s.edges[e][1]]).norm();
-    const int32_t edges = s.edge_start[b + 1] - s.edge_start[b];
-    half_skin_[b] = edges > 0 ? 0.5 * kSkinOfEdge * length / edges : 0.0;
-  }
+  half_skin_ = half_skin ? *half_skin : HalfSkins(s, *q.start);
   self_.assign(s.num_bodies(), SelfCandidates());
   vertex_box_.assign(s.num_vertices(), Box());
 }

@@ -108,7 +108,8 @@ class SurfaceCollisionFinder {
   // order: the lists are renumbered, the static grids kept, the candidates
   // dropped.
   void Renumber(const CollisionQuery &query);
-  const std::vector<double> &half_skin() const { return half_skin_; }
+  // Per body of s, half its skin (m) from its mean edge length at positions x.
+  static std::vector<double> HalfSkins(const ContactSurface &s, const std::vector<Point> &x);
   // The colliding pairs (in an order that depends on the grids: callers that
   // need one sort them).
   std::vector<SurfaceCollision> Find(const CollisionQuery &query, CollisionCount *count) const;

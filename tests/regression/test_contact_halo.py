@@ -24,6 +24,10 @@ and its obstacle grids hold only the tets and triangles that came whole.
     1e-11). The aligned head-on scene, whose vertices lie exactly in the other
     cube's face planes, is left to round-off (its inside tests flip) and is not
     compared.
+(f) The pairs that start closer than the guard's separation, counted per owner
+    of a pair's lowest moving vertex on its part of the surfaces and summed
+    (src/contact/collision_guard.cpp): three blocks placed with touching faces
+    report the same count on 1, 3 and 4 ranks, and more than none.
 """
 import os
 import re
@@ -102,4 +106,18 @@ for mode, tolerance in (("linear", RANK_TOLERANCE), ("corotational", COROTATIONA
             checks.check(difference <= tolerance,
                          f"(e) {mode}, {ranks} ranks vs 1: {key} relative difference {difference:.1e} <= "
                          f"{tolerance}")
+print("(f) surface pairs closer than the separation at the start, 1, 3 and 4 ranks")
+BLOCK = os.path.join(SCENES, "block.mesh")
+touching = harness.write_scene(os.path.join(args.work, "touching.txt"),
+                               [(BLOCK, 1000, 1e6, 0.3, 0, (0, 0.5, 0), (1, 0, 0, 0)),
+                                (BLOCK, 1000, 1e6, 0.3, 0, (0, 1.5, 0.3), (1, 0, 0, 0)),
+                                (BLOCK, 1000, 1e6, 0.3, 0, (0.2, 2.5, 0), (1, 0, 0, 0))])
+counts = []
+for ranks in (1, 3, 4):
+    stdout = harness.run(args, ranks, ["-scene", touching, "-gravity", "0,-9.81,0", "-ground", "0",
+                                       "-dt", "0.01", "-steps", "1"]).stdout
+    close = re.search(r"\((\d+) at the scene's start\)", stdout)
+    counts.append(int(close.group(1)) if close else None)
+checks.check(counts[0] is not None and counts[0] > 0 and counts.count(counts[0]) == len(counts),
+             f"(f) close pairs at the start on 1, 3 and 4 ranks: {counts} (equal and more than none)")
 checks.exit()
