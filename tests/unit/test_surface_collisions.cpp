@@ -185,8 +185,10 @@ TEST(SurfaceCollisionFinder, KeepsStaticCandidatesOverSmallSteps) {
 
 // A rank's part of the surfaces, as its halo changes from step to step
 // (held_surface.hpp): sheet 0's near columns are its own, sheet 2 is static,
-// and the halo brings rows of sheets 0 and 1 with the primitives keyed at
-// them. The held surface keeps the whole surface's order and exactly the
+// and the halo brings rows of sheets 0 and 1, a vertex new to it with the
+// primitives keyed at it (as the guard's exchange sends them), the rows
+// moving by one per step, so that primitives are kept across steps, held or
+// pending. The held surface keeps the whole surface's order and exactly the
 // static primitives, those at an own vertex and the halo's whose vertices are
 // all held; the finder, renumbered on each new part (its static grids kept),
 // reports exactly the pairs that CCD reports among the held primitives.
@@ -206,7 +208,9 @@ TEST(SurfaceCollisionFinder, FindsEveryPairOnARenumberedHeldPart) {
     return in;
   };
   ContactSurface held;
-  AssembleHeldSurface(whole, own, moving, {}, {}, &held);
+  std::vector<SurfacePrimitive> pending;
+  AssembleHeldSurface(whole, own, moving, {}, {}, &pending, &held);
+  std::vector<char> before_in(n, 0);  // the last step's halo
   std::vector<Point> start, end;
   std::vector<char> held_moving;
   auto localise = [&](const std::vector<char> &a) {
@@ -234,13 +238,17 @@ TEST(SurfaceCollisionFinder, FindsEveryPairOnARenumberedHeldPart) {
     std::vector<SurfacePrimitive> primitives;
     for (size_t t = 0; t < whole.triangles.size(); ++t) {
       const auto &w = whole.triangles[t];
-      if (in[*std::min_element(w.begin(), w.end())])
+      const int32_t key = *std::min_element(w.begin(), w.end());
+      if (in[key] && !before_in[key])
         primitives.push_back({static_cast<int32_t>(t), {w[0], w[1], w[2]}});
     }
     for (const auto &e : whole.edges)
-      if (in[e[0]]) primitives.push_back({kNoSurfaceVertex, {e[0], e[1], kNoSurfaceVertex}});
+      if (in[e[0]] && !before_in[e[0]])
+        primitives.push_back({kNoSurfaceVertex, {e[0], e[1], kNoSurfaceVertex}});
+    before_in = in;
     const ContactSurface before = held;
-    AssembleHeldSurface(before, localise(own), localise(moving), received, primitives, &held);
+    AssembleHeldSurface(before, localise(own), localise(moving), received, primitives, &pending,
+                        &held);
     // What must be held: the static and own vertices, the vertices of the
     // primitives at an own vertex, the halo's; the primitives whose vertices
     // are all static or one own, and the halo's whose vertices are all held.
