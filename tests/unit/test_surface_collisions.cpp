@@ -118,6 +118,19 @@ CollisionQuery Query(const ContactSurface &s, const std::vector<Point> &start,
   return q;
 }
 
+// Step k: the finder reports exactly the brute force's pairs and close
+// count; returns the brute force's pairs and the finder's count.
+PairSet ExpectBruteForce(const SurfaceCollisionFinder &finder, const CollisionQuery &q, int k,
+                         CollisionCount *count) {
+  PairSet found;
+  for (const SurfaceCollision &c : finder.Find(q, count)) found.insert(c.vertices);
+  int64_t close = 0;
+  const PairSet expected = BruteForce(*q.surface, *q.start, *q.end, q.tolerance, &close);
+  EXPECT_EQ(found, expected) << "step " << k;
+  EXPECT_EQ(count->close, close) << "step " << k;
+  return expected;
+}
+
 struct Totals {
   int64_t rebuilds = 0, static_rebuilds = 0, reported = 0, reported_static = 0;
 };
@@ -138,12 +151,7 @@ Totals CheckSteps(Positions positions) {
   for (int k = 1; k <= kSteps; ++k) {
     end = positions(s, k);
     CollisionCount count;
-    PairSet found;
-    for (const SurfaceCollision &c : finder.Find(q, &count)) found.insert(c.vertices);
-    int64_t close = 0;
-    const PairSet expected = BruteForce(s, start, end, q.tolerance, &close);
-    EXPECT_EQ(found, expected) << "step " << k;
-    EXPECT_EQ(count.close, close) << "step " << k;
+    const PairSet expected = ExpectBruteForce(finder, q, k, &count);
     totals.rebuilds += count.rebuilds;
     totals.static_rebuilds += count.static_rebuilds;
     totals.reported += static_cast<int64_t>(expected.size());
@@ -288,13 +296,7 @@ TEST(SurfaceCollisionFinder, FindsEveryPairOnARenumberedHeldPart) {
     held_moving = localise(moving);
     finder.Renumber(q);
     CollisionCount count;
-    PairSet found;
-    for (const SurfaceCollision &c : finder.Find(q, &count)) found.insert(c.vertices);
-    int64_t close = 0;
-    const PairSet expected = BruteForce(held, start, end, q.tolerance, &close);
-    EXPECT_EQ(found, expected) << "step " << k;
-    EXPECT_EQ(count.close, close) << "step " << k;
-    reported += static_cast<int64_t>(expected.size());
+    reported += static_cast<int64_t>(ExpectBruteForce(finder, q, k, &count).size());
     x0 = x1;
   }
   EXPECT_GT(reported, 10);
