@@ -48,9 +48,8 @@ const char *PartitionNote(Partitioner partitioner) {
 }
 
 // How the meshes were read and held, for the "scene" line ("" on one rank, unless
-// a mesh file was read in slabs); `immobile`: bodies fixed or at rest, whose
-// meshes contact's set-up held whole.
-std::string MeshHoldingNote(const Scene &scene, int ranks, int immobile) {
+// a mesh file was read in slabs).
+std::string MeshHoldingNote(const Scene &scene, int ranks) {
   const int in_slabs = scene.meshes_read_in_slabs;
   const bool on_rank0 = in_slabs < static_cast<int>(scene.bodies.size());
   if (ranks == 1 && in_slabs == 0) return "";
@@ -66,10 +65,7 @@ std::string MeshHoldingNote(const Scene &scene, int ranks, int immobile) {
   else
     read = std::to_string(in_slabs) + " of " + std::to_string(scene.bodies.size()) +
            " meshes read in slabs by every rank, the rest on rank 0, then held in slabs";
-  const char *fixed = scene.fixed_meshes_released && immobile > 0
-                          ? " (the fixed bodies' also whole on every rank until contact's set-up)"
-                          : "";
-  return "; " + read + fixed;
+  return "; " + read;
 }
 
 // "  scene ..." and "  unknowns ..." lines.
@@ -83,7 +79,7 @@ PetscErrorCode PrintSceneAndUnknowns(MPI_Comm comm, const Scene &scene, const Do
     max_dofs = std::max(max_dofs, dofs);
   }
   const size_t bodies = scene.bodies.size();
-  const std::string held = MeshHoldingNote(scene, layout.size, b.fixed_bodies + b.resting_bodies);
+  const std::string held = MeshHoldingNote(scene, layout.size);
   PetscCall(PetscPrintf(comm, "  scene        %s: %zu %s (%d fixed), %d vertices, %lld tets%s\n",
                         scene.path.c_str(), bodies, bodies == 1 ? "body" : "bodies", b.fixed_bodies,
                         scene.num_vertices(), (long long)scene.num_tets(), held.c_str()));
@@ -160,6 +156,27 @@ PetscErrorCode PrintGuard(MPI_Comm comm, const GuardStatistics *g, PetscInt64 by
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
+// Collective. The fixed tets' part of the "contact" line: the most a rank
+// holds of them, how often they were fetched, and a warning if a query fell
+// outside a rank's region.
+PetscErrorCode PrintFixedTets(MPI_Comm comm, const ContactSolver &contact) {
+  PetscFunctionBeginUser;
+  const FixedTets &fixed = contact.fixed_tets();
+  if (fixed.scene_count() == 0) PetscFunctionReturn(PETSC_SUCCESS);
+  PetscInt counts[2] = {static_cast<PetscInt>(fixed.held().size()), contact.fixed_outside_region()};
+  PetscCallMPI(MPIU_Allreduce(MPI_IN_PLACE, counts, 2, MPIU_INT, MPI_MAX, comm));
+  PetscCall(PetscPrintf(comm,
+                        "; fixed tets held by a rank at most %" PetscInt_FMT
+                        " of %lld (fetched %" PetscInt_FMT " times around its vertices)",
+                        counts[0], static_cast<long long>(fixed.scene_count()), fixed.fetches()));
+  if (counts[1] > 0)
+    PetscCall(PetscPrintf(comm,
+                          " (WARNING: %" PetscInt_FMT
+                          " queries outside a rank's region of fixed tets: please report)",
+                          counts[1]));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
 // Collective. "  contact ..." line, when the scene has collisions or constraints.
 PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
   PetscFunctionBeginUser;
@@ -178,6 +195,7 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
                           "; moving obstacles' grids built in %" PetscInt_FMT
                           " passes (only where bodies' boxes met)",
                           grid_builds));
+  PetscCall(PrintFixedTets(comm, contact));
   if (c.exchanges)
     PetscCall(PetscPrintf(comm,
                           "; free state exchanged %" PetscInt_FMT
@@ -198,8 +216,9 @@ PetscErrorCode PrintContact(MPI_Comm comm, const ContactSolver &contact) {
 // Collective. "  whole scene ..." line, with contact: the largest rank's bytes
 // of each structure contact keeps over the scene (the numbering and the free
 // state's slot map are O(scene) on every rank; the obstacles' and the guard's
-// lists hold the fixed bodies whole and of the free ones the rank's own part
-// and its halo), and their sum per scene vertex.
+// lists hold the fixed bodies' surfaces whole, the fixed tets of the rank's
+// share and region, and of the free bodies the rank's own part and its halo),
+// and their sum per scene vertex.
 PetscErrorCode PrintSceneBytes(MPI_Comm comm, const Scene &scene, const DofLayout &layout,
                                const ContactSolver &contact) {
   PetscFunctionBeginUser;

@@ -146,9 +146,8 @@ PetscErrorCode Simulation::CheckFiles() {
 
 // Rank 0 reads and validates the scene and its meshes; every rank the -deform
 // events. Each rank gets its shares of the meshes (mesh_share.hpp): .h5 meshes
-// are read in slabs by every rank, never whole. When contact may
-// need them, the fixed bodies' meshes reach every rank whole (contact builds
-// the rest from the shares); -scene_replicate sends every mesh whole to every
+// are read in slabs by every rank, never whole, and contact builds its
+// structures from the shares; -scene_replicate sends every mesh whole to every
 // rank. Bodies that nothing can set in motion add no unknowns (partition.hpp);
 // not on a restart (its bodies move as the checkpoint says) or when
 // -export_matrices asks for the matrices of every free body.
@@ -157,9 +156,7 @@ PetscErrorCode Simulation::ReadScene() {
   const ContactOptions &contact = options_.contact;
   PetscCall(LoadScene(comm_, options_.scene, true, &scene_));
   PetscCall(ParseDeformations(comm_, options_.deformations, scene_, &deformations_));
-  holding_ = options_.scene.replicate                       ? MeshHolding::kWhole
-             : ContactMayRun(contact, scene_.bodies.size()) ? MeshHolding::kSlabsAndFixed
-                                                            : MeshHolding::kSlabs;
+  holding_ = options_.scene.replicate ? MeshHolding::kWhole : MeshHolding::kSlabs;
   PetscCall(DistributeScene(comm_, options_.scene.meshing, holding_, &scene_, &share_));
   if (!restart() && options_.output.matrix_dir.empty()) {
     MotionSources sources{options_.integration.gravity.squaredNorm() > 0, bool(contact.ground),
@@ -169,7 +166,6 @@ PetscErrorCode Simulation::ReadScene() {
     int marked;
     PetscCall(MarkBodiesAtRest(comm_, sources, &scene_, &share_, &marked));
   }
-  if (holding_ == MeshHolding::kSlabsAndFixed) PetscCall(KeepFixedMeshes(comm_, share_, &scene_));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
@@ -179,7 +175,8 @@ PetscErrorCode Simulation::DistributeMesh() {
   PetscFunctionBeginUser;
   PetscCall(BuildDofLayout(comm_, options_.partition, &share_, &layout_));
   // Contact (when it may run) and -export_matrices still read the replicated numbering.
-  if (holding_ != MeshHolding::kSlabs || !options_.output.matrix_dir.empty())
+  if (holding_ == MeshHolding::kWhole || ContactMayRun(options_.contact, scene_.bodies.size()) ||
+      !options_.output.matrix_dir.empty())
     PetscCall(ReplicateNumbering(comm_, share_, &layout_));
   PetscCall(MigrateTets(comm_, share_, layout_, &tets_));
   PetscFunctionReturn(PETSC_SUCCESS);
@@ -225,7 +222,7 @@ PetscErrorCode Simulation::SetUpContact() {
   PetscFunctionBeginUser;
   options_.contact.gravity = options_.integration.gravity.norm();
   PetscCall(contact_.Setup(comm_, scene_, share_, layout_, state_.lumped_mass, options_.contact));
-  if (scene_.fixed_meshes_held) scene_.ReleaseMeshes();
+  if (scene_.meshes_held) scene_.ReleaseMeshes();
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -29,6 +29,18 @@ constexpr double kGroundMarginOfGap = 0.5;
 // count as one direction, so a body on a gently curved contact is not taken to
 // be held sideways.
 constexpr double kSupportedShare = 1e-2;
+// A rank's region of fixed tets is the box its own vertices need grown by this
+// fraction of the box's largest side on every side: a body then moves about a
+// quarter of its part's size between fetches, and the region holds about
+// (1.5)^3 = 3.4 times the part's box.
+constexpr double kRegionGrowth = 0.25;
+
+Box Grown(const Box &box, double margin) {
+  Box grown = box;
+  grown.lower.array() -= margin;
+  grown.upper.array() += margin;
+  return grown;
+}
 
 }  // namespace
 
@@ -57,11 +69,9 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
   options_ = options;
   DecideParts(scene, layout);
   if (!ContactMayRun(options, scene.bodies.size())) PetscFunctionReturn(PETSC_SUCCESS);
-  PetscCheck(scene.fixed_meshes_held &&
-                 static_cast<PetscInt>(layout.petsc_of_natural.size()) == scene.num_vertices(),
-             comm, PETSC_ERR_PLIB,
-             "contact needs the fixed bodies' meshes and the replicated numbering on every rank "
-             "(ContactMayRun)");
+  PetscCheck(static_cast<PetscInt>(layout.petsc_of_natural.size()) == scene.num_vertices(), comm,
+             PETSC_ERR_PLIB,
+             "contact needs the replicated numbering on every rank (ContactMayRun)");
   ContactMeshes meshes;
   PetscCall(meshes.Build(comm, scene, layout, share));
   PetscCall(meshes.FetchRest(RestVerticesNeeded(meshes)));
@@ -71,7 +81,8 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
 
   state_.SetupBodies(scene, meshes, options.halo_reach);
   SharpFeatures::Candidates candidates;
-  if (body_obstacles_ && options.sharp_edges) candidates = SharpFeatures::Sample(scene, state_);
+  if (body_obstacles_ && options.sharp_edges)
+    candidates = SharpFeatures::Sample(scene, state_, meshes);
   track_free_ = free_obstacles_ || !candidates.empty();
   exchange_always_ = free_obstacles_ || !distance_.empty() || options.impulse_spreading;
   PetscCall(state_.SetupMasses(comm, layout, lumped_mass, track_free_, !candidates.empty()));
@@ -79,7 +90,7 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
   // Vertices come back to the contact gap once within half of it of the ground.
   obstacles_.SetupGround(scene, state_, ground_, options.ground_y,
                          kGroundMarginOfGap * options.gap);
-  if (body_obstacles_) SetupBodyObstacles(candidates);
+  if (body_obstacles_) PetscCall(SetupBodyObstacles(candidates, meshes));
   if (free_obstacles_) PetscCall(state_.SetupRingSet(lumped_mass, RingNeighbours(meshes)));
   meshes.ReleaseFreeTets();  // the free items have taken theirs
   CollectCheckedVertices();
@@ -92,18 +103,19 @@ PetscErrorCode ContactSolver::Setup(MPI_Comm comm, const Scene &scene, const Mes
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-// The vertices whose rest positions the set-up reads besides the fixed bodies'
-// (ContactMeshes holds those): this rank's own, the free bodies' surface
-// vertices (the guard, the mean boundary edges, the edge bounds) and their
-// vertices without unknowns (stray vertices no tet names).
+// The vertices whose rest positions the set-up reads (the fixed tets bring
+// their own corners): this rank's own, every body's surface vertices (the
+// guard, the mean boundary edges, the edge bounds, the fixed triangles and
+// sharp features) and the free bodies' vertices without unknowns (stray
+// vertices no tet names).
 std::vector<int32_t> ContactSolver::RestVerticesNeeded(const ContactMeshes &meshes) const {
   std::vector<int32_t> naturals(layout_->natural_of_owned.begin(), layout_->natural_of_owned.end());
   for (size_t b = 0; b < scene_->bodies.size(); ++b) {
     const Body &body = scene_->bodies[b];
-    if (body.fixed) continue;
     const auto &boundary = meshes.boundary(b);
     for (Eigen::Index k = 0; k < boundary.size(); ++k)
       naturals.push_back(body.first_vertex + boundary.data()[k]);
+    if (body.fixed) continue;
     for (int32_t v = body.first_vertex; v < body.first_vertex + body.num_vertices(); ++v)
       if (layout_->PetscVertexOfNatural(v) < 0) naturals.push_back(v);
   }
@@ -173,9 +185,83 @@ void ContactSolver::DecideParts(const Scene &scene, const DofLayout &layout) {
       options_.guard && layout.num_free() > 0 && (ground_ || body_obstacles_ || lone_self_contact);
 }
 
-void ContactSolver::SetupBodyObstacles(const SharpFeatures::Candidates &candidates) {
-  obstacles_.SetupBodies(track_free_);
-  features_.Keep(candidates, *scene_, state_, obstacles_);
+PetscErrorCode ContactSolver::SetupBodyObstacles(const SharpFeatures::Candidates &candidates,
+                                                 ContactMeshes &meshes) {
+  PetscFunctionBeginUser;
+  obstacles_.SetupBodies(track_free_, meshes);
+  fixed_tets_.Setup(comm_, meshes.TakeFixedShare(), meshes.num_fixed_tets());
+  PetscCall(features_.Keep(candidates, *scene_, state_, fixed_tets_));
+  fixed_region_.assign(scene_->bodies.size(), Box());
+  PetscCall(KeepFixedRegion({}));  // around the owned vertices at rest
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Each rank's region holds, per free body, its own vertices at every position
+// given, grown by the body's halo reach (the halo's vertices and the faces at
+// own vertices lie within it); when a rank's vertices leave it, every rank
+// sets its region to that box grown by kRegionGrowth of its largest side, and
+// the fixed tets are fetched again. One rank's region is everything.
+PetscErrorCode ContactSolver::KeepFixedRegion(const std::vector<PositionsAt> &at) {
+  PetscFunctionBeginUser;
+  PetscMPIInt size;
+  PetscCallMPI(MPI_Comm_size(comm_, &size));
+  if (fixed_tets_.scene_count() == 0 || (size == 1 && fixed_tets_.fetches() > 0))
+    PetscFunctionReturn(PETSC_SUCCESS);
+  if (size == 1) {
+    Box everything;
+    everything.lower = Point::Constant(-kUnbounded);
+    everything.upper = Point::Constant(kUnbounded);
+    fixed_region_.assign(scene_->bodies.size(), everything);
+    PetscCall(FetchFixedTets());
+    fixed_tets_.ReleaseShare();
+    PetscFunctionReturn(PETSC_SUCCESS);
+  }
+  std::vector<Box> needed(scene_->bodies.size());
+  const auto &owned = state_.owned_natural();
+  if (at.empty())
+    for (const int32_t n : owned) needed[state_.body_of(n)].Extend(state_.position(n));
+  for (const PositionsAt &positions : at) {
+    const PetscScalar *x, *v = nullptr;
+    PetscCall(VecGetArrayRead(positions.x, &x));
+    if (positions.v) PetscCall(VecGetArrayRead(positions.v, &v));
+    for (size_t p = 0; p < owned.size(); ++p) {
+      Point q(&x[3 * p]);
+      if (v) q += positions.h * Point(&v[3 * p]);
+      needed[state_.body_of(owned[p])].Extend(q);
+    }
+    PetscCall(VecRestoreArrayRead(positions.x, &x));
+    if (v) PetscCall(VecRestoreArrayRead(positions.v, &v));
+  }
+  int leaves = 0;
+  for (size_t b = 0; b < needed.size(); ++b) {
+    if (needed[b].Empty()) continue;
+    needed[b] = Grown(needed[b], state_.reach(b));
+    leaves = leaves || !fixed_region_[b].Contains(needed[b].lower) ||
+             !fixed_region_[b].Contains(needed[b].upper);
+  }
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &leaves, 1, MPI_INT, MPI_MAX, comm_));
+  if (!leaves) PetscFunctionReturn(PETSC_SUCCESS);
+  for (size_t b = 0; b < needed.size(); ++b)
+    fixed_region_[b] =
+        needed[b].Empty()
+            ? needed[b]
+            : Grown(needed[b], kRegionGrowth * (needed[b].upper - needed[b].lower).maxCoeff());
+  PetscCall(FetchFixedTets());
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+PetscErrorCode ContactSolver::FetchFixedTets() {
+  PetscFunctionBeginUser;
+  PetscCall(fixed_tets_.Fetch(
+      fixed_region_,
+      [&](const FreeTet &tet) {
+        Box box;
+        for (int k = 0; k < 4; ++k) box.Extend(state_.position(tet[k]));
+        return box;
+      },
+      [&](int32_t n, const Point &x) { state_.PlaceFixed(n, x); }));
+  obstacles_.SetFixedTets(fixed_tets_);
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 // Every owned vertex, interior ones too (a soft body hitting hard can push them
@@ -273,6 +359,7 @@ PetscErrorCode ContactSolver::BeginStep(const StepMotion &motion, Vec u0) {
   holding_ = false;
   held_.clear();
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
+  if (body_obstacles_) PetscCall(KeepFixedRegion({{motion.start}, {motion.base, u0, motion.h}}));
   if (options_.restitution > 0) PetscCall(response_.RecordStart(u0));
   if (free_obstacles_ && !overlaps_checked_) PetscCall(FindOverlaps(motion.start));
   // Obstacles where they will be if they keep their velocity.
@@ -358,6 +445,7 @@ PetscErrorCode ContactSolver::AddPenetrations(const StepMotion &motion, Vec u, b
   Timing timing(this);
   *added = false;
   if (!ground_ && !body_obstacles_) PetscFunctionReturn(PETSC_SUCCESS);
+  if (body_obstacles_) PetscCall(KeepFixedRegion({{motion.start}, {motion.base, u, motion.h}}));
   PetscCall(Refresh(motion.base, u, motion.h, true));
   PetscInt local_found[2] = {0, 0}, all_found[2];
   PetscCall(AddVertexPenetrations(motion.base, u, motion.h, &local_found[0]));
@@ -535,6 +623,7 @@ PetscErrorCode ContactSolver::EndStep(const StepMotion &motion, Vec x, Vec v,
     PetscCall(EndHeldWithMeanVelocity(motion, x, v));
     *changed = true;
   }
+  if (body_obstacles_) PetscCall(KeepFixedRegion({{x}}));
   if (ground_ || body_obstacles_) PetscCall(RespondToContacts(x, v, reactions, changed));
   if (!distance_.empty()) {
     PetscCall(ResolveDistanceConstraints(x, v, nullptr));

@@ -104,10 +104,9 @@ class ContactSolver {
   // Collective. Builds only what the scene and options need. scene and layout
   // (its replicated numbering, when contact may need it) must outlive the
   // solver; lumped_mass: per DOF (kg), PETSc order. The meshes are read here
-  // only: the free bodies' from the ranks' shares (contact_meshes.hpp), the
-  // fixed bodies' whole (Scene::fixed_meshes_held); the caller may release
-  // both after (Scene::ReleaseMeshes); the counts, flags and first vertices
-  // stay read.
+  // only, from the ranks' shares (contact_meshes.hpp); a caller holding the
+  // meshes whole may release them after (Scene::ReleaseMeshes); the counts,
+  // flags and first vertices stay read.
   PetscErrorCode Setup(MPI_Comm comm, const Scene &scene, const MeshShare &share,
                        const DofLayout &layout, Vec lumped_mass, const ContactOptions &options);
   // Anything to resolve at all.
@@ -198,6 +197,11 @@ class ContactSolver {
   // edge within a free body's).
   PetscInt free_grid_builds() const { return obstacles_.free_grid_builds(); }
   bool tracks_free_bodies() const { return track_free_; }
+  // Not collective. The fixed tets: this rank's share's bytes and the tets it
+  // holds now, how often they were fetched, and the obstacles' queries about
+  // points outside their region (0 when KeepFixedRegion does its job).
+  const FixedTets &fixed_tets() const { return fixed_tets_; }
+  PetscInt fixed_outside_region() const { return obstacles_.outside_region(); }
   size_t num_constraints() const { return distance_.size(); }
   // What Setup built, for the run summary.
   std::string Description() const;
@@ -210,8 +214,22 @@ class ContactSolver {
   // What the set-up fetches of the meshes beyond the boundaries (Setup's comments).
   std::vector<int32_t> RestVerticesNeeded(const ContactMeshes &meshes) const;
   std::vector<int32_t> KeysNeeded(const ContactMeshes &meshes) const;
-  // Collective. The obstacle bodies, their grids and the sharp features kept.
-  void SetupBodyObstacles(const SharpFeatures::Candidates &candidates);
+  // Collective. The obstacle bodies, their grids, the fixed tets around this
+  // rank's vertices and the sharp features kept.
+  PetscErrorCode SetupBodyObstacles(const SharpFeatures::Candidates &candidates,
+                                    ContactMeshes &meshes);
+  // Positions x + h v of this rank's own vertices (PETSc-order vectors; v null: x).
+  struct PositionsAt {
+    Vec x = nullptr, v = nullptr;
+    PetscReal h = 0;
+  };
+  // Collective. Fetches the fixed tets again when this rank's own vertices at
+  // the positions `at` (none: the free state's, at set-up) leave its region
+  // (fixed_tets.hpp), so that every query about a point inside a fixed body
+  // finds the tets there.
+  PetscErrorCode KeepFixedRegion(const std::vector<PositionsAt> &at);
+  // Collective. The fixed tets of fixed_region_, for the obstacles.
+  PetscErrorCode FetchFixedTets();
   // The (local, natural) vertices checked against obstacles.
   void CollectCheckedVertices();
   // Collective. The free state and grids that this call needs at x + dt v:
@@ -295,6 +313,8 @@ class ContactSolver {
   // The vertices checked against obstacles: (local, natural), this rank's.
   std::vector<std::pair<PetscInt, int32_t>> checked_vertices_;
   FreeState state_;
+  FixedTets fixed_tets_;
+  std::vector<Box> fixed_region_;  // per body: the region of this rank's fixed tets
   Obstacles obstacles_;
   SharpFeatures features_;
   ContactConstraints constraints_;

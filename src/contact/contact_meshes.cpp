@@ -53,6 +53,7 @@ PetscErrorCode ContactMeshes::Build(MPI_Comm comm, const Scene &scene, const Dof
   rest_.setConstant(1, 3, std::numeric_limits<double>::quiet_NaN());
   PetscCall(GatherBoundaries());
   PetscCall(FindLongestEdges());
+  PetscCall(FindFixedBoxes());
   PetscCall(SendTetsToKeyOwners());
   PetscFunctionReturn(PETSC_SUCCESS);
 }
@@ -104,6 +105,57 @@ PetscErrorCode ContactMeshes::FindLongestEdges() {
   }
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, longest_edge_.data(),
                              static_cast<int>(longest_edge_.size()), MPI_DOUBLE, MPI_MAX, comm_));
+  KeepFixedShare(corners);
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// The share's fixed tets with their corners (rows 4 t .. 4 t + 3 of corners),
+// named by their index in the scene's list of fixed tets.
+void ContactMeshes::KeepFixedShare(const Positions &corners) {
+  const size_t bodies = scene_->bodies.size();
+  std::vector<int64_t> free_before(bodies + 1, 0);  // tets of free bodies before body b
+  for (size_t b = 0; b < bodies; ++b)
+    free_before[b + 1] =
+        free_before[b] + (scene_->bodies[b].fixed ? 0 : scene_->bodies[b].num_tets());
+  num_fixed_tets_ = scene_->num_tets() - free_before[bodies];
+  for (size_t t = 0; t < share_->tets.size(); ++t) {
+    const int32_t b = share_->tet_body[t];
+    if (!scene_->bodies[b].fixed) continue;
+    FixedTetRecord record;
+    record.tet.key = -1;
+    record.tet.id =
+        static_cast<int32_t>(share_->first_tet + static_cast<int64_t>(t) - free_before[b]);
+    for (int a = 0; a < 4; ++a) {
+      record.tet.item[a] = static_cast<int32_t>(share_->tets[t][a]);
+      for (int c = 0; c < 3; ++c) record.corners[3 * a + c] = corners(4 * t + a, c);
+    }
+    record.tet.item[4] = b;
+    fixed_share_.push_back(record);
+  }
+}
+
+// Per fixed body, the box of its vertices: each rank's slab, then MPI_MAX over
+// (-lower, upper).
+PetscErrorCode ContactMeshes::FindFixedBoxes() {
+  PetscFunctionBeginUser;
+  const size_t bodies = scene_->bodies.size();
+  std::vector<double> bounds(6 * bodies, -kUnbounded);
+  for (PetscInt i = 0; i < share_->slab_size(); ++i) {
+    const int32_t b = BodyOfNatural(*scene_, static_cast<int32_t>(share_->first_vertex + i));
+    if (!scene_->bodies[b].fixed) continue;
+    for (int c = 0; c < 3; ++c) {
+      bounds[6 * b + c] = std::max(bounds[6 * b + c], -share_->rest(i, c));
+      bounds[6 * b + 3 + c] = std::max(bounds[6 * b + 3 + c], share_->rest(i, c));
+    }
+  }
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, bounds.data(), static_cast<int>(bounds.size()),
+                             MPI_DOUBLE, MPI_MAX, comm_));
+  fixed_box_.assign(bodies, Box());
+  for (size_t b = 0; b < bodies; ++b)
+    if (scene_->bodies[b].fixed) {
+      fixed_box_[b].lower = -Point(&bounds[6 * b]);
+      fixed_box_[b].upper = Point(&bounds[6 * b + 3]);
+    }
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -1,5 +1,5 @@
 // What contact's set-up reads of the bodies' meshes, built from the ranks'
-// shares (mesh_share.hpp), so that no rank holds a free body's mesh whole.
+// shares (mesh_share.hpp), so that no rank holds a body's mesh whole.
 //
 // - The boundary triangles of every body (fixed ones too), as BoundaryTriangles
 //   (mesh.hpp) gives them from the whole mesh: body-local vertex indices, the
@@ -7,10 +7,13 @@
 //   gathered on every rank: O(scene surface) per rank, 12 B per triangle, for
 //   the set-up only (the guard, the obstacles' free triangles and overlap
 //   separation keep their own copies, as they did).
-// - Per body, its longest rest tet edge (m): a maximum over the tet shares.
-// - Rest positions (m) of the vertices asked for (FetchRest): a fixed body's
-//   from its mesh, which the scene holds whole on every rank
-//   (Scene::fixed_meshes_held), every other one fetched from the vertex slabs.
+// - Per body, its longest rest tet edge (m): a maximum over the tet shares;
+//   per fixed body, its box: a reduction over the vertex slabs.
+// - The fixed tets of this rank's tet share with their corners' rest
+//   positions (TakeFixedShare), which fixed_tets.hpp keeps for the run.
+// - Rest positions (m) of the vertices asked for (FetchRest), fetched from
+//   the vertex slabs (read from the mesh where the scene holds it whole,
+//   -scene_replicate).
 // - The free bodies' tets listed under the key vertices asked for
 //   (FetchFreeTets; key: a tet's first corner with unknowns, free_items.hpp):
 //   each free tet travels once to the rank whose vertex slab holds its key, and
@@ -28,6 +31,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "contact/fixed_tets.hpp"
 #include "contact/free_items.hpp"
 #include "contact/geometry.hpp"
 #include "fem/mesh_share.hpp"
@@ -70,10 +74,18 @@ class ContactMeshes {
   const std::vector<IndexedItem<FreeTet>> &free_tets() const { return free_tets_; }
   // The scene's free tets (all ranks).
   int64_t num_free_tets() const { return num_free_tets_; }
+  // This rank's share of the fixed tets with their corners (fixed_tets.hpp),
+  // handed over once; the scene's fixed tets (all ranks).
+  std::vector<FixedTetRecord> TakeFixedShare() { return std::move(fixed_share_); }
+  int64_t num_fixed_tets() const { return num_fixed_tets_; }
+  // A fixed body's box (its vertices at rest); empty for a free body.
+  const Box &fixed_box(size_t body) const { return fixed_box_[body]; }
 
  private:
   PetscErrorCode GatherBoundaries();
   PetscErrorCode FindLongestEdges();
+  void KeepFixedShare(const Positions &corners);
+  PetscErrorCode FindFixedBoxes();
   PetscErrorCode SendTetsToKeyOwners();
   int32_t KeyOf(const FreeTet &tet) const;
 
@@ -90,6 +102,9 @@ class ContactMeshes {
   std::vector<IndexedItem<FreeTet>> static_;  // tets without a key (every rank)
   std::vector<IndexedItem<FreeTet>> free_tets_;
   int64_t num_free_tets_ = 0;
+  std::vector<FixedTetRecord> fixed_share_;
+  int64_t num_fixed_tets_ = 0;
+  std::vector<Box> fixed_box_;  // per body
 };
 
 }  // namespace softbody

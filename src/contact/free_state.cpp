@@ -65,19 +65,35 @@ PetscErrorCode FreeState::SetupMasses(MPI_Comm comm, const DofLayout &layout, Ve
   layout_ = &layout;
   same_body_ = same_body;
   owned_natural_.assign(layout.natural_of_owned.begin(), layout.natural_of_owned.end());
-  const int32_t V = static_cast<int32_t>(slot_.size());
-  static_box_.assign(num_bodies_, Box());
-  for (int32_t n = 0; n < V; ++n) {
-    if (is_free(n)) continue;
-    position_ref(n) = RestPosition(n);
-    static_box_[body_of(n)].Extend(position(n));
-  }
+  PlaceStaticVertices();
   for (const int32_t n : owned_natural_) position_ref(n) = RestPosition(n);
   body_box_ = static_box_;
   PetscCall(OwnInverseMasses(layout, lumped_mass));
   PetscCall(SumBodyMasses(comm));
   if (halo) PetscCall(neighbours_.Setup(comm));
   PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// A fixed body's surface vertices (its tets' other vertices come with them,
+// PlaceFixed) and its box, and the free bodies' vertices without unknowns.
+void FreeState::PlaceStaticVertices() {
+  static_box_.assign(num_bodies_, Box());
+  for (size_t b = 0; b < num_bodies_; ++b) {
+    const Body &body = scene_->bodies[b];
+    if (body.fixed) {
+      static_box_[b] = meshes_->fixed_box(b);
+      const auto &boundary = meshes_->boundary(b);
+      for (Eigen::Index k = 0; k < boundary.size(); ++k)
+        PlaceFixed(body.first_vertex + boundary.data()[k],
+                   RestPosition(body.first_vertex + boundary.data()[k]));
+      continue;
+    }
+    for (int32_t n = body.first_vertex; n < body.first_vertex + body.num_vertices(); ++n) {
+      if (is_free(n)) continue;
+      position_ref(n) = RestPosition(n);
+      static_box_[b].Extend(position(n));
+    }
+  }
 }
 
 // This rank's own vertices' inverse masses.

@@ -4,8 +4,9 @@
 // length (m), total lumped mass (kg) and bounding box.
 //
 // Fixed vertices keep their rest positions and zero velocity and are always
-// current. Exchange writes this rank's own vertices and brings, when asked,
-// two kinds of other ranks' vertices (nothing else is current; queries must
+// current; only the fixed bodies' surface vertices and the corners of the
+// fixed tets a rank holds (fixed_tets.hpp) have them. Exchange writes this rank's own vertices and
+// brings, when asked, two kinds of other ranks' vertices (nothing else is current; queries must
 // read only current vertices, see current()):
 // - the halo: the vertices of other bodies (and, with `same_body` on, of its
 //   own bodies) that lie within reach of this rank's own vertices of a body.
@@ -23,8 +24,9 @@
 // meets this rank's box, and is stretched less than that, comes whole.
 //
 // Positions, velocities and inverse masses are kept per slot: for this rank's
-// own vertices, those it received and those without unknowns (rest positions
-// fetched at set-up, contact_meshes.hpp), O(local + halo + fixed); the map from
+// own vertices, those it received, the free bodies' vertices without unknowns
+// and the fixed vertices above (rest positions fetched at set-up,
+// contact_meshes.hpp), O(local + halo + fixed surface + fixed region); the map from
 // natural vertex to slot stays natural-indexed on every rank (4 B per scene
 // vertex, SceneBytes); a vertex's body is found from the bodies' first vertices,
 // and whether it moves from the layout's numbering; the messages are O(halo).
@@ -137,6 +139,9 @@ class FreeState {
   const Box &body_box(size_t body) const { return body_box_[body]; }
   // Bytes this rank sent in exchanges (halo records, boxes, fixed set), all calls.
   PetscInt64 bytes_sent() const { return bytes_sent_; }
+  // Not collective. A fixed body's vertex at rest at x (the fixed tets'
+  // corners as they arrive, fixed_tets.hpp).
+  void PlaceFixed(int32_t natural, const Point &x) { position_ref(natural) = x; }
   // Local vertex -> natural vertex.
   const std::vector<int32_t> &owned_natural() const { return owned_natural_; }
   // Bytes of the natural-indexed arrays (O(scene vertices) on every rank).
@@ -149,6 +154,7 @@ class FreeState {
     int32_t natural;
     double x[3], v[3], inverse_mass;
   };
+  void PlaceStaticVertices();
   PetscErrorCode OwnInverseMasses(const DofLayout &layout, Vec lumped_mass);
   PetscErrorCode SumBodyMasses(MPI_Comm comm);
   // Writes the owned vertices; *boxes: their box per body.

@@ -45,6 +45,21 @@ struct Box {
 Eigen::Vector4d Barycentric(const Point &p, const Point &a, const Point &b, const Point &c,
                             const Point &d);
 
+// A point counts as inside a tet when all its barycentric coordinates are at
+// least -kInsideTolerance: faces count (a point on a face shared by two tets is
+// in both), round-off does not decide.
+constexpr double kInsideTolerance = 1e-12;
+// Margin (m) of the cheap box rejection before a barycentric test, so that the
+// box never rejects a point the test would accept.
+constexpr double kBoxMargin = 1e-12;
+
+// Whether the tet (a, b, c, d), whose box is `box`, holds p (faces included,
+// kInsideTolerance).
+inline bool TetHolds(const Point &p, const Box &box, const Point &a, const Point &b, const Point &c,
+                     const Point &d) {
+  return box.Contains(p, kBoxMargin) && Barycentric(p, a, b, c, d).minCoeff() >= -kInsideTolerance;
+}
+
 // Closest point to p on the triangle (a, b, c) (Ericson, Real-Time Collision
 // Detection, 5.1.5); also its barycentric coordinates.
 Point ClosestPointOnTriangle(const Point &p, const Point &a, const Point &b, const Point &c,

@@ -11,13 +11,6 @@ namespace softbody {
 
 namespace {
 
-// A point counts as inside a tet when all its barycentric coordinates are at
-// least -kInsideTolerance: faces count (a point on a face shared by two tets is
-// in both), round-off does not decide.
-constexpr double kInsideTolerance = 1e-12;
-// Margin (m) of the cheap box rejection before a barycentric test, so that the
-// box never rejects a point the test would accept.
-constexpr double kBoxMargin = 1e-12;
 // Where an entry search starts: beyond the segment's fraction range [0, 1].
 constexpr double kNoCrossing = 2;
 // Closest triangles whose distances differ by less than this fraction of the
@@ -45,34 +38,28 @@ void Obstacles::SetupGround(const Scene &scene, FreeState &state, bool ground, d
 }
 
 int64_t Obstacles::SceneBytes() const {
-  return HeldBytes(fixed_tets_) + HeldBytes(fixed_triangles_) + free_items_.HeldBytes();
+  return (fixed_tets_ ? fixed_tets_->HeldBytes() : 0) + HeldBytes(fixed_triangles_) +
+         free_items_.HeldBytes();
 }
 
-void Obstacles::SetupBodies(bool track_free) {
-  // Exact sizes: the fixed lists hold every tet of the scene's fixed bodies.
-  size_t fixed_tets = 0;
-  for (const Body &body : scene_->bodies) fixed_tets += body.fixed ? body.num_tets() : 0;
-  fixed_tets_.reserve(fixed_tets);
+void Obstacles::SetupBodies(bool track_free, const ContactMeshes &meshes) {
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
-    if (scene_->bodies[b].fixed) AddFixedBody(b);
+    if (scene_->bodies[b].fixed) AddFixedTriangles(b, meshes.boundary(b));
   fixed_triangles_.shrink_to_fit();
   BuildFixedBodyBoxes();
-  fixed_tets_bin_.base = fixed_tets_.data();
   fixed_triangles_bin_.base = fixed_triangles_.data();
-  BinItems(fixed_tets_.size(), &fixed_tets_bin_);
   BinItems(fixed_triangles_.size(), &fixed_triangles_bin_);
   if (track_free) state_->AttachItems(&free_items_);
 }
 
-void Obstacles::AddFixedBody(size_t b) {
-  const Body &body = scene_->bodies[b];
-  const auto boundary = BoundaryTriangles(body.mesh);
-  const int32_t first = body.first_vertex, body_id = static_cast<int32_t>(b);
-  for (int32_t t = 0; t < body.mesh.num_tets(); ++t)
-    fixed_tets_.push_back({-1,
-                           static_cast<int32_t>(fixed_tets_.size()),
-                           {first + body.mesh.tets(t, 0), first + body.mesh.tets(t, 1),
-                            first + body.mesh.tets(t, 2), first + body.mesh.tets(t, 3), body_id}});
+void Obstacles::SetFixedTets(const FixedTets &fixed) {
+  fixed_tets_ = &fixed;
+  fixed_tets_bin_.base = fixed.held().data();
+  BinItems(fixed.held().size(), &fixed_tets_bin_);
+}
+
+void Obstacles::AddFixedTriangles(size_t b, const ContactMeshes::Triangles &boundary) {
+  const int32_t first = scene_->bodies[b].first_vertex, body_id = static_cast<int32_t>(b);
   for (Eigen::Index f = 0; f < boundary.rows(); ++f)
     fixed_triangles_.push_back(
         {-1,
@@ -88,13 +75,8 @@ void Obstacles::MoveFreeBodies() {
 
 void Obstacles::BuildFixedBodyBoxes() {
   body_box_.resize(scene_->bodies.size());
-  for (size_t b = 0; b < scene_->bodies.size(); ++b) {
-    const Body &body = scene_->bodies[b];
-    if (!body.fixed) continue;
-    body_box_[b] = Box();
-    for (int32_t v = 0; v < body.mesh.num_vertices(); ++v)
-      body_box_[b].Extend(WorldPoint(body.first_vertex + v));
-  }
+  for (size_t b = 0; b < scene_->bodies.size(); ++b)
+    if (scene_->bodies[b].fixed) body_box_[b] = state_->body_box(b);
 }
 
 template <class Item>
@@ -222,13 +204,13 @@ bool Obstacles::ClosestOnBody(const Point &p, int32_t obstacle, SurfaceHit *hit)
 bool Obstacles::InsideBody(const Point &p, int32_t obstacle) const {
   const bool fixed_part = scene_->bodies[obstacle].fixed;
   if (!fixed_part) EnsureFreeTets();
+  if (fixed_part) CountOutsideRegion(p);
   bool inside = false;
   (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
       .ForEachNear(p, 0.0, [&](int32_t, const FreeTet &tet, const Box &box) {
-        if (inside || tet[4] != obstacle || !box.Contains(p, kBoxMargin)) return;
-        inside = Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
-                             WorldPoint(tet[3]))
-                     .minCoeff() >= -kInsideTolerance;
+        if (inside || tet[4] != obstacle) return;
+        inside = TetHolds(p, box, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                          WorldPoint(tet[3]));
       });
   return inside;
 }
@@ -410,19 +392,23 @@ bool Obstacles::ContactOnBody(const Point &p, int32_t natural, int32_t obstacle,
 int32_t Obstacles::BodyContaining(const Point &p, bool fixed_part, int32_t body,
                                   const VertexObstacles &skip) const {
   int32_t first = -1, first_body = -1;  // the lowest tet holding p, its body
+  if (fixed_part) CountOutsideRegion(p);
   (fixed_part ? fixed_tets_bin_ : free_tets_bin_)
       .ForEachNear(p, 0.0, [&](int32_t t, const FreeTet &tet, const Box &box) {
         if ((first >= 0 && t >= first) || tet[4] == body || skip.Has(tet[4]) ||
-            !box.Contains(p, kBoxMargin) || (!fixed_part && Separating(body, tet[4])))
+            (!fixed_part && Separating(body, tet[4])))
           return;
-        if (Barycentric(p, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
-                        WorldPoint(tet[3]))
-                .minCoeff() >= -kInsideTolerance) {
+        if (TetHolds(p, box, WorldPoint(tet[0]), WorldPoint(tet[1]), WorldPoint(tet[2]),
+                     WorldPoint(tet[3]))) {
           first = t;
           first_body = tet[4];
         }
       });
   return first_body;
+}
+
+void Obstacles::CountOutsideRegion(const Point &p) const {
+  if (fixed_tets_ && !fixed_tets_->InRegion(p)) ++outside_region_;
 }
 
 bool Obstacles::Separating(int32_t a, int32_t b) const {

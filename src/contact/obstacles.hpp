@@ -7,12 +7,14 @@
 // once; the free bodies' boxes follow them (MoveFreeBodies) and their grids
 // are rebuilt lazily, when a query first needs them, so that a step whose
 // bodies' boxes stay apart builds none. Positions and velocities are read
-// from FreeState (world coordinates). The fixed bodies' tets and triangles and
-// the free bodies' triangles are held whole on every rank; of the free bodies'
-// tets a rank holds only those listed under its own, its halo's and the fixed
-// and ring sets' vertices (free_items.hpp: they travel with the halo), and the
-// free grids bin the items whose vertices are all current, so the tets' lists
-// and a rebuild are O(local + halo). Queries break
+// from FreeState (world coordinates). The fixed bodies' triangles are held
+// whole on every rank (O(fixed surface)); of their tets a rank holds those
+// that meet its region (fixed_tets.hpp), which must hold every point asked
+// about inside a fixed body (outside_region() counts the queries it did not).
+// Of the free bodies' tets and triangles a rank holds only those listed under
+// its own, its halo's and the fixed and ring sets' vertices (free_items.hpp:
+// they travel with the halo), and the free grids bin the items whose vertices
+// are all current, so the lists and a rebuild are O(local + halo). Queries break
 // ties of distance by the lower triangle or tet index (the item's index in the
 // scene's list), so that answers do not depend on which items a rank's grid
 // holds. Not collective.
@@ -24,6 +26,8 @@
 #include <utility>
 #include <vector>
 
+#include "contact/contact_meshes.hpp"
+#include "contact/fixed_tets.hpp"
 #include "contact/free_items.hpp"
 #include "contact/free_state.hpp"
 #include "contact/geometry.hpp"
@@ -71,11 +75,14 @@ class Obstacles {
   // halo exchanges bring the free items (SetupBodies).
   void SetupGround(const Scene &scene, FreeState &state, bool ground, double ground_y,
                    double ground_margin);
-  // While the scene's meshes are held. The bodies: fixed ones always, free
-  // ones when `track_free` (they are obstacles to each other or meet sharp
-  // edges; their items then travel with the state's halo); builds the fixed
-  // grids.
-  void SetupBodies(bool track_free);
+  // During contact's set-up (meshes: its boundaries). The bodies: fixed ones
+  // always, free ones when `track_free` (they are obstacles to each other or
+  // meet sharp edges; their items then travel with the state's halo); builds
+  // the fixed triangles' grid.
+  void SetupBodies(bool track_free, const ContactMeshes &meshes);
+  // The fixed tets that `fixed` holds now (after each of its Fetches; the
+  // state holds their corners): bins them. `fixed` must outlive this object.
+  void SetFixedTets(const FixedTets &fixed);
 
   // The free bodies moved (FreeState holds their new positions and boxes):
   // their boxes follow, their grids are stale.
@@ -120,19 +127,25 @@ class Obstacles {
   bool ground() const { return ground_; }
   double ground_y() const { return ground_y_; }
   const Box &body_box(size_t body) const { return body_box_[body]; }
-  size_t num_fixed_tets() const { return fixed_tets_.size(); }
+  // The scene's fixed tets.
+  int64_t num_fixed_tets() const { return fixed_tets_ ? fixed_tets_->scene_count() : 0; }
+  // Queries about points inside fixed bodies outside the fixed tets' region
+  // (their answer may have missed a tet): none when the region is kept right.
+  PetscInt outside_region() const { return outside_region_; }
   size_t num_free_tets() const { return static_cast<size_t>(free_items_.num_tets()); }
-  // Bytes of the bodies' item lists: the fixed bodies' tets and triangles
-  // (O(fixed scene) on every rank) and the free tets and triangles this rank
-  // holds (O(local + halo)); the grids and their items' boxes are not counted.
+  // Bytes of the bodies' item lists: the fixed bodies' triangles (O(fixed
+  // surface) on every rank), the fixed tets' share and region (FixedTets) and
+  // the free tets and triangles this rank holds (O(local + halo)); the grids and
+  // their items' boxes are not counted.
   int64_t SceneBytes() const;
   // How often this rank built the free bodies' grids.
   PetscInt free_grid_builds() const { return free_grid_builds_; }
 
  private:
-  // A fixed body's tets and boundary triangles, as natural vertices + body,
-  // indexed in the scene's list of fixed items.
-  void AddFixedBody(size_t b);
+  // A fixed body's boundary triangles (body-local rows), as natural vertices
+  // + body, indexed in the scene's list of fixed triangles.
+  void AddFixedTriangles(size_t b, const ContactMeshes::Triangles &boundary);
+  void CountOutsideRegion(const Point &p) const;
   void BuildFixedBodyBoxes();
   // The free bodies' tet and triangle grids at the current positions and
   // items, each built only when a query needs it (a pass that locates sharp
@@ -205,8 +218,9 @@ class Obstacles {
   FreeState *state_ = nullptr;  // read by the queries; its halo brings free_items_
   bool ground_ = false;
   double ground_y_ = 0;
-  double ground_margin_ = 0;                      // in mean boundary edges of the point's body
-  std::vector<IndexedItem<FreeTet>> fixed_tets_;  // the fixed bodies' (key -1)
+  double ground_margin_ = 0;               // in mean boundary edges of the point's body
+  const FixedTets *fixed_tets_ = nullptr;  // the fixed bodies' (SetFixedTets)
+  mutable PetscInt outside_region_ = 0;
   std::vector<IndexedItem<FreeTriangle>> fixed_triangles_;
   Binned<FreeTet> fixed_tets_bin_;
   Binned<FreeTriangle> fixed_triangles_bin_;

@@ -18,13 +18,14 @@ constexpr double kFlushProbe = 1e-6;
 using Candidate = SharpFeatures::Candidate;
 using NormalPairs = std::vector<std::pair<Point, Point>>;
 
-// The outward normals of the boundary faces at each boundary edge.
-std::map<std::pair<int32_t, int32_t>, std::vector<Point>> FacesOfEdges(const TetMesh &mesh) {
-  const auto triangles = BoundaryTriangles(mesh);
+// The outward normals of the boundary faces at each boundary edge (body-local
+// vertices); rest(v) the body's vertex v at rest.
+template <class Rest>
+std::map<std::pair<int32_t, int32_t>, std::vector<Point>> FacesOfEdges(
+    const ContactMeshes::Triangles &triangles, Rest rest) {
   std::map<std::pair<int32_t, int32_t>, std::vector<Point>> faces_of_edge;
   for (Eigen::Index t = 0; t < triangles.rows(); ++t) {
-    const Point a = mesh.vertices.row(triangles(t, 0)), b = mesh.vertices.row(triangles(t, 1)),
-                c = mesh.vertices.row(triangles(t, 2));
+    const Point a = rest(triangles(t, 0)), b = rest(triangles(t, 1)), c = rest(triangles(t, 2));
     const Point normal = (b - a).cross(c - a).normalized();
     for (int k = 0; k < 3; ++k) {
       const int32_t u = triangles(t, k), w = triangles(t, (k + 1) % 3);
@@ -45,61 +46,77 @@ NormalPairs SharpPairs(const std::vector<Point> &normals) {
   return pairs;
 }
 
-// The sharp features of a body's surface as points: the end points of its
-// sharp edges, and points along them at most `spacing` apart.
-std::vector<Candidate> FeaturePoints(const TetMesh &mesh, double spacing) {
+// The sharp features of a body's surface (its boundary triangles, body-local;
+// rest(v) its vertex v at rest) as points: the end points of its sharp edges,
+// and points along them at most `spacing` apart.
+template <class Rest>
+std::vector<Candidate> FeaturePoints(const ContactMeshes::Triangles &boundary, Rest rest,
+                                     double spacing) {
   std::map<int32_t, NormalPairs> corners;
   std::vector<Candidate> points;
-  for (const auto &[edge, normals] : FacesOfEdges(mesh)) {
+  for (const auto &[edge, normals] : FacesOfEdges(boundary, rest)) {
     const NormalPairs pairs = SharpPairs(normals);
     if (pairs.empty()) continue;
     for (const int32_t v : {edge.first, edge.second})
       corners[v].insert(corners[v].end(), pairs.begin(), pairs.end());
-    const Point a = mesh.vertices.row(edge.first), b = mesh.vertices.row(edge.second);
+    const Point a = rest(edge.first), b = rest(edge.second);
     const int pieces = static_cast<int>(std::ceil((b - a).norm() / spacing));
     for (int k = 1; k < pieces; ++k) points.push_back({a + (b - a) * (double(k) / pieces), pairs});
   }
-  for (const auto &[v, pairs] : corners)
-    points.push_back({mesh.vertices.row(v).transpose(), pairs});
+  for (const auto &[v, pairs] : corners) points.push_back({rest(v), pairs});
   return points;
 }
 
 }  // namespace
 
-SharpFeatures::Candidates SharpFeatures::Sample(const Scene &scene, const FreeState &state) {
+SharpFeatures::Candidates SharpFeatures::Sample(const Scene &scene, const FreeState &state,
+                                                const ContactMeshes &meshes) {
   double spacing = kUnbounded;
   for (size_t b = 0; b < scene.bodies.size(); ++b)
     if (!scene.bodies[b].fixed) spacing = std::min(spacing, kFeatureSpacing * state.edge(b));
   Candidates candidates;
-  for (size_t b = 0; b < scene.bodies.size(); ++b)
-    if (scene.bodies[b].fixed) candidates[b] = FeaturePoints(scene.bodies[b].mesh, spacing);
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+    if (!scene.bodies[b].fixed) continue;
+    const int32_t first = scene.bodies[b].first_vertex;
+    candidates[b] = FeaturePoints(
+        meshes.boundary(b), [&](int32_t v) { return meshes.rest(first + v); }, spacing);
+  }
   return candidates;
 }
 
-void SharpFeatures::Keep(const Candidates &candidates, const Scene &scene, const FreeState &state,
-                         const Obstacles &obstacles) {
-  begin_.assign(1, 0);
-  for (size_t b = 0; b < scene.bodies.size(); ++b) {
+// A candidate is kept when, for one of its edges, the points a probe off both
+// faces lie in no other fixed body: all probe points are asked at once
+// (FixedTets::Covered, every rank its share of the fixed tets).
+PetscErrorCode SharpFeatures::Keep(const Candidates &candidates, const Scene &scene,
+                                   const FreeState &state, const FixedTets &fixed) {
+  PetscFunctionBeginUser;
+  std::vector<Point> probes;
+  std::vector<int32_t> bodies;
+  for (const auto &[b, list] : candidates) {
     const double probe = kFlushProbe * state.edge(b);
-    auto covered = [&](const Point &p) {
-      for (size_t o = 0; o < scene.bodies.size(); ++o)
-        if (o != b && scene.bodies[o].fixed && obstacles.body_box(o).Contains(p, probe) &&
-            obstacles.InsideBody(p, static_cast<int32_t>(o)))
-          return true;
-      return false;
-    };
+    for (const Candidate &candidate : list)
+      for (const auto &faces : candidate.edges)
+        for (const Point &normal : {faces.first, faces.second}) {
+          probes.push_back(candidate.point + probe * normal);
+          bodies.push_back(static_cast<int32_t>(b));
+        }
+  }
+  std::vector<char> covered;
+  PetscCall(fixed.Covered(probes, bodies, &covered));
+  begin_.assign(1, 0);
+  size_t next = 0;  // the next probe's index
+  for (size_t b = 0; b < scene.bodies.size(); ++b) {
     const auto found = candidates.find(b);
     if (found != candidates.end())
       for (const Candidate &candidate : found->second) {
-        const bool real =
-            std::any_of(candidate.edges.begin(), candidate.edges.end(), [&](const auto &faces) {
-              return !covered(candidate.point + probe * faces.first) &&
-                     !covered(candidate.point + probe * faces.second);
-            });
+        bool real = false;
+        for (size_t e = 0; e < candidate.edges.size(); ++e, next += 2)
+          real = real || (!covered[next] && !covered[next + 1]);
         if (real) point_.push_back(candidate.point);
       }
     begin_.push_back(static_cast<int32_t>(point_.size()));
   }
+  PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 }  // namespace softbody

@@ -16,6 +16,8 @@
 #include <utility>
 #include <vector>
 
+#include "contact/contact_meshes.hpp"
+#include "contact/fixed_tets.hpp"
 #include "contact/free_state.hpp"
 #include "contact/geometry.hpp"
 #include "contact/obstacles.hpp"
@@ -40,11 +42,13 @@ class SharpFeatures {
   // Per fixed body, its candidates.
   using Candidates = std::map<size_t, std::vector<Candidate>>;
 
-  // The fixed bodies' sharp-edge points, before the flush test.
-  static Candidates Sample(const Scene &scene, const FreeState &state);
-  // Keeps the candidates on real edges; needs the fixed bodies' grids.
-  void Keep(const Candidates &candidates, const Scene &scene, const FreeState &state,
-            const Obstacles &obstacles);
+  // Not collective. The fixed bodies' sharp-edge points, before the flush
+  // test, from their boundaries and rest positions (contact's set-up).
+  static Candidates Sample(const Scene &scene, const FreeState &state, const ContactMeshes &meshes);
+  // Collective (the same candidates on every rank). Keeps the candidates on
+  // real edges, asking the fixed tets of every rank's share.
+  PetscErrorCode Keep(const Candidates &candidates, const Scene &scene, const FreeState &state,
+                      const FixedTets &fixed);
 
   bool empty() const { return point_.empty(); }
   size_t size() const { return point_.size(); }

@@ -308,57 +308,6 @@ PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, Mes
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
-PetscErrorCode KeepFixedMeshes(MPI_Comm comm, const MeshShare &share, Scene *scene) {
-  PetscFunctionBeginUser;
-  std::vector<PetscInt> naturals;  // every fixed body's vertices, then its tets
-  std::vector<PetscInt> tet_rows;
-  int64_t first_tet = 0;
-  for (Body &body : scene->bodies) {
-    body.count_vertices = body.num_vertices();
-    body.count_tets = body.num_tets();
-    body.mesh = TetMesh();
-    if (body.fixed) {
-      for (PetscInt v = 0; v < body.count_vertices; ++v) naturals.push_back(body.first_vertex + v);
-      for (int64_t t = 0; t < body.count_tets; ++t)
-        tet_rows.push_back(static_cast<PetscInt>(first_tet + t));
-    }
-    first_tet += body.count_tets;
-  }
-  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> rest(naturals.size(), 3);
-  std::vector<std::array<PetscInt, 4>> tets(tet_rows.size());
-  PetscSF sf;
-  PetscCall(CreateSlabSF(comm, share, naturals, &sf));
-  PetscCall(FetchFromSlabs(sf, MPI_DOUBLE, 3, share.rest.data(), rest.data()));
-  PetscCall(PetscSFDestroy(&sf));
-  {
-    PetscLayout shares;  // the tets' even shares
-    PetscCall(PetscLayoutCreate(comm, &shares));
-    PetscCall(PetscLayoutSetLocalSize(shares, share.num_tets()));
-    PetscCall(PetscLayoutSetUp(shares));
-    PetscCall(PetscSFCreate(comm, &sf));
-    PetscCall(PetscSFSetGraphLayout(sf, shares, static_cast<PetscInt>(tet_rows.size()), nullptr,
-                                    PETSC_OWN_POINTER, tet_rows.data()));
-    PetscCall(PetscLayoutDestroy(&shares));
-    PetscCall(FetchFromSlabs(sf, MPIU_INT, 4, share.tets.data(), tets.data()));
-    PetscCall(PetscSFDestroy(&sf));
-  }
-  Eigen::Index vertex = 0;
-  size_t tet = 0;
-  for (Body &body : scene->bodies) {
-    if (!body.fixed) continue;
-    body.mesh.vertices = rest.middleRows(vertex, body.count_vertices);
-    body.mesh.tets.resize(body.count_tets, 4);
-    for (int64_t t = 0; t < body.count_tets; ++t, ++tet)
-      for (int a = 0; a < 4; ++a)
-        body.mesh.tets(t, a) = static_cast<int32_t>(tets[tet][a] - body.first_vertex);
-    vertex += body.count_vertices;
-  }
-  scene->initial_velocities = std::vector<InitialVelocity>();
-  scene->meshes_held = false;
-  scene->fixed_meshes_held = true;
-  PetscFunctionReturn(PETSC_SUCCESS);
-}
-
 PetscErrorCode CreateSlabSF(MPI_Comm comm, const MeshShare &share,
                             const std::vector<PetscInt> &naturals, PetscSF *sf) {
   PetscFunctionBeginUser;

@@ -48,9 +48,8 @@ MeshShare ShareScene(const Scene &scene, PetscMPIInt rank, PetscMPIInt size);
 
 // How the meshes are held once distributed.
 enum class MeshHolding {
-  kSlabs,          // no rank holds a mesh whole
-  kSlabsAndFixed,  // the same, then the fixed bodies' whole on every rank (KeepFixedMeshes)
-  kWhole,          // every rank holds every mesh (-scene_replicate)
+  kSlabs,  // no rank holds a mesh whole
+  kWhole,  // every rank holds every mesh (-scene_replicate)
 };
 
 // Collective, after LoadScene (rank 0 holds the meshes, but not the deferred .h5
@@ -64,11 +63,6 @@ enum class MeshHolding {
 // whichever way a mesh came (bit for bit).
 PetscErrorCode DistributeScene(MPI_Comm comm, const MeshingOptions &meshing, MeshHolding holding,
                                Scene *scene, MeshShare *share);
-
-// Collective, after DistributeScene with MeshHolding::kSlabsAndFixed, once the
-// fixed flags are final (MarkBodiesAtRest): the fixed bodies' meshes whole on
-// every rank (fixed_meshes_held), fetched from the shares.
-PetscErrorCode KeepFixedMeshes(MPI_Comm comm, const MeshShare &share, Scene *scene);
 
 // Collective. A star forest with one root per vertex of this rank's slab and one
 // leaf per entry of `naturals` (natural vertices, each in [0, num_vertices), any

@@ -41,7 +41,6 @@ void Scene::DropMeshes() {
   }
   initial_velocities = std::vector<InitialVelocity>();
   meshes_held = false;
-  fixed_meshes_held = false;
 }
 
 Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> DenseInitialVelocities(
@@ -369,7 +368,6 @@ PetscErrorCode BroadcastMeshes(MPI_Comm comm, Scene *scene) {
   scene->initial_velocities.resize(entries);
   PetscCall(BroadcastArray(comm, scene->initial_velocities.data(), entries));
   scene->meshes_held = true;
-  scene->fixed_meshes_held = true;
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

@@ -73,15 +73,9 @@ struct Scene {
   // Whether this rank holds the bodies' meshes and the initial velocities
   // (DistributeScene); the counts are known either way.
   bool meshes_held = true;
-  // Whether this rank holds the fixed bodies' meshes (KeepFixedMeshes; all
-  // meshes when meshes_held), which contact's set-up reads whole.
-  bool fixed_meshes_held = false;
   // Whether the meshes were whole on every rank for contact's set-up and
   // released after it (ReleaseMeshes).
   bool meshes_released = false;
-  // Whether only the fixed bodies' meshes were whole on every rank for
-  // contact's set-up and released after it (ReleaseMeshes).
-  bool fixed_meshes_released = false;
   // Bytes of the meshes and initial velocities this rank held when contact was
   // set up (ReleaseMeshes; 0 before).
   int64_t contact_setup_mesh_bytes = 0;
@@ -96,10 +90,9 @@ struct Scene {
   // Not collective. Bytes of the meshes and initial velocities this rank holds.
   int64_t MeshBytes() const;
   // Not collective. DropMeshes once contact has built its structures from the
-  // meshes it holds (meshes_released, fixed_meshes_released, contact_setup_mesh_bytes).
+  // meshes it holds (meshes_released, contact_setup_mesh_bytes).
   void ReleaseMeshes() {
     meshes_released = meshes_held;
-    fixed_meshes_released = fixed_meshes_held && !meshes_held;
     contact_setup_mesh_bytes = MeshBytes();
     DropMeshes();
   }

@@ -12,8 +12,7 @@ Scene (written into the work dir): one 3 x 1 x 1 m block (tools/box_mesh.py,
 - restart in slabs: 3 ranks, 10 steps with a checkpoint, continued to 20 steps on 3
   ranks, equals the uninterrupted 3-rank run bit for bit;
 - a scene of two bodies (contact between them) holds them in slabs too (contact is set up
-  from the shares; only fixed bodies' meshes are whole on every rank, until then, and
-  the scene line mentions them only when there are some);
+  from the shares, fixed bodies' too);
 - the block converted to a softbody .h5 mesh (softbody-convert) and placed off the
   origin (turned and moved): every rank reads its slabs of the file, and the result
   file equals the one from the text mesh bit for bit at 1, 3 and 4 ranks (the
@@ -24,7 +23,8 @@ Scene (written into the work dir): one 3 x 1 x 1 m block (tools/box_mesh.py,
   beneath it) and one text mesh falling onto the free one: at 1, 2 and 3 ranks every
   rank reads its slabs of both files (the summary says 2 of 3), the result file equals
   the all-text scene's bit for bit, and the free .h5 block rests on the fixed one
-  (whose whole mesh contact fetched from the shares) instead of falling through it.
+  (whose tets contact fetched from the shares, src/contact/fixed_tets.hpp) instead
+  of falling through it.
 """
 import os
 import subprocess
@@ -47,8 +47,7 @@ READ_IN_SLABS = "mesh read in slabs by every rank"
 PLACED = ((0.3, -1.7, 2.9), (0.9, 0.2, -0.4, 0.1))
 FAR = ((3e17, -1.7, 2.9), (0.9, 0.2, -0.4, 0.1))
 WHOLE = "meshes whole on every rank"
-MIXED = ("2 of 3 meshes read in slabs by every rank, the rest on rank 0, then held in slabs (the fixed "
-         "bodies' also whole on every rank until contact's set-up)")
+MIXED = "2 of 3 meshes read in slabs by every rank, the rest on rank 0, then held in slabs"
 STACK_STEPS = 30
 
 

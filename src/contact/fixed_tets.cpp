@@ -1,0 +1,159 @@
+#include "contact/fixed_tets.hpp"
+
+#include <algorithm>
+
+#include "common/exchange.hpp"
+#include "common/held_bytes.hpp"
+
+namespace softbody {
+
+namespace {
+
+// A region box travelling to every rank, with the rank it is for.
+struct RegionRecord {
+  PetscMPIInt rank;
+  double lower[3], upper[3];
+};
+
+}  // namespace
+
+void FixedTets::Setup(MPI_Comm comm, std::vector<FixedTetRecord> share, int64_t scene_count) {
+  comm_ = comm;
+  scene_count_ = scene_count;
+  std::vector<std::pair<int32_t, Point>> corners;
+  for (const FixedTetRecord &r : share) {
+    share_.push_back(r.tet);
+    for (int k = 0; k < 4; ++k) corners.push_back({r.tet.item[k], r.corner(k)});
+  }
+  std::sort(corners.begin(), corners.end(),
+            [](const auto &a, const auto &b) { return a.first < b.first; });
+  std::vector<int32_t> naturals;  // of share_rest_
+  for (const auto &[n, x] : corners)
+    if (naturals.empty() || naturals.back() != n) {
+      naturals.push_back(n);
+      share_rest_.push_back(x);
+    }
+  share_corners_.resize(share_.size());
+  for (size_t t = 0; t < share_.size(); ++t)
+    for (int k = 0; k < 4; ++k)
+      share_corners_[t][k] = static_cast<int32_t>(
+          std::lower_bound(naturals.begin(), naturals.end(), share_[t].item[k]) - naturals.begin());
+  std::vector<Box> boxes(share_.size());
+  for (size_t t = 0; t < share_.size(); ++t) boxes[t] = BoxOf(t);
+  share_grid_.Build(boxes);
+}
+
+FixedTetRecord FixedTets::Record(size_t t) const {
+  FixedTetRecord r{share_[t], {}};
+  for (int k = 0; k < 4; ++k) {
+    const Point &x = share_rest_[share_corners_[t][k]];
+    for (int c = 0; c < 3; ++c) r.corners[3 * k + c] = x[c];
+  }
+  return r;
+}
+
+Box FixedTets::BoxOf(size_t t) const {
+  Box box;
+  for (int k = 0; k < 4; ++k) box.Extend(share_rest_[share_corners_[t][k]]);
+  return box;
+}
+
+void FixedTets::ReleaseShare() {
+  std::vector<IndexedItem<FreeTet>>().swap(share_);
+  std::vector<std::array<int32_t, 4>>().swap(share_corners_);
+  std::vector<Point>().swap(share_rest_);
+  share_grid_ = UniformGrid();
+}
+
+int64_t FixedTets::HeldBytes() const {
+  return softbody::HeldBytes(share_) + softbody::HeldBytes(share_corners_) +
+         softbody::HeldBytes(share_rest_) + softbody::HeldBytes(held_) +
+         softbody::HeldBytes(region_);
+}
+
+bool FixedTets::InRegion(const Point &p) const {
+  return std::any_of(region_.begin(), region_.end(), [&](const Box &b) { return b.Contains(p); });
+}
+
+// Every rank's region boxes gathered; each rank sends the tets of its share
+// that meet a rank's new boxes and none of its previous ones (which it holds)
+// to that rank, each once; a rank keeps the held tets that meet its new boxes.
+PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &held_box,
+                                const Place &place) {
+  PetscFunctionBeginUser;
+  PetscMPIInt rank, size;
+  PetscCallMPI(MPI_Comm_rank(comm_, &rank));
+  PetscCallMPI(MPI_Comm_size(comm_, &size));
+  std::vector<RegionRecord> mine, gathered;
+  for (const Box &b : region)
+    if (!b.Empty())
+      mine.push_back(
+          {rank, {b.lower[0], b.lower[1], b.lower[2]}, {b.upper[0], b.upper[1], b.upper[2]}});
+  PetscCall(AllGatherRecords(comm_, mine, &gathered));  // ranks in order
+  std::vector<RegionBox> all(gathered.size());
+  for (size_t i = 0; i < gathered.size(); ++i) {
+    all[i].rank = gathered[i].rank;
+    all[i].box.lower = Point(gathered[i].lower);
+    all[i].box.upper = Point(gathered[i].upper);
+  }
+  std::vector<FixedTetRecord> send;
+  std::vector<int> counts(size, 0);
+  std::vector<PetscMPIInt> sent_to(share_.size(), -1);  // the last rank a tet went to
+  auto held_by = [&](PetscMPIInt r, const Box &box) {   // r's previous region holds it
+    for (const RegionBox &p : all_regions_)
+      if (p.rank == r && p.box.Overlaps(box)) return true;
+    return false;
+  };
+  for (const RegionBox &r : all)
+    share_grid_.ForEachInBox(r.box, [&](int32_t t) {
+      if (sent_to[t] == r.rank) return;
+      const Box box = BoxOf(t);
+      if (!box.Overlaps(r.box) || held_by(r.rank, box)) return;
+      sent_to[t] = r.rank;
+      send.push_back(Record(t));
+      ++counts[r.rank];
+    });
+  std::vector<FixedTetRecord> received;
+  PetscCall(ExchangeRecords(comm_, send, counts, &received));
+  KeepMeeting(region, held_box);
+  for (const FixedTetRecord &r : received) {
+    held_.push_back(r.tet);
+    for (int k = 0; k < 4; ++k) place(r.tet.item[k], r.corner(k));
+  }
+  std::sort(
+      held_.begin(), held_.end(),
+      [](const IndexedItem<FreeTet> &a, const IndexedItem<FreeTet> &b) { return a.id < b.id; });
+  region_ = region;
+  all_regions_ = std::move(all);
+  ++fetches_;
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+void FixedTets::KeepMeeting(const std::vector<Box> &region, const HeldBox &held_box) {
+  std::vector<IndexedItem<FreeTet>> kept;
+  for (const IndexedItem<FreeTet> &tet : held_) {
+    const Box box = held_box(tet.item);
+    if (std::any_of(region.begin(), region.end(), [&](const Box &b) { return b.Overlaps(box); }))
+      kept.push_back(tet);
+  }
+  held_ = std::move(kept);
+}
+
+PetscErrorCode FixedTets::Covered(const std::vector<Point> &points,
+                                  const std::vector<int32_t> &bodies,
+                                  std::vector<char> *covered) const {
+  PetscFunctionBeginUser;
+  covered->assign(points.size(), 0);
+  for (size_t i = 0; i < points.size(); ++i)
+    share_grid_.ForEachNear(points[i], 0.0, [&](int32_t t) {
+      if ((*covered)[i] || share_[t].item[4] == bodies[i]) return;
+      const FixedTetRecord r = Record(t);
+      (*covered)[i] =
+          TetHolds(points[i], BoxOf(t), r.corner(0), r.corner(1), r.corner(2), r.corner(3));
+    });
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, covered->data(), static_cast<int>(covered->size()),
+                             MPI_UNSIGNED_CHAR, MPI_MAX, comm_));
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+}  // namespace softbody
