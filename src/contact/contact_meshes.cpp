@@ -110,7 +110,7 @@ PetscErrorCode ContactMeshes::FindLongestEdges() {
 }
 
 // The share's fixed tets with their corners (rows 4 t .. 4 t + 3 of corners),
-// named by their index in the scene's list of fixed tets.
+// named by their index in the scene's list of fixed tets; each corner once.
 void ContactMeshes::KeepFixedShare(const Positions &corners) {
   const size_t bodies = scene_->bodies.size();
   std::vector<int64_t> free_before(bodies + 1, 0);  // tets of free bodies before body b
@@ -118,19 +118,31 @@ void ContactMeshes::KeepFixedShare(const Positions &corners) {
     free_before[b + 1] =
         free_before[b] + (scene_->bodies[b].fixed ? 0 : scene_->bodies[b].num_tets());
   num_fixed_tets_ = scene_->num_tets() - free_before[bodies];
+  std::vector<size_t> rows;  // the share's rows of the fixed tets
+  std::vector<int32_t> naturals;
   for (size_t t = 0; t < share_->tets.size(); ++t) {
     const int32_t b = share_->tet_body[t];
     if (!scene_->bodies[b].fixed) continue;
-    FixedTetRecord record;
-    record.tet.key = -1;
-    record.tet.id =
-        static_cast<int32_t>(share_->first_tet + static_cast<int64_t>(t) - free_before[b]);
+    rows.push_back(t);
+    for (int a = 0; a < 4; ++a) naturals.push_back(static_cast<int32_t>(share_->tets[t][a]));
+  }
+  naturals = SortedUnique(std::move(naturals));
+  FixedTetShare &fixed = fixed_share_;
+  fixed.rest.resize(naturals.size());
+  for (const size_t t : rows) {
+    const int32_t b = share_->tet_body[t];
+    IndexedItem<FreeTet> tet{
+        -1, static_cast<int32_t>(share_->first_tet + static_cast<int64_t>(t) - free_before[b]), {}};
+    std::array<int32_t, 4> corner;
     for (int a = 0; a < 4; ++a) {
-      record.tet.item[a] = static_cast<int32_t>(share_->tets[t][a]);
-      for (int c = 0; c < 3; ++c) record.corners[3 * a + c] = corners(4 * t + a, c);
+      tet.item[a] = static_cast<int32_t>(share_->tets[t][a]);
+      corner[a] = static_cast<int32_t>(
+          std::lower_bound(naturals.begin(), naturals.end(), tet.item[a]) - naturals.begin());
+      fixed.rest[corner[a]] = corners.row(4 * t + a).transpose();
     }
-    record.tet.item[4] = b;
-    fixed_share_.push_back(record);
+    tet.item[4] = b;
+    fixed.tets.push_back(tet);
+    fixed.corners.push_back(corner);
   }
 }
 

@@ -76,7 +76,7 @@ class ContactMeshes {
   int64_t num_free_tets() const { return num_free_tets_; }
   // This rank's share of the fixed tets with their corners (fixed_tets.hpp),
   // handed over once; the scene's fixed tets (all ranks).
-  std::vector<FixedTetRecord> TakeFixedShare() { return std::move(fixed_share_); }
+  FixedTetShare TakeFixedShare() { return std::move(fixed_share_); }
   int64_t num_fixed_tets() const { return num_fixed_tets_; }
   // A fixed body's box (its vertices at rest); empty for a free body.
   const Box &fixed_box(size_t body) const { return fixed_box_[body]; }
@@ -102,7 +102,7 @@ class ContactMeshes {
   std::vector<IndexedItem<FreeTet>> static_;  // tets without a key (every rank)
   std::vector<IndexedItem<FreeTet>> free_tets_;
   int64_t num_free_tets_ = 0;
-  std::vector<FixedTetRecord> fixed_share_;
+  FixedTetShare fixed_share_;
   int64_t num_fixed_tets_ = 0;
   std::vector<Box> fixed_box_;  // per body
 };

@@ -17,36 +17,19 @@ struct RegionRecord {
 
 }  // namespace
 
-void FixedTets::Setup(MPI_Comm comm, std::vector<FixedTetRecord> share, int64_t scene_count) {
+void FixedTets::Setup(MPI_Comm comm, FixedTetShare share, int64_t scene_count) {
   comm_ = comm;
   scene_count_ = scene_count;
-  std::vector<std::pair<int32_t, Point>> corners;
-  for (const FixedTetRecord &r : share) {
-    share_.push_back(r.tet);
-    for (int k = 0; k < 4; ++k) corners.push_back({r.tet.item[k], r.corner(k)});
-  }
-  std::sort(corners.begin(), corners.end(),
-            [](const auto &a, const auto &b) { return a.first < b.first; });
-  std::vector<int32_t> naturals;  // of share_rest_
-  for (const auto &[n, x] : corners)
-    if (naturals.empty() || naturals.back() != n) {
-      naturals.push_back(n);
-      share_rest_.push_back(x);
-    }
-  share_corners_.resize(share_.size());
-  for (size_t t = 0; t < share_.size(); ++t)
-    for (int k = 0; k < 4; ++k)
-      share_corners_[t][k] = static_cast<int32_t>(
-          std::lower_bound(naturals.begin(), naturals.end(), share_[t].item[k]) - naturals.begin());
-  std::vector<Box> boxes(share_.size());
-  for (size_t t = 0; t < share_.size(); ++t) boxes[t] = BoxOf(t);
+  share_ = std::move(share);
+  std::vector<Box> boxes(share_.tets.size());
+  for (size_t t = 0; t < boxes.size(); ++t) boxes[t] = BoxOf(t);
   share_grid_.Build(boxes);
 }
 
 FixedTetRecord FixedTets::Record(size_t t) const {
-  FixedTetRecord r{share_[t], {}};
+  FixedTetRecord r{share_.tets[t], {}};
   for (int k = 0; k < 4; ++k) {
-    const Point &x = share_rest_[share_corners_[t][k]];
+    const Point &x = share_.rest[share_.corners[t][k]];
     for (int c = 0; c < 3; ++c) r.corners[3 * k + c] = x[c];
   }
   return r;
@@ -54,20 +37,18 @@ FixedTetRecord FixedTets::Record(size_t t) const {
 
 Box FixedTets::BoxOf(size_t t) const {
   Box box;
-  for (int k = 0; k < 4; ++k) box.Extend(share_rest_[share_corners_[t][k]]);
+  for (int k = 0; k < 4; ++k) box.Extend(share_.rest[share_.corners[t][k]]);
   return box;
 }
 
 void FixedTets::ReleaseShare() {
-  std::vector<IndexedItem<FreeTet>>().swap(share_);
-  std::vector<std::array<int32_t, 4>>().swap(share_corners_);
-  std::vector<Point>().swap(share_rest_);
+  share_ = FixedTetShare();
   share_grid_ = UniformGrid();
 }
 
 int64_t FixedTets::HeldBytes() const {
-  return softbody::HeldBytes(share_) + softbody::HeldBytes(share_corners_) +
-         softbody::HeldBytes(share_rest_) + softbody::HeldBytes(held_) +
+  return softbody::HeldBytes(share_.tets) + softbody::HeldBytes(share_.corners) +
+         softbody::HeldBytes(share_.rest) + softbody::HeldBytes(held_) +
          softbody::HeldBytes(region_);
 }
 
@@ -97,9 +78,10 @@ PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &h
     all[i].box.upper = Point(gathered[i].upper);
   }
   std::vector<FixedTetRecord> send;
+  std::vector<size_t> to_self;  // tets of the share for this rank: no record
   std::vector<int> counts(size, 0);
-  std::vector<PetscMPIInt> sent_to(share_.size(), -1);  // the last rank a tet went to
-  auto held_by = [&](PetscMPIInt r, const Box &box) {   // r's previous region holds it
+  std::vector<PetscMPIInt> sent_to(share_.tets.size(), -1);  // the last rank a tet went to
+  auto held_by = [&](PetscMPIInt r, const Box &box) {        // r's previous region holds it
     for (const RegionBox &p : all_regions_)
       if (p.rank == r && p.box.Overlaps(box)) return true;
     return false;
@@ -110,6 +92,10 @@ PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &h
       const Box box = BoxOf(t);
       if (!box.Overlaps(r.box) || held_by(r.rank, box)) return;
       sent_to[t] = r.rank;
+      if (r.rank == rank) {
+        to_self.push_back(t);
+        return;
+      }
       send.push_back(Record(t));
       ++counts[r.rank];
     });
@@ -119,6 +105,10 @@ PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &h
   for (const FixedTetRecord &r : received) {
     held_.push_back(r.tet);
     for (int k = 0; k < 4; ++k) place(r.tet.item[k], r.corner(k));
+  }
+  for (const size_t t : to_self) {
+    held_.push_back(share_.tets[t]);
+    for (int k = 0; k < 4; ++k) place(share_.tets[t].item[k], share_.rest[share_.corners[t][k]]);
   }
   std::sort(
       held_.begin(), held_.end(),
@@ -146,10 +136,10 @@ PetscErrorCode FixedTets::Covered(const std::vector<Point> &points,
   covered->assign(points.size(), 0);
   for (size_t i = 0; i < points.size(); ++i)
     share_grid_.ForEachNear(points[i], 0.0, [&](int32_t t) {
-      if ((*covered)[i] || share_[t].item[4] == bodies[i]) return;
-      const FixedTetRecord r = Record(t);
-      (*covered)[i] =
-          TetHolds(points[i], BoxOf(t), r.corner(0), r.corner(1), r.corner(2), r.corner(3));
+      if ((*covered)[i] || share_.tets[t].item[4] == bodies[i]) return;
+      const auto &corner = share_.corners[t];
+      (*covered)[i] = TetHolds(points[i], BoxOf(t), share_.rest[corner[0]], share_.rest[corner[1]],
+                               share_.rest[corner[2]], share_.rest[corner[3]]);
     });
   PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, covered->data(), static_cast<int>(covered->size()),
                              MPI_UNSIGNED_CHAR, MPI_MAX, comm_));

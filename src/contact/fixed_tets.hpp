@@ -30,7 +30,16 @@
 
 namespace softbody {
 
-// A fixed tet with its corners' positions (x, y, z of each corner in turn).
+// A rank's share of the fixed tets: the tets, each corner's index in `rest`,
+// and the corners' positions (each vertex once).
+struct FixedTetShare {
+  std::vector<IndexedItem<FreeTet>> tets;
+  std::vector<std::array<int32_t, 4>> corners;
+  std::vector<Point> rest;
+};
+
+// A fixed tet with its corners' positions (x, y, z of each corner in turn), as
+// it travels.
 struct FixedTetRecord {
   IndexedItem<FreeTet> tet;  // key -1
   double corners[12];
@@ -42,7 +51,7 @@ struct FixedTetRecord {
 class FixedTets {
  public:
   // Not collective. This rank's share (any order) and the scene's count of fixed tets.
-  void Setup(MPI_Comm comm, std::vector<FixedTetRecord> share, int64_t scene_count);
+  void Setup(MPI_Comm comm, FixedTetShare share, int64_t scene_count);
 
   // Collective. held(): the tets of all ranks' shares whose boxes meet one of
   // this rank's `region` boxes (each rank its own), id increasing. The tets
@@ -85,9 +94,7 @@ class FixedTets {
   };
 
   MPI_Comm comm_ = MPI_COMM_NULL;
-  std::vector<IndexedItem<FreeTet>> share_;
-  std::vector<std::array<int32_t, 4>> share_corners_;  // per tet, its corners in share_rest_
-  std::vector<Point> share_rest_;                      // the share's corners' positions
+  FixedTetShare share_;
   UniformGrid share_grid_;
   int64_t scene_count_ = 0;
   std::vector<IndexedItem<FreeTet>> held_;
