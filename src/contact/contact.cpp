@@ -34,6 +34,12 @@ constexpr double kSupportedShare = 1e-2;
 // quarter of its part's size between fetches, and the region holds about
 // (1.5)^3 = 3.4 times the part's box.
 constexpr double kRegionGrowth = 0.25;
+// What a fixed tet held costs a rank (B): the tet (28 B), its box (48 B), its
+// place in the grid (about 2 cells of 8 B) and its corners' positions in the
+// free state (about 1/5 corner per tet at 64 B a slot): -contact_fixed_replicate_mb
+// compares the scene's fixed tets at this rate.
+constexpr double kHeldBytesPerFixedTet = 110;
+constexpr double kBytesPerMB = 1e6;  // as the run summary counts them
 
 Box Grown(const Box &box, double margin) {
   Box grown = box;
@@ -200,23 +206,44 @@ PetscErrorCode ContactSolver::SetupBodyObstacles(const SharpFeatures::Candidates
 // given, grown by the body's halo reach (the halo's vertices and the faces at
 // own vertices lie within it); when a rank's vertices leave it, every rank
 // sets its region to that box grown by kRegionGrowth of its largest side, and
-// the fixed tets are fetched again. One rank's region is everything.
+// the fixed tets are fetched again. When the fixed tets are small
+// (-contact_fixed_replicate_mb) or on one rank, the region is everything:
+// they are fetched once, and the shares then freed.
 PetscErrorCode ContactSolver::KeepFixedRegion(const std::vector<PositionsAt> &at) {
   PetscFunctionBeginUser;
   PetscMPIInt size;
   PetscCallMPI(MPI_Comm_size(comm_, &size));
-  if (fixed_tets_.scene_count() == 0 || (size == 1 && fixed_tets_.fetches() > 0))
+  const bool everything = size == 1 || fixed_tets_.scene_count() * kHeldBytesPerFixedTet <=
+                                           options_.fixed_replicate_mb * kBytesPerMB;
+  if (fixed_tets_.scene_count() == 0 || (everything && fixed_tets_.fetches() > 0))
     PetscFunctionReturn(PETSC_SUCCESS);
-  if (size == 1) {
-    Box everything;
-    everything.lower = Point::Constant(-kUnbounded);
-    everything.upper = Point::Constant(kUnbounded);
-    fixed_region_.assign(scene_->bodies.size(), everything);
-    PetscCall(FetchFixedTets());
-    fixed_tets_.ReleaseShare();
-    PetscFunctionReturn(PETSC_SUCCESS);
+  std::vector<Box> needed;
+  PetscCall(OwnBoxes(at, &needed));
+  int leaves = 0;
+  for (size_t b = 0; b < needed.size(); ++b)
+    leaves = leaves || (!needed[b].Empty() && !(fixed_region_[b].Contains(needed[b].lower) &&
+                                                fixed_region_[b].Contains(needed[b].upper)));
+  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &leaves, 1, MPI_INT, MPI_MAX, comm_));
+  if (!leaves) PetscFunctionReturn(PETSC_SUCCESS);
+  Box all;
+  all.lower = Point::Constant(-kUnbounded);
+  all.upper = Point::Constant(kUnbounded);
+  for (size_t b = 0; b < needed.size(); ++b) {
+    const double growth = kRegionGrowth * (needed[b].upper - needed[b].lower).maxCoeff();
+    fixed_region_[b] = needed[b].Empty() ? Box() : everything ? all : Grown(needed[b], growth);
   }
-  std::vector<Box> needed(scene_->bodies.size());
+  PetscCall(FetchFixedTets());
+  if (everything) fixed_tets_.ReleaseShare();  // no rank will ask for it again
+  PetscFunctionReturn(PETSC_SUCCESS);
+}
+
+// Per body, the box of this rank's own vertices at the positions `at` (none:
+// the free state's), grown by the body's halo reach.
+PetscErrorCode ContactSolver::OwnBoxes(const std::vector<PositionsAt> &at,
+                                       std::vector<Box> *boxes) const {
+  PetscFunctionBeginUser;
+  std::vector<Box> &needed = *boxes;
+  needed.assign(scene_->bodies.size(), Box());
   const auto &owned = state_.owned_natural();
   if (at.empty())
     for (const int32_t n : owned) needed[state_.body_of(n)].Extend(state_.position(n));
@@ -232,26 +259,14 @@ PetscErrorCode ContactSolver::KeepFixedRegion(const std::vector<PositionsAt> &at
     PetscCall(VecRestoreArrayRead(positions.x, &x));
     if (v) PetscCall(VecRestoreArrayRead(positions.v, &v));
   }
-  int leaves = 0;
-  for (size_t b = 0; b < needed.size(); ++b) {
-    if (needed[b].Empty()) continue;
-    needed[b] = Grown(needed[b], state_.reach(b));
-    leaves = leaves || !fixed_region_[b].Contains(needed[b].lower) ||
-             !fixed_region_[b].Contains(needed[b].upper);
-  }
-  PetscCallMPI(MPI_Allreduce(MPI_IN_PLACE, &leaves, 1, MPI_INT, MPI_MAX, comm_));
-  if (!leaves) PetscFunctionReturn(PETSC_SUCCESS);
   for (size_t b = 0; b < needed.size(); ++b)
-    fixed_region_[b] =
-        needed[b].Empty()
-            ? needed[b]
-            : Grown(needed[b], kRegionGrowth * (needed[b].upper - needed[b].lower).maxCoeff());
-  PetscCall(FetchFixedTets());
+    if (!needed[b].Empty()) needed[b] = Grown(needed[b], state_.reach(b));
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 
 PetscErrorCode ContactSolver::FetchFixedTets() {
   PetscFunctionBeginUser;
+  bool changed;
   PetscCall(fixed_tets_.Fetch(
       fixed_region_,
       [&](const FreeTet &tet) {
@@ -259,8 +274,8 @@ PetscErrorCode ContactSolver::FetchFixedTets() {
         for (int k = 0; k < 4; ++k) box.Extend(state_.position(tet[k]));
         return box;
       },
-      [&](int32_t n, const Point &x) { state_.PlaceFixed(n, x); }));
-  obstacles_.SetFixedTets(fixed_tets_);
+      [&](int32_t n, const Point &x) { state_.PlaceFixed(n, x); }, &changed));
+  if (changed || fixed_tets_.fetches() == 1) obstacles_.SetFixedTets(fixed_tets_);
   PetscFunctionReturn(PETSC_SUCCESS);
 }
 

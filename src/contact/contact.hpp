@@ -228,6 +228,9 @@ class ContactSolver {
   // (fixed_tets.hpp), so that every query about a point inside a fixed body
   // finds the tets there.
   PetscErrorCode KeepFixedRegion(const std::vector<PositionsAt> &at);
+  // Not collective. Per body, this rank's own vertices' box at `at`, grown by
+  // the body's halo reach.
+  PetscErrorCode OwnBoxes(const std::vector<PositionsAt> &at, std::vector<Box> *boxes) const;
   // Collective. The fixed tets of fixed_region_, for the obstacles.
   PetscErrorCode FetchFixedTets();
   // The (local, natural) vertices checked against obstacles.

@@ -18,6 +18,9 @@ PetscErrorCode CheckContactOptions(MPI_Comm comm, const PetscReal bounds[2], Pet
              "option -contact_gap: must lie in (0, 0.1) edge lengths (got %g)", (double)o->gap);
   PetscCheck(o->halo_reach >= 1, comm, PETSC_ERR_USER_INPUT,
              "option -contact_halo_reach: must be >= 1 tet edge (got %g)", (double)o->halo_reach);
+  PetscCheck(o->fixed_replicate_mb >= 0, comm, PETSC_ERR_USER_INPUT,
+             "option -contact_fixed_replicate_mb: must be >= 0 MB (got %g)",
+             (double)o->fixed_replicate_mb);
   if (o->edge_bounds) {
     PetscCheck(nbounds == 2, comm, PETSC_ERR_USER_INPUT, "option -edge_bounds: expected lo,hi");
     o->edge_lower = bounds[0];
@@ -43,6 +46,7 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                                      {OptionSyntax::kReal, "-contact_gap"},
                                      {OptionSyntax::kBool, "-self_contact"},
                                      {OptionSyntax::kReal, "-contact_halo_reach"},
+                                     {OptionSyntax::kReal, "-contact_fixed_replicate_mb"},
                                      {OptionSyntax::kRealList, "-edge_bounds"}}));
   char path[PETSC_MAX_PATH_LEN] = "";
   PetscReal bounds[2] = {o->edge_lower, o->edge_upper};
@@ -97,6 +101,10 @@ PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *o) {
                              "Halo of contact: other ranks' vertices within this many of their "
                              "body's longest tet edge of a rank's own (>= 1; huge: all near)",
                              nullptr, o->halo_reach, &o->halo_reach, nullptr));
+  PetscCall(PetscOptionsReal("-contact_fixed_replicate_mb",
+                             "Every rank holds the fixed bodies' tets whole when they take at most "
+                             "this many MB, else those near its own vertices (0: never whole)",
+                             nullptr, o->fixed_replicate_mb, &o->fixed_replicate_mb, nullptr));
   PetscOptionsEnd();
   o->constraints_path = path;
   PetscCall(CheckContactOptions(comm, bounds, nbounds, o));

@@ -35,16 +35,21 @@ struct ContactOptions {
   // own. 3: a tet stretched less than threefold comes whole; a huge value
   // sends every vertex near any box (what tests compare the halo with).
   PetscReal halo_reach = 3;
+  // Every rank holds the fixed bodies' tets whole when they would take at most
+  // this many MB on a rank (fixed_tets.hpp: about kHeldBytesPerFixedTet each,
+  // with their boxes and grid), else each holds those near its own vertices.
+  // 64 MB (about 5e5 tets): small beside what a rank holds anyway, and a small
+  // fixed scene is cheaper held whole than fetched as the free bodies move.
+  PetscReal fixed_replicate_mb = 64;
 };
 
 // Collective. Reads -ground -restitution -friction -sharp_edges -impulse_spreading -constraints
 // -edge_bounds -contact_guard -contact_guard_reuse -contact_gap -self_contact
-// -contact_halo_reach.
+// -contact_halo_reach -contact_fixed_replicate_mb.
 PetscErrorCode ProcessContactOptions(MPI_Comm comm, ContactOptions *options);
 
-// Not collective. Whether contact may run (ContactSolver builds its structures,
-// from the ranks' shares and the fixed bodies' meshes, which are then held
-// whole on every rank until its set-up): with a ground, distance constraints
+// Not collective. Whether contact may run (ContactSolver builds its structures
+// from the ranks' shares): with a ground, distance constraints
 // or edge bounds, with more than one body (obstacles), or with -self_contact 1.
 inline bool ContactMayRun(const ContactOptions &options, size_t num_bodies) {
   return options.ground || !options.constraints_path.empty() || options.edge_bounds ||

@@ -60,7 +60,7 @@ bool FixedTets::InRegion(const Point &p) const {
 // that meet a rank's new boxes and none of its previous ones (which it holds)
 // to that rank, each once; a rank keeps the held tets that meet its new boxes.
 PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &held_box,
-                                const Place &place) {
+                                const Place &place, bool *changed) {
   PetscFunctionBeginUser;
   PetscMPIInt rank, size;
   PetscCallMPI(MPI_Comm_rank(comm_, &rank));
@@ -80,18 +80,23 @@ PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &h
   std::vector<FixedTetRecord> send;
   std::vector<size_t> to_self;  // tets of the share for this rank: no record
   std::vector<int> counts(size, 0);
-  std::vector<PetscMPIInt> sent_to(share_.tets.size(), -1);  // the last rank a tet went to
-  auto held_by = [&](PetscMPIInt r, const Box &box) {        // r's previous region holds it
+  // The last rank for which a tet was settled: sent, or held by its last region.
+  std::vector<PetscMPIInt> settled(share_.tets.size(), -1);
+  auto held_by = [&](PetscMPIInt r, const Box &box, bool whole) {  // r's last region holds it
     for (const RegionBox &p : all_regions_)
-      if (p.rank == r && p.box.Overlaps(box)) return true;
+      if (p.rank == r &&
+          (whole ? p.box.Contains(box.lower) && p.box.Contains(box.upper) : p.box.Overlaps(box)))
+        return true;
     return false;
   };
-  for (const RegionBox &r : all)
+  for (const RegionBox &r : all) {
+    if (held_by(r.rank, r.box, true)) continue;  // nothing new in it
     share_grid_.ForEachInBox(r.box, [&](int32_t t) {
-      if (sent_to[t] == r.rank) return;
+      if (settled[t] == r.rank) return;
       const Box box = BoxOf(t);
-      if (!box.Overlaps(r.box) || held_by(r.rank, box)) return;
-      sent_to[t] = r.rank;
+      if (!box.Overlaps(r.box)) return;
+      settled[t] = r.rank;
+      if (held_by(r.rank, box, false)) return;
       if (r.rank == rank) {
         to_self.push_back(t);
         return;
@@ -99,9 +104,12 @@ PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &h
       send.push_back(Record(t));
       ++counts[r.rank];
     });
+  }
   std::vector<FixedTetRecord> received;
   PetscCall(ExchangeRecords(comm_, send, counts, &received));
+  const size_t before = held_.size();
   KeepMeeting(region, held_box);
+  *changed = held_.size() != before || !received.empty() || !to_self.empty();
   for (const FixedTetRecord &r : received) {
     held_.push_back(r.tet);
     for (int k = 0; k < 4; ++k) place(r.tet.item[k], r.corner(k));
@@ -120,6 +128,14 @@ PetscErrorCode FixedTets::Fetch(const std::vector<Box> &region, const HeldBox &h
 }
 
 void FixedTets::KeepMeeting(const std::vector<Box> &region, const HeldBox &held_box) {
+  auto inside = [](const Box &a, const Box &b) {  // a within b
+    return b.Contains(a.lower) && b.Contains(a.upper);
+  };
+  if (std::all_of(region_.begin(), region_.end(), [&](const Box &old) {
+        return old.Empty() || std::any_of(region.begin(), region.end(),
+                                          [&](const Box &b) { return inside(old, b); });
+      }))
+    return;
   std::vector<IndexedItem<FreeTet>> kept;
   for (const IndexedItem<FreeTet> &tet : held_) {
     const Box box = held_box(tet.item);

@@ -3,14 +3,14 @@
 //
 // Each rank keeps its share of the scene's fixed tets (its part of the tets'
 // even share, mesh_share.hpp) and their corners' rest positions for the whole
-// run: O(fixed tets / P), and the only copy (44 B per tet, 28 B per corner,
-// and a grid over their boxes). On one rank the region is everything: the
-// share is fetched whole once and then released. The obstacles of a rank
-// hold the fixed tets whose boxes meet its region, a few boxes around where
-// its own free vertices are and will be (ContactSolver keeps it): Fetch brings
-// them from the shares. The sharp features' flush test asks whether fixed
-// tets hold points anywhere in the scene: Covered answers on every rank from
-// every rank's share.
+// run: O(fixed tets / P), and the only copy (44 B per tet, 24 B per corner,
+// and a grid over their boxes). The obstacles of a rank hold the fixed tets
+// whose boxes meet its region, a few boxes around where its own free vertices
+// are and will be, or everything once its region held most of them
+// (ContactSolver keeps it; on one rank the share is fetched whole once and
+// then released): Fetch brings them from the shares. The sharp features' flush test asks whether
+// fixed tets hold points anywhere in the scene: Covered answers on every rank from every rank's
+// share.
 //
 // Tets are named by their index in the scene's list of fixed tets (bodies in
 // order, each body's tets in mesh order), the same on every rank, so that a
@@ -57,10 +57,12 @@ class FixedTets {
   // this rank's `region` boxes (each rank its own), id increasing. The tets
   // held before that still meet it are kept (held_box(tet): its box, from the
   // corners placed), the others come from their shares: place(n, x) for each
-  // of their corners (natural vertex, position; repeats possible).
+  // of their corners (natural vertex, position; repeats possible). *changed:
+  // held() is not what it was.
   using HeldBox = std::function<Box(const FreeTet &)>;
   using Place = std::function<void(int32_t, const Point &)>;
-  PetscErrorCode Fetch(const std::vector<Box> &region, const HeldBox &held_box, const Place &place);
+  PetscErrorCode Fetch(const std::vector<Box> &region, const HeldBox &held_box, const Place &place,
+                       bool *changed);
   // Collective; points and bodies the same on every rank. (*covered)[i], the
   // same on every rank: a fixed tet of a body other than bodies[i] holds
   // points[i] (TetHolds).
@@ -85,7 +87,8 @@ class FixedTets {
   // A tet of the share with its corners' positions, and its box.
   FixedTetRecord Record(size_t t) const;
   Box BoxOf(size_t t) const;
-  // Of held_, those whose boxes meet `region`.
+  // Of held_, those whose boxes meet `region` (all of them, unread, when
+  // each box of the last region lies in one of region's).
   void KeepMeeting(const std::vector<Box> &region, const HeldBox &held_box);
   // A region box with the rank it is for.
   struct RegionBox {
