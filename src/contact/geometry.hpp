@@ -80,7 +80,8 @@ std::vector<std::pair<int32_t, int32_t>> BoundaryEdges(
 
 // Uniform grid over the boxes of a set of items (tets or triangles): each item is
 // listed in every cell its box overlaps. Cell size h: the mean box edge, so an
-// item overlaps a few cells.
+// item overlaps a few cells, grown until the grid has at most about two cells
+// per item (point-like items, surfaces: geometry.cpp, kMaxCellsPerItem).
 class UniformGrid {
  public:
   void Build(const std::vector<Box> &boxes);
