@@ -32,6 +32,8 @@ tets (the run summary's vertex collisions).
     2.5 m slab (1 200 tets) on 3 ranks with the default threshold: one fetch,
     every fixed tet held by the largest rank, and the 1-rank result to 1e-9.
     With -contact_fixed_replicate_mb 0 the largest rank holds 972 of them.
+(f) A negative -contact_fixed_replicate_mb ends with one line naming the
+    option, exit status 1, on 2 ranks.
 """
 import os
 import re
@@ -141,7 +143,18 @@ def main():
         checks.check(worst == 0, f"4 ranks: no crossing face pair in any of {len(report['frames'])} frames "
                      f"(worst frame {worst})")
     small_body()
+    bad_option(path)
     checks.exit()
+
+
+def bad_option(path):
+    """(f): a negative threshold is refused."""
+    out = harness.fresh_result(args.work, "bad")
+    bad = harness.run(args, 2, ["-scene", path, "-output", out, "-contact_fixed_replicate_mb", "-1"] + RUN,
+                      check=False)
+    lines = [l for l in (bad.stdout + bad.stderr).splitlines() if "-contact_fixed_replicate_mb" in l]
+    checks.check(bad.returncode == 1 and len(lines) >= 1 and lines[0].startswith("softbody: error: option"),
+                 f"(f) negative threshold: exit {bad.returncode}, {lines[:1]}")
 
 
 if __name__ == "__main__":
