@@ -129,6 +129,8 @@ void ContactMeshes::KeepFixedShare(const Positions &corners) {
   naturals = SortedUnique(std::move(naturals));
   FixedTetShare &fixed = fixed_share_;
   fixed.rest.resize(naturals.size());
+  fixed.tets.reserve(rows.size());
+  fixed.corners.reserve(rows.size());
   for (const size_t t : rows) {
     const int32_t b = share_->tet_body[t];
     IndexedItem<FreeTet> tet{

@@ -43,9 +43,12 @@ int64_t Obstacles::SceneBytes() const {
 }
 
 void Obstacles::SetupBodies(bool track_free, const ContactMeshes &meshes) {
+  size_t count = 0;  // exact size: the list is allocated once
+  for (size_t b = 0; b < scene_->bodies.size(); ++b)
+    if (scene_->bodies[b].fixed) count += meshes.boundary(b).rows();
+  fixed_triangles_.reserve(count);
   for (size_t b = 0; b < scene_->bodies.size(); ++b)
     if (scene_->bodies[b].fixed) AddFixedTriangles(b, meshes.boundary(b));
-  fixed_triangles_.shrink_to_fit();
   BuildFixedBodyBoxes();
   fixed_triangles_bin_.base = fixed_triangles_.data();
   BinItems(fixed_triangles_.size(), &fixed_triangles_bin_);

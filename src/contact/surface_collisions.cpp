@@ -43,6 +43,9 @@ Boxes BoxesOf(const CollisionQuery &q, const std::vector<int32_t> &vertices,
               const std::vector<int32_t> &triangles, const std::vector<int32_t> &edges,
               const Point &shift) {
   Boxes boxes;
+  boxes.vertices.reserve(vertices.size());
+  boxes.triangles.reserve(triangles.size());
+  boxes.edges.reserve(edges.size());
   for (const int32_t v : vertices)
     boxes.vertices.push_back(SweptBox(q, std::array<int32_t, 1>{v}, shift));
   for (const int32_t t : triangles)
@@ -285,10 +288,10 @@ std::vector<double> SurfaceCollisionFinder::HalfSkins(const ContactSurface &s,
 void SurfaceCollisionFinder::Setup(const CollisionQuery &q, const std::vector<double> *half_skin) {
   const ContactSurface &s = *q.surface;
   ListPrimitives(q);
-  const Boxes boxes = BoxesOf(q, static_.vertices, static_.triangles, static_.edges, Point::Zero());
-  static_.vertex_boxes = boxes.vertices;
-  static_.triangle_boxes = boxes.triangles;
-  static_.edge_boxes = boxes.edges;
+  Boxes boxes = BoxesOf(q, static_.vertices, static_.triangles, static_.edges, Point::Zero());
+  static_.vertex_boxes = std::move(boxes.vertices);
+  static_.triangle_boxes = std::move(boxes.triangles);
+  static_.edge_boxes = std::move(boxes.edges);
   static_.vertex_grid.Build(static_.vertex_boxes);
   static_.triangle_grid.Build(static_.triangle_boxes);
   static_.edge_grid.Build(static_.edge_boxes);
