@@ -34,10 +34,15 @@ tets (the run summary's vertex collisions).
     With -contact_fixed_replicate_mb 0 the largest rank holds 972 of them.
 (f) A negative -contact_fixed_replicate_mb ends with one line naming the
     option, exit status 1, on 2 ranks.
+(g) Restart by region: the terrain run of (a) on 3 ranks stopped at step 30
+    with a checkpoint and continued to step 60 equals the uninterrupted run bit
+    for bit (the regions start empty and are fetched at the first step).
 """
 import os
 import re
 import sys
+
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
@@ -144,7 +149,21 @@ def main():
                      f"(worst frame {worst})")
     small_body()
     bad_option(path)
+    restart(path, runs[3][2])
     checks.exit()
+
+
+def restart(path, uninterrupted):
+    """(g): a checkpoint halfway, continued, equals the uninterrupted 3-rank run."""
+    part = harness.fresh_result(args.work, "throw-part")
+    half = ["-steps", "30", "-checkpoint_every", "30"]
+    harness.run(args, 3, ["-scene", path, "-output", part] + RUN + BY_REGION + half)
+    continued = harness.fresh_result(args.work, "throw-continued")
+    harness.run(args, 3, ["-scene", path, "-output", continued, "-restart", part] + RUN + BY_REGION)
+    frames = harness.read_frames(continued)
+    for key in ("positions", "velocities"):
+        checks.check(np.array_equal(frames[key], uninterrupted[key]),
+                     f"(g) restart on 3 ranks: {key} bit for bit those of the uninterrupted run")
 
 
 def bad_option(path):
