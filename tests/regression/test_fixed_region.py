@@ -5,7 +5,7 @@ those whose boxes meet its region, boxes around where its own free vertices
 are and go; when they leave it, the tets are fetched again
 (src/contact/fixed_tets.hpp, ContactSolver::KeepFixedRegion). One rank's
 region is everything, and so is every rank's when the fixed tets are small
-(-contact_fixed_replicate_mb, default 64 MB at 110 B per tet): the scenes
+(-contact_fixed_replicate_mb, default 64 MB at 140 B per tet): the scenes
 below are small, so (a)-(d) set it to 0.
 
 The scene: a fixed slab of terrain, 8 x 0.5 x 8 m (tools/box_mesh.py, 32 x 2 x
